@@ -1,0 +1,1 @@
+"""FastAPI app: MES REST API, operator panel, live streams, auth."""

@@ -1,0 +1,1 @@
+"""Benchmarks behind ``station bench``; timing code lives here, never in unit tests."""
