@@ -1,0 +1,256 @@
+"""Abstract device interfaces: what the rest of the station may know about hardware.
+
+``station`` (the sequencer, compensation, vision) talks only to these classes, so a
+real drive, a drive pointed at a twin server and a test double are interchangeable.
+Every method that touches I/O is ``async`` and bounded by a timeout: a controller
+that hangs on a dead cable is worse than one that reports the dead cable.
+
+Errors are typed so that a caller can decide what to do without parsing messages:
+
+* :class:`DeviceTimeout` -- the device did not answer in time (retry may help);
+* :class:`CommunicationLost` -- the link is gone (reconnect, or stop the station);
+* :class:`ProtocolError` -- an answer arrived but was malformed or failed its checksum;
+* :class:`DriveFault` -- the drive answered and reports a fault code;
+* :class:`FollowingError` -- a drive fault of the special kind "the axis did not follow".
+"""
+
+from __future__ import annotations
+
+import abc
+import enum
+from dataclasses import dataclass, field
+
+import numpy as np
+
+# --------------------------------------------------------------------------- errors
+
+
+class DriverError(Exception):
+    """Base of every error a driver raises; ``device`` names the device for messages."""
+
+    def __init__(self, message: str, device: str = ""):
+        self.device = device
+        super().__init__(f"{device}: {message}" if device else message)
+
+
+class DeviceTimeout(DriverError):
+    """The device did not answer within the timeout (it may still be alive)."""
+
+
+class CommunicationLost(DriverError):
+    """The connection is down (refused, reset, port gone); the driver reconnects on the next call."""
+
+
+class ProtocolError(DriverError):
+    """A reply arrived but is not valid: bad checksum, bad framing, a Modbus exception response."""
+
+
+class DriveFault(DriverError):
+    """The drive reports a fault; ``code`` is the drive's fault code (see docs/register-map.md)."""
+
+    def __init__(self, code: int, text: str, device: str = ""):
+        self.code = int(code)
+        self.text = text
+        super().__init__(f"drive fault 0x{self.code:04X}: {text}", device)
+
+
+class FollowingError(DriveFault):
+    """The drive's position lagged its command by more than its limit (a jam, a crash, a stuck brake)."""
+
+
+# --------------------------------------------------------------------------- axes
+
+
+class AxisState(enum.Enum):
+    """Coarse state of an axis, derived from the status bits (for displays and the sequencer)."""
+
+    DISABLED = "disabled"
+    IDLE = "idle"
+    MOVING = "moving"
+    FAULT = "fault"
+
+
+@dataclass(frozen=True)
+class AxisStatus:
+    """One snapshot of a servo drive: the status bits decoded, plus position and fault code.
+
+    ``position`` is in the axis unit (mm for a linear axis, deg for a rotary one) and is
+    what the drive's own motor encoder reports -- not the true carriage position.
+    """
+
+    ready: bool
+    enabled: bool
+    moving: bool
+    in_position: bool
+    homed: bool
+    fault: bool
+    following_error: bool
+    estop: bool
+    fault_code: int
+    position: float
+    velocity: float
+    status_word: int = 0
+
+    @property
+    def state(self) -> AxisState:
+        if self.fault or self.estop:
+            return AxisState.FAULT
+        if not self.enabled:
+            return AxisState.DISABLED
+        if self.moving:
+            return AxisState.MOVING
+        return AxisState.IDLE
+
+
+class _ServoAxis(abc.ABC):
+    """Common face of a positioning axis; subclasses fix the unit (mm or deg)."""
+
+    #: a human name used in error messages ("Z", "C")
+    name: str = "axis"
+
+    @abc.abstractmethod
+    async def connect(self) -> None:
+        """Open the link and prepare the drive (watchdog, profile); idempotent."""
+
+    @abc.abstractmethod
+    async def close(self) -> None:
+        """Stop background tasks and close the link; never raises."""
+
+    @abc.abstractmethod
+    async def enable(self, on: bool = True) -> None:
+        """Power the motor (or remove power)."""
+
+    @abc.abstractmethod
+    async def move_to(self, position: float, velocity: float | None = None) -> None:
+        """Start an absolute move; returns once the drive accepted it (see ``wait_in_position``)."""
+
+    @abc.abstractmethod
+    async def stop(self) -> None:
+        """Stop the current move (controlled deceleration)."""
+
+    @abc.abstractmethod
+    async def home(self) -> None:
+        """Start the homing procedure (reference search)."""
+
+    @abc.abstractmethod
+    async def wait_in_position(self, timeout: float) -> AxisStatus:
+        """Wait until the move is finished; raise DriveFault/FollowingError or DeviceTimeout."""
+
+    @abc.abstractmethod
+    async def read_position(self) -> float:
+        """The drive's reported position in the axis unit."""
+
+    @abc.abstractmethod
+    async def status(self) -> AxisStatus:
+        """One status snapshot."""
+
+    @abc.abstractmethod
+    async def reset_fault(self) -> None:
+        """Acknowledge a drive fault (the cause must be gone for it to clear)."""
+
+    async def __aenter__(self):
+        await self.connect()
+        return self
+
+    async def __aexit__(self, *exc):
+        await self.close()
+
+
+class LinearAxis(_ServoAxis):
+    """A linear axis; positions in mm, velocities in mm/s."""
+
+    unit = "mm"
+
+
+class RotaryAxis(_ServoAxis):
+    """A rotary axis; positions in deg, velocities in deg/s."""
+
+    unit = "deg"
+
+
+# --------------------------------------------------------------------------- encoder
+
+
+@dataclass(frozen=True)
+class EncoderStatus:
+    """Status bits of a grating encoder read head (see docs/encoder-protocol.md)."""
+
+    referenced: bool
+    signal_low: bool
+    overspeed: bool
+    hardware_error: bool
+    raw: int = 0
+
+    @property
+    def ok(self) -> bool:
+        return not (self.signal_low or self.overspeed or self.hardware_error)
+
+
+@dataclass(frozen=True)
+class EncoderReading:
+    """A position read from the grating, with the host time (``time.monotonic``) it refers to."""
+
+    position_mm: float
+    timestamp: float
+    status: EncoderStatus
+
+    def __iter__(self):  # allows ``position_mm, timestamp, status = await enc.read()``
+        return iter((self.position_mm, self.timestamp, self.status))
+
+
+class PositionEncoder(abc.ABC):
+    """An absolute/incremental position encoder read on request."""
+
+    name: str = "encoder"
+
+    @abc.abstractmethod
+    async def connect(self) -> None: ...
+
+    @abc.abstractmethod
+    async def close(self) -> None: ...
+
+    @abc.abstractmethod
+    async def read(self) -> EncoderReading:
+        """One reading; raise DeviceTimeout, ProtocolError or CommunicationLost."""
+
+    async def __aenter__(self):
+        await self.connect()
+        return self
+
+    async def __aexit__(self, *exc):
+        await self.close()
+
+
+# --------------------------------------------------------------------------- camera
+
+
+@dataclass(frozen=True)
+class Frame:
+    """One grey image (uint8, shape (rows, cols)), the host time it was grabbed and its number."""
+
+    image: np.ndarray = field(repr=False)
+    timestamp: float
+    sequence: int
+
+
+class Camera(abc.ABC):
+    """A camera delivering grey frames on request."""
+
+    name: str = "camera"
+
+    @abc.abstractmethod
+    async def connect(self) -> None: ...
+
+    @abc.abstractmethod
+    async def close(self) -> None: ...
+
+    @abc.abstractmethod
+    async def grab(self) -> Frame:
+        """The next frame; raise DeviceTimeout or CommunicationLost."""
+
+    async def __aenter__(self):
+        await self.connect()
+        return self
+
+    async def __aexit__(self, *exc):
+        await self.close()

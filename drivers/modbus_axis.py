@@ -1,0 +1,338 @@
+"""A servo drive on Modbus (TCP or RTU): the Z stage and the C table.
+
+One class serves both axes; they differ only in unit, scaling (``unit_per_count``:
+e.g. 1e-4 mm = 0.1 um per count for Z, 1e-4 deg per count for C) and device id.
+The register map is ``drivers.interfaces.register_map`` (docs/register-map.md).
+
+Uses pymodbus 3.x's current async client API (checked against 3.16):
+``AsyncModbusTcpClient(host, port=, timeout=, retries=, reconnect_delay=)``,
+``AsyncModbusSerialClient(port, baudrate=, ...)`` and
+``read_holding_registers(address, count=, device_id=)`` /
+``write_registers(address, values, device_id=)`` (``device_id`` replaced ``slave``).
+
+Error policy: every request is bounded by ``timeout_s``; after a timeout or a
+malformed reply the link is closed, so that a late or corrupt answer cannot be taken
+for the next one, and the next call reconnects.  pymodbus' own background
+reconnection is switched off (``reconnect_delay=0``) so that the driver alone
+decides when to reconnect.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+from typing import Awaitable, Callable
+
+from pymodbus.client import AsyncModbusSerialClient, AsyncModbusTcpClient
+from pymodbus.exceptions import ConnectionException, ModbusException, ModbusIOException
+
+from drivers.interfaces import (
+    AxisStatus,
+    CommunicationLost,
+    DeviceTimeout,
+    DriveFault,
+    DriverError,
+    FollowingError,
+    LinearAxis,
+    ProtocolError,
+    RotaryAxis,
+    _ServoAxis,
+)
+from drivers.interfaces import register_map as rm
+
+log = logging.getLogger(__name__)
+
+#: how often wait_in_position polls the status word; 20 ms is well below a move's
+#: duration and keeps the bus load at 50 requests/s per axis
+DEFAULT_POLL_S = 0.02
+
+
+class ModbusServoAxis(_ServoAxis):
+    """Drives one servo axis over Modbus.  Build it with :meth:`tcp` or :meth:`rtu`."""
+
+    def __init__(
+        self,
+        client_factory: Callable[[], AsyncModbusTcpClient | AsyncModbusSerialClient],
+        *,
+        name: str,
+        device_id: int,
+        unit_per_count: float,
+        default_velocity: float,
+        default_acceleration: float,
+        timeout_s: float = 0.5,
+        watchdog_timeout_ms: int = 500,
+        heartbeat_period_s: float = 0.1,
+        following_error_limit: float | None = None,
+        in_position_window: float | None = None,
+    ):
+        if unit_per_count <= 0:
+            raise ValueError("unit_per_count must be positive")
+        if watchdog_timeout_ms and heartbeat_period_s * 1000.0 * 2 > watchdog_timeout_ms:
+            # two heartbeats per watchdog period at least, or one late write faults the drive
+            raise ValueError("heartbeat_period_s must be at most half the watchdog timeout")
+        self._client_factory = client_factory
+        self._client: AsyncModbusTcpClient | AsyncModbusSerialClient | None = None
+        self.name = name
+        self.device_id = int(device_id)
+        self.unit_per_count = float(unit_per_count)
+        self.default_velocity = float(default_velocity)
+        self.default_acceleration = float(default_acceleration)
+        self.timeout_s = float(timeout_s)
+        self.watchdog_timeout_ms = int(watchdog_timeout_ms)
+        self.heartbeat_period_s = float(heartbeat_period_s)
+        self.following_error_limit = following_error_limit
+        #: tolerance of wait_in_position on the reported position (default: 2 counts)
+        self.in_position_window = in_position_window if in_position_window is not None else 2 * unit_per_count
+        self._control = 0  # shadow of the level bits of the control word (ENABLE)
+        self._heartbeat_task: asyncio.Task | None = None
+        self._heartbeat_counter = 0
+        self._last_target: float | None = None
+        self.firmware_id: int | None = None
+        #: the last error the background heartbeat met (None while it succeeds)
+        self.heartbeat_error: DriverError | None = None
+
+    # ------------------------------------------------------------------ factories
+
+    @classmethod
+    def tcp(cls, host: str, port: int, **kw) -> "ModbusServoAxis":
+        timeout_s = kw.get("timeout_s", 0.5)
+
+        def factory():
+            # retries=0: the driver, not pymodbus, decides about repeating a request
+            return AsyncModbusTcpClient(host, port=port, timeout=timeout_s, retries=0, reconnect_delay=0)
+
+        return cls(factory, **kw)
+
+    @classmethod
+    def rtu(cls, serial_port: str, baudrate: int = 115200, **kw) -> "ModbusServoAxis":
+        timeout_s = kw.get("timeout_s", 0.5)
+
+        def factory():
+            return AsyncModbusSerialClient(
+                serial_port, baudrate=baudrate, timeout=timeout_s, retries=0, reconnect_delay=0
+            )
+
+        return cls(factory, **kw)
+
+    # ------------------------------------------------------------------ scaling
+
+    def to_counts(self, position: float) -> int:
+        return int(round(position / self.unit_per_count))
+
+    def from_counts(self, counts: int) -> float:
+        return counts * self.unit_per_count
+
+    # ------------------------------------------------------------------ link
+
+    async def _ensure_connected(self):
+        if self._client is not None and self._client.connected:
+            return self._client
+        self._drop_client()
+        client = self._client_factory()
+        try:
+            ok = await asyncio.wait_for(client.connect(), self.timeout_s)
+        except (asyncio.TimeoutError, OSError, ModbusException) as exc:
+            client.close()
+            raise CommunicationLost(f"cannot connect: {exc}", self.name) from None
+        if not ok:
+            client.close()
+            raise CommunicationLost("cannot connect (refused or port missing)", self.name)
+        self._client = client
+        return client
+
+    def _drop_client(self) -> None:
+        if self._client is not None:
+            with contextlib.suppress(Exception):
+                self._client.close()
+            self._client = None
+
+    async def _request(self, what: str, call: Callable[[object], Awaitable]):
+        """Run one Modbus request with the driver's timeout and error mapping."""
+        client = await self._ensure_connected()
+        try:
+            # a small margin over pymodbus' own timeout, so its error (more precise) wins
+            response = await asyncio.wait_for(call(client), self.timeout_s * 1.5)
+        except asyncio.TimeoutError:
+            self._drop_client()
+            raise DeviceTimeout(f"{what}: no reply within {self.timeout_s} s", self.name) from None
+        except ConnectionException as exc:
+            self._drop_client()
+            raise CommunicationLost(f"{what}: {exc}", self.name) from None
+        except ModbusIOException as exc:
+            lost = not client.connected
+            self._drop_client()
+            if lost:
+                raise CommunicationLost(f"{what}: connection lost ({exc})", self.name) from None
+            if "No response" in str(exc):
+                raise DeviceTimeout(f"{what}: no reply within {self.timeout_s} s", self.name) from None
+            raise ProtocolError(f"{what}: {exc}", self.name) from None
+        except ModbusException as exc:
+            self._drop_client()
+            raise ProtocolError(f"{what}: {exc}", self.name) from None
+        except OSError as exc:
+            self._drop_client()
+            raise CommunicationLost(f"{what}: {exc}", self.name) from None
+        if response is None:
+            self._drop_client()
+            raise CommunicationLost(f"{what}: connection closed", self.name)
+        if response.isError():
+            raise ProtocolError(
+                f"{what}: Modbus exception code {getattr(response, 'exception_code', '?')}", self.name
+            )
+        return response
+
+    async def read_registers(self, address: int, count: int) -> list[int]:
+        r = await self._request(
+            f"read {count} @ {address}",
+            lambda c: c.read_holding_registers(address, count=count, device_id=self.device_id),
+        )
+        regs = list(r.registers)
+        if len(regs) != count:
+            raise ProtocolError(f"asked for {count} registers, got {len(regs)}", self.name)
+        return regs
+
+    async def write_registers(self, address: int, values: list[int]) -> None:
+        await self._request(
+            f"write {len(values)} @ {address}",
+            lambda c: c.write_registers(address, values, device_id=self.device_id),
+        )
+
+    # ------------------------------------------------------------------ lifecycle
+
+    async def connect(self) -> None:
+        await self._ensure_connected()
+        (self.firmware_id,) = await self.read_registers(rm.FIRMWARE_ID, 1)
+        if self.following_error_limit is not None:
+            limit_counts = max(1, self.to_counts(self.following_error_limit))
+            await self.write_registers(rm.FOLLOWING_ERROR_LIMIT, rm.uint32_to_regs(limit_counts))
+        # heartbeat first, then arm the watchdog, so the drive never sees a stale counter
+        await self._beat()
+        await self.write_registers(rm.WATCHDOG_TIMEOUT_MS, [self.watchdog_timeout_ms])
+        if self.watchdog_timeout_ms and (self._heartbeat_task is None or self._heartbeat_task.done()):
+            self._heartbeat_task = asyncio.create_task(self._heartbeat_loop(), name=f"{self.name}-heartbeat")
+
+    async def _beat(self) -> None:
+        self._heartbeat_counter = (self._heartbeat_counter + 1) & 0xFFFF
+        await self.write_registers(rm.WATCHDOG_COUNTER, [self._heartbeat_counter])
+
+    async def _heartbeat_loop(self) -> None:
+        """Change the watchdog register every period; the drive faults if this stops (by design)."""
+        while True:
+            await asyncio.sleep(self.heartbeat_period_s)
+            try:
+                await self._beat()
+                self.heartbeat_error = None
+            except DriverError as exc:  # keep beating: the link may come back
+                self.heartbeat_error = exc
+                log.debug("%s heartbeat failed: %s", self.name, exc)
+
+    async def close(self) -> None:
+        task, self._heartbeat_task = self._heartbeat_task, None
+        if task is not None:
+            task.cancel()
+            with contextlib.suppress(asyncio.CancelledError, Exception):
+                await task
+        self._drop_client()
+
+    # ------------------------------------------------------------------ commands
+
+    async def _command(self, bit: rm.ControlBit) -> None:
+        # command bits are self-clearing in the drive: one write per command
+        await self.write_registers(rm.CONTROL_WORD, [self._control | int(bit)])
+
+    async def enable(self, on: bool = True) -> None:
+        self._control = (self._control | rm.ControlBit.ENABLE) if on else (self._control & ~rm.ControlBit.ENABLE)
+        await self.write_registers(rm.CONTROL_WORD, [int(self._control)])
+
+    async def move_to(self, position: float, velocity: float | None = None) -> None:
+        st = await self.status()
+        self._raise_if_fault(st)
+        if not st.enabled:
+            raise DriverError("move refused: drive not enabled", self.name)
+        v = self.default_velocity if velocity is None else float(velocity)
+        if v <= 0:
+            raise ValueError("velocity must be positive")
+        v_counts = max(1, self.to_counts(v))
+        a_counts = max(1, self.to_counts(self.default_acceleration))
+        # target, velocity and acceleration are contiguous (2..9): one FC16 request
+        await self.write_registers(
+            rm.TARGET_POSITION,
+            rm.int32_to_regs(self.to_counts(position)) + rm.uint32_to_regs(v_counts) + rm.uint32_to_regs(a_counts),
+        )
+        self._last_target = float(position)
+        await self._command(rm.ControlBit.START_MOVE)
+
+    async def stop(self) -> None:
+        self._last_target = None  # the axis stops short of the target by design
+        await self._command(rm.ControlBit.STOP)
+
+    async def home(self) -> None:
+        st = await self.status()
+        self._raise_if_fault(st)
+        self._last_target = 0.0
+        await self._command(rm.ControlBit.HOME)
+
+    async def reset_fault(self) -> None:
+        # a fault leaves the axis disabled; the caller must enable it again deliberately
+        self._control &= ~rm.ControlBit.ENABLE
+        await self.write_registers(rm.CONTROL_WORD, [int(rm.ControlBit.FAULT_RESET)])
+
+    # ------------------------------------------------------------------ reading
+
+    async def status(self) -> AxisStatus:
+        regs = await self.read_registers(rm.STATUS_BLOCK_START, rm.STATUS_BLOCK_COUNT)
+
+        def reg(addr: int) -> int:
+            return regs[addr - rm.STATUS_BLOCK_START]
+
+        word = reg(rm.STATUS_WORD)
+        sb = rm.StatusBit
+        return AxisStatus(
+            ready=bool(word & sb.READY),
+            enabled=bool(word & sb.ENABLED),
+            moving=bool(word & sb.MOVING),
+            in_position=bool(word & sb.IN_POSITION),
+            homed=bool(word & sb.HOMED),
+            fault=bool(word & sb.FAULT),
+            following_error=bool(word & sb.FOLLOWING_ERROR),
+            estop=bool(word & sb.ESTOP),
+            fault_code=reg(rm.FAULT_CODE),
+            position=self.from_counts(rm.regs_to_int32(reg(rm.ACTUAL_POSITION), reg(rm.ACTUAL_POSITION + 1))),
+            velocity=self.from_counts(rm.regs_to_int32(reg(rm.ACTUAL_VELOCITY), reg(rm.ACTUAL_VELOCITY + 1))),
+            status_word=word,
+        )
+
+    async def read_position(self) -> float:
+        hi, lo = await self.read_registers(rm.ACTUAL_POSITION, 2)
+        return self.from_counts(rm.regs_to_int32(hi, lo))
+
+    def _raise_if_fault(self, st: AxisStatus) -> None:
+        if st.following_error or st.fault_code == rm.FaultCode.FOLLOWING_ERROR:
+            raise FollowingError(st.fault_code, rm.FaultCode.describe(st.fault_code), self.name)
+        if st.fault or st.estop:
+            raise DriveFault(st.fault_code, rm.FaultCode.describe(st.fault_code), self.name)
+
+    async def wait_in_position(self, timeout: float, poll_s: float = DEFAULT_POLL_S) -> AxisStatus:
+        loop = asyncio.get_running_loop()
+        deadline = loop.time() + timeout
+        while True:
+            st = await self.status()
+            self._raise_if_fault(st)
+            at_target = self._last_target is None or abs(st.position - self._last_target) <= self.in_position_window
+            if st.in_position and not st.moving and at_target:
+                return st
+            if loop.time() >= deadline:
+                raise DeviceTimeout(
+                    f"not in position after {timeout} s (at {st.position:.6f} {getattr(self, 'unit', '')}, moving={st.moving})",
+                    self.name,
+                )
+            await asyncio.sleep(poll_s)
+
+
+class ModbusLinearAxis(ModbusServoAxis, LinearAxis):
+    """The Z stage: positions in mm, ``unit_per_count`` in mm per count."""
+
+
+class ModbusRotaryAxis(ModbusServoAxis, RotaryAxis):
+    """The C table: positions in deg, ``unit_per_count`` in deg per count."""
