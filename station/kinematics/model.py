@@ -61,6 +61,8 @@ from station.kinematics.rigid import (
     rot_xyz,
     rot_z,
     small_transform,
+    then_rotate_z,
+    then_translate_z,
 )
 from station.kinematics.topology import Topology, load_topology
 
@@ -234,12 +236,12 @@ class StationModel:
         for s in slots:
             if s.kind == "const":
                 t = s.const
-            elif s.kind == "prismatic_z":
-                p = np.zeros(np.shape(z_mm) + (3,))
-                p[..., 2] = z_mm
-                t = Rigid(np.eye(3), p)
-            elif s.kind == "revolute_z":
-                t = Rigid(rot_z(c_rad), np.zeros(3))
+            elif s.kind == "prismatic_z":  # acc @ Trans(0, 0, z), without a full product
+                acc = then_translate_z(acc, z_mm)
+                continue
+            elif s.kind == "revolute_z":  # acc @ Rz(C), without a full product
+                acc = then_rotate_z(acc, c_rad)
+                continue
             elif s.kind == "error":
                 if ideal:
                     continue
@@ -298,10 +300,9 @@ class StationModel:
                 tool_slots, zz, crad, m, False
             )
             # ideal relative pose in closed form: R = Rz(-C), p = ideal point
-            ideal_R = rot_z(-crad)
             ip = self.ideal_point_mm(zz, cc)
-            # E = P' P^-1: R_E = R' R^T, d_E = p' - R_E p   (Eq. 12, exact)
-            RE = actual.R @ np.swapaxes(ideal_R, -1, -2)
+            # E = P' P^-1: R_E = R' Rz(-C)^T = R' Rz(C), d_E = p' - R_E p   (Eq. 12, exact)
+            RE = then_rotate_z(Rigid(actual.R, actual.p), crad).R
             dE = actual.p - np.einsum("nij,nj->ni", RE, ip)
             d[lo:hi] = dE
             th[lo:hi] = angles_xyz(RE)

@@ -55,6 +55,29 @@ class Rigid:
         return out
 
 
+def then_translate_z(T: Rigid | None, z_mm) -> Rigid:
+    """T @ Trans(0, 0, z) without a full product: only p changes (p + R e_z z)."""
+    z = np.asarray(z_mm, dtype=float)
+    if T is None:
+        p = np.zeros(z.shape + (3,))
+        p[..., 2] = z
+        return Rigid(np.eye(3), p)
+    return Rigid(T.R, T.p + T.R[..., :, 2] * z[..., None])
+
+
+def then_rotate_z(T: Rigid | None, c_rad) -> Rigid:
+    """T @ Rz(c) without a full product: only the first two columns of R mix."""
+    c = np.asarray(c_rad, dtype=float)
+    if T is None:
+        return Rigid(rot_z(c), np.zeros(3))
+    cc, sc = np.cos(c)[..., None], np.sin(c)[..., None]
+    R = np.broadcast_to(T.R, np.broadcast_shapes(T.R.shape, c.shape + (3, 3))).copy()
+    col0 = R[..., :, 0].copy()
+    R[..., :, 0] = col0 * cc + R[..., :, 1] * sc
+    R[..., :, 1] = R[..., :, 1] * cc - col0 * sc
+    return Rigid(R, T.p)
+
+
 def rot_xyz(a_rad, b_rad, c_rad) -> np.ndarray:
     """Exact rotation R = Rz(c) Ry(b) Rx(a), shape (..., 3, 3).
 

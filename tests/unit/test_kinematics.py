@@ -246,3 +246,36 @@ def test_rigid_inverse_is_exact():
     T = Rigid(rot_xyz(ang[:, 0], ang[:, 1], ang[:, 2]), rng.normal(size=(10, 3)))
     I = T @ T.inverse()
     assert np.allclose(I.R, np.eye(3), atol=1e-14) and np.allclose(I.p, 0, atol=1e-14)
+
+
+# ---------------------------------------------------------------- budget and CLI
+def test_budget_rows_are_first_order_contributions(model):
+    from station.kinematics.budget import error_budget
+
+    # one parameter alone: its budget row is the exact error, to second order
+    m = with_motion(model, "Z", "z", ErrorCurve.table([0, 150], [0, 20]))
+    rows = {r.parameter: r for r in error_budget(m, np.linspace(0, 150, 11), np.zeros(11))}
+    assert rows["EZZ"].max_axial_um == pytest.approx(20.0, abs=1e-9)
+    assert rows["EZZ"].worst_z_mm == 150.0
+    assert all(r.max_axial_um == 0 for n, r in rows.items() if n != "EZZ")
+    # a table tilt shows up tangentially, growing with height, and as an angle
+    m = with_motion(model, "C", "a", const_curve(10.0, "rotary"))
+    row = next(r for r in error_budget(m, [0.0, 100.0], [0.0, 0.0]) if r.parameter == "EAC")
+    assert row.max_tangential_um == pytest.approx(10 * ARC * 100.0 * 1e3, rel=1e-9)
+    assert row.max_angle_arcsec == pytest.approx(row.max_tangential_um * 1e-3 / 11.1 / ARC, rel=1e-9)
+
+
+def test_cli_model_compensate_json(model):
+    import json
+
+    from typer.testing import CliRunner
+
+    from station.cli import app
+
+    res = CliRunner().invoke(app, ["model", "compensate", "--axial", "85.19", "--angle", "0", "--json"])
+    assert res.exit_code == 0, res.output
+    out = json.loads(res.stdout)
+    t = out["targets"][0]
+    assert t["converged"] and abs(t["residual_nm"]) < 1.0 and abs(t["residual_arcsec"]) < 0.01
+    direct = compensate(model, [85.19], [0.0])
+    assert t["z_cmd_mm"] == pytest.approx(direct.z_mm[0], abs=1e-12)
