@@ -1,0 +1,240 @@
+"""All twin servers of the station, started and stopped together.
+
+:class:`TwinStation` builds, from a scenario (``sim/scenarios/*.toml``), one
+:class:`~sim.servo.physics.ServoAxisPhysics` and one Modbus TCP server per axis and
+the grating-encoder twin on a pty, and runs them in the caller's asyncio loop.
+:class:`TwinsThread` runs a TwinStation in a loop of its own in a background thread,
+for synchronous callers (the CLI, benches, sync tests).
+
+Where the world plugs in (see also docs/drivers.md):
+
+* ``station.physics["Z"].actual_offset = fn(motor_position_mm, direction, time_s) -> mm``
+  (same for ``"C"`` in deg): the carriage's deviation from the motor position;
+* ``station.encoder.position_mm = fn() -> mm``: what the grating reads (default: the Z
+  physics' ``carriage_position``, which already includes ``actual_offset``).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import threading
+import tomllib
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+from typing import Any, Callable
+
+from sim.encoder.twin import SerialEncoderTwin
+from sim.servo.modbus_face import ModbusDriveTwin
+from sim.servo.physics import ServoAxisConfig, ServoAxisPhysics
+
+DEFAULT_SCENARIO = Path(__file__).with_name("scenarios") / "default.toml"
+
+
+class ScenarioError(ValueError):
+    """A scenario file that cannot be used; the message names the file and the key."""
+
+
+@dataclass
+class AxisScenario:
+    config: ServoAxisConfig
+    device_id: int = 1
+    port: int = 0
+    unit_per_count: float = 1e-4
+
+
+@dataclass
+class EncoderScenario:
+    axis: str = "Z"
+    resolution_um: float = 0.05
+    baudrate: int = 115200
+    model: str = "GRT-005"
+    version: str = "V1.3"
+
+
+@dataclass
+class Scenario:
+    host: str = "127.0.0.1"
+    time_scale: float = 1.0
+    axes: dict[str, AxisScenario] = field(default_factory=dict)
+    encoder: EncoderScenario | None = None
+    source: str = "<built-in>"
+
+
+def load_scenario(path: str | Path | None = None) -> Scenario:
+    """Read a scenario TOML file (default: ``sim/scenarios/default.toml``)."""
+    path = Path(path) if path is not None else DEFAULT_SCENARIO
+    try:
+        data = tomllib.loads(path.read_text())
+    except FileNotFoundError:
+        raise ScenarioError(f"scenario file not found: {path}") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ScenarioError(f"{path}: not valid TOML: {exc}") from None
+    return scenario_from_dict(data, str(path))
+
+
+def scenario_from_dict(data: dict[str, Any], source: str = "<dict>") -> Scenario:
+    station = data.get("station", {})
+    host = station.get("host", "127.0.0.1")
+    if host not in ("127.0.0.1", "localhost"):
+        raise ScenarioError(f"{source}: twins listen on loopback only, not {host!r}")
+    cfg_names = {f.name for f in fields(ServoAxisConfig)}
+    axes: dict[str, AxisScenario] = {}
+    for name, spec in data.get("axes", {}).items():
+        spec = dict(spec)
+        device_id = int(spec.pop("device_id", 1))
+        port = int(spec.pop("port", 0))
+        unit_per_count = float(spec.pop("unit_per_count", 1e-4))
+        unknown = set(spec) - cfg_names
+        if unknown:
+            raise ScenarioError(f"{source}: axes.{name} has unknown keys {sorted(unknown)}")
+        axes[name] = AxisScenario(ServoAxisConfig(name=name, **spec), device_id, port, unit_per_count)
+    encoder = None
+    if "encoder" in data:
+        enc = dict(data["encoder"])
+        unknown = set(enc) - {f.name for f in fields(EncoderScenario)}
+        if unknown:
+            raise ScenarioError(f"{source}: encoder has unknown keys {sorted(unknown)}")
+        encoder = EncoderScenario(**enc)
+        if encoder.axis not in axes:
+            raise ScenarioError(f"{source}: encoder reads axis {encoder.axis!r}, which is not defined")
+    return Scenario(host, float(station.get("time_scale", 1.0)), axes, encoder, source)
+
+
+class TwinStation:
+    """The physics, the drive servers and the encoder twin of one scenario."""
+
+    def __init__(self, scenario: Scenario | None = None, *, clock: Callable[[], float] | None = None):
+        self.scenario = scenario or load_scenario()
+        kw = {"clock": clock} if clock is not None else {}
+        self.physics: dict[str, ServoAxisPhysics] = {
+            name: ServoAxisPhysics(ax.config, time_scale=self.scenario.time_scale, **kw)
+            for name, ax in self.scenario.axes.items()
+        }
+        self.drives: dict[str, ModbusDriveTwin] = {
+            name: ModbusDriveTwin(self.physics[name], device_id=ax.device_id, unit_per_count=ax.unit_per_count, name=name)
+            for name, ax in self.scenario.axes.items()
+        }
+        self.encoder: SerialEncoderTwin | None = None
+        enc = self.scenario.encoder
+        if enc is not None:
+            self.encoder = SerialEncoderTwin(
+                self.physics[enc.axis].carriage_position,
+                resolution_um=enc.resolution_um,
+                model=enc.model,
+                version=enc.version,
+            )
+        self.running = False
+
+    async def start(self) -> dict[str, Any]:
+        try:
+            for name, drive in self.drives.items():
+                await drive.start(self.scenario.host, self.scenario.axes[name].port)
+            if self.encoder is not None:
+                self.encoder.start()
+        except BaseException:
+            await self.stop()
+            raise
+        self.running = True
+        return self.endpoints()
+
+    async def stop(self) -> None:
+        for drive in self.drives.values():
+            await drive.stop()
+        if self.encoder is not None:
+            self.encoder.stop()
+        self.running = False
+
+    def endpoints(self) -> dict[str, Any]:
+        """Where everything listens: ``{"Z": {"host", "port", "device_id", ...}, "encoder": {...}}``."""
+        out: dict[str, Any] = {}
+        for name, d in self.drives.items():
+            ax = self.scenario.axes[name]
+            out[name] = {
+                "protocol": "modbus-tcp",
+                "host": d.host,
+                "port": d.port,
+                "device_id": d.device_id,
+                "unit_per_count": ax.unit_per_count,
+                "kind": ax.config.kind,
+            }
+        if self.encoder is not None and self.scenario.encoder is not None:
+            out["encoder"] = {
+                "protocol": "serial-ascii",
+                "path": self.encoder.path,
+                "baudrate": self.scenario.encoder.baudrate,
+                "resolution_um": self.encoder.resolution_um,
+                "axis": self.scenario.encoder.axis,
+            }
+        return out
+
+    async def __aenter__(self):
+        await self.start()
+        return self
+
+    async def __aexit__(self, *exc):
+        await self.stop()
+
+
+class TwinsThread:
+    """A TwinStation in its own event loop on a background thread (``with TwinsThread() as t:``)."""
+
+    def __init__(self, station: TwinStation | None = None, start_timeout_s: float = 10.0):
+        self.station = station or TwinStation()
+        self.start_timeout_s = start_timeout_s
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._thread: threading.Thread | None = None
+        self._ready = threading.Event()
+        self._error: BaseException | None = None
+        self._stop_event: asyncio.Event | None = None
+
+    def start(self) -> dict[str, Any]:
+        self._thread = threading.Thread(target=self._run, name="twins", daemon=True)
+        self._thread.start()
+        if not self._ready.wait(self.start_timeout_s):
+            raise TimeoutError("the twins did not start in time")
+        if self._error is not None:
+            raise self._error
+        return self.station.endpoints()
+
+    def _run(self) -> None:
+        asyncio.run(self._main())
+
+    async def _main(self) -> None:
+        self._loop = asyncio.get_running_loop()
+        self._stop_event = asyncio.Event()
+        try:
+            await self.station.start()
+        except BaseException as exc:  # noqa: BLE001 - reported to start()
+            self._error = exc
+            self._ready.set()
+            return
+        self._ready.set()
+        try:
+            await self._stop_event.wait()
+        finally:
+            await self.station.stop()
+
+    def call(self, fn: Callable[[], Any]) -> Any:
+        """Run ``fn`` in the twins' loop thread and return its result (thread-safe access)."""
+        assert self._loop is not None
+        fut = asyncio.run_coroutine_threadsafe(_call(fn), self._loop)
+        return fut.result(self.start_timeout_s)
+
+    def stop(self) -> None:
+        if self._loop is not None and self._stop_event is not None and self._thread is not None:
+            if self._thread.is_alive():
+                self._loop.call_soon_threadsafe(self._stop_event.set)
+        if self._thread is not None:
+            self._thread.join(timeout=10.0)
+            self._thread = None
+
+    def __enter__(self):
+        self.start()
+        return self
+
+    def __exit__(self, *exc):
+        self.stop()
+
+
+async def _call(fn):
+    return fn()

@@ -1,0 +1,68 @@
+"""``station sim ...``: the simulated twins as standalone servers.
+
+``station sim up`` starts every twin server of a scenario (Modbus TCP per drive, the
+grating encoder on a pty) and prints where each listens, then serves until Ctrl-C --
+so the real drivers (or any Modbus tool) can be pointed at them from another process.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import signal
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+from station.cli.common import err_console, fail, print_json
+
+sim_app = typer.Typer(help="Simulated twins: protocol-level servers for the drives and the encoder.", no_args_is_help=True)
+
+
+@sim_app.command("up")
+def up(
+    scenario: Optional[Path] = typer.Option(None, "--scenario", "-s", help="scenario TOML (default: sim/scenarios/default.toml)"),
+    json_out: bool = typer.Option(False, "--json", help="print the endpoints as one JSON document on stdout"),
+) -> None:
+    """Start all twin servers and serve until Ctrl-C."""
+    from sim.twins import ScenarioError, TwinStation, load_scenario
+
+    try:
+        sc = load_scenario(scenario)
+    except ScenarioError as exc:
+        fail(str(exc))
+
+    async def serve() -> None:
+        station = TwinStation(sc)
+        try:
+            endpoints = await station.start()
+        except OSError as exc:
+            fail(f"cannot start the twins: {exc}")
+        stop = asyncio.Event()
+        loop = asyncio.get_running_loop()
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            with contextlib.suppress(NotImplementedError, RuntimeError):
+                loop.add_signal_handler(sig, stop.set)
+        try:
+            if json_out:
+                print_json(endpoints)
+            else:
+                err_console.print(f"twins of [bold]{sc.source}[/] (time scale {sc.time_scale}):")
+                for name, ep in endpoints.items():
+                    if "port" in ep:
+                        print(f"{name}: modbus-tcp {ep['host']}:{ep['port']} device_id={ep['device_id']} "
+                              f"unit_per_count={ep['unit_per_count']} ({ep['kind']})", flush=True)
+                    else:
+                        print(f"{name}: serial {ep['path']} baud={ep['baudrate']} "
+                              f"resolution_um={ep['resolution_um']} (axis {ep['axis']})", flush=True)
+                err_console.print("serving; Ctrl-C to stop")
+            await stop.wait()
+        finally:
+            await station.stop()
+
+    asyncio.run(serve())
+
+
+def register(app: typer.Typer) -> None:
+    app.add_typer(sim_app, name="sim")
