@@ -1,0 +1,225 @@
+"""The library of physics discovery may propose, and how each candidate is tried.
+
+The formulas are those of :mod:`station.effects` (one definition per effect);
+this module only adds effects the contract's vocabulary lacks (registered with
+:func:`station.effects.register`, so a model file that names them can be read
+by the twin too) and, for every candidate, what is fitted, from where the fit
+starts, what is physical, and how many hypotheses a scan tries (for the
+multiple-testing correction of its p-value).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable, ClassVar
+
+import numpy as np
+
+from station.effects import (
+    Backlash, Eccentricity, Effect, Offset, Periodic, Scale, ThermalDrift, ThermalExpansion, register,
+)
+from station.discovery.data import Prepared
+
+
+@register
+@dataclass(frozen=True)
+class LocalDefect(Effect):
+    """A Gaussian bump: ``amplitude * exp(-((x - centre) / width)^2 / 2)``.
+
+    Not in the contract's vocabulary; registered here so that a model file naming
+    ``local_defect`` is understood by the twin and by discovery alike.
+    """
+
+    centre: float = 0.0
+    width: float = 1.0
+    amplitude: float = 0.0
+    name: ClassVar[str] = "local_defect"
+    explanation: ClassVar[str] = (
+        "a bump or dip confined to one part of the travel: a damaged, dirty or "
+        "re-glued spot of the scale, a worn or dented stretch of the screw or "
+        "guideway, a joint between scale segments; modelled as a Gaussian bump "
+        "(amplitude at the centre, width = its standard deviation, in position units)"
+    )
+
+    def evaluate(self, ctx):
+        w = max(abs(self.width), 1e-12)
+        return self.amplitude * np.exp(-0.5 * ((ctx.x - self.centre) / w) ** 2)
+
+
+#: Effects registered by discovery (documented in docs/discovery.md).
+EXTRA_EFFECTS = (LocalDefect,)
+
+
+@dataclass
+class Candidate:
+    """How one effect is tried as an addition to the current model.
+
+    ``inits`` returns starting effects (one per scanned value of the nonlinear
+    parameters); ``trials`` is the number of hypotheses the scan behind it tests
+    and ``df_single`` the degrees of freedom of one of them, so the p-value of the
+    best is ``min(1, trials * P(chi2_df_single > LR))`` (Bonferroni over the scan).
+    """
+
+    name: str
+    free: tuple[str, ...]
+    inits: Callable[[Prepared], list[Effect]]
+    magnitude: str
+    trials: float = 1.0
+    df_single: int = 1
+    bounds: dict[str, tuple[float, float]] = field(default_factory=dict)
+    physical: Callable[[Effect, Prepared], str | None] = lambda e, p: None
+
+    @property
+    def n_params(self) -> int:
+        return len(self.free)
+
+
+def distinct_targets(prep: Prepared) -> np.ndarray:
+    return np.unique(np.round(prep.x, 6))
+
+
+def min_spacing(prep: Prepared) -> float:
+    """Smallest step between distinct targets (5th percentile, robust to a near-duplicate)."""
+    t = distinct_targets(prep)
+    if t.size < 2:
+        return 0.0
+    gaps = np.diff(t)
+    return float(np.percentile(gaps, 5))
+
+
+def period_limits(prep: Prepared) -> tuple[float, float]:
+    """Shortest and longest period a periodic effect may have in this recording.
+
+    Shortest: two target steps (the Nyquist-like limit of the finest spacing, x1.1
+    margin against the very edge).  Longest: two thirds of the travel, so that at
+    least 1.5 cycles are seen; anything longer is a trend or curvature, and on a
+    rotary axis once-per-revolution belongs to eccentricity.
+    """
+    rng = float(np.ptp(prep.x))
+    p_min = 2.2 * min_spacing(prep)
+    p_max = rng / 1.5
+    if prep.kind == "rotary":
+        p_max = min(p_max, 360.0 / 1.5)
+    return p_min, p_max
+
+
+def tau_grid(prep: Prepared) -> np.ndarray:
+    """Time constants tried for thermal drift: 1/30 to 5 times the campaign length.
+
+    Faster than 1/30 of the campaign a warm-up is over before the second target;
+    slower than five campaign lengths it is a straight line and its amplitude and
+    tau cannot be told apart.
+    """
+    span = float(np.ptp(prep.time_s))
+    return np.geomspace(span / 30.0, 5.0 * span, 12)
+
+
+def width_grid(prep: Prepared) -> np.ndarray:
+    """Widths tried for a local defect: from the finest spacing to 1/12 of the travel."""
+    lo = max(min_spacing(prep), 1e-6)
+    hi = max(np.ptp(prep.x) / 12.0, 1.5 * lo)
+    return np.geomspace(lo, hi, 5)
+
+
+def _phys_periodic(e: Periodic, prep: Prepared) -> str | None:
+    p_min, p_max = period_limits(prep)
+    if not (p_min <= e.period <= p_max):
+        return f"period {e.period:.4g} outside the resolvable range [{p_min:.4g}, {p_max:.4g}]"
+    return None
+
+
+def _phys_drift(e: ThermalDrift, prep: Prepared) -> str | None:
+    span = float(np.ptp(prep.time_s))
+    if e.tau <= 0:
+        return f"tau = {e.tau:.4g} s is not positive"
+    if e.tau > 10 * span:
+        return f"tau = {e.tau:.4g} s is over ten campaign lengths: a straight drift, amplitude and tau not separable"
+    return None
+
+
+def _phys_local(e: LocalDefect, prep: Prepared) -> str | None:
+    lo, hi = float(prep.x.min()), float(prep.x.max())
+    if not (lo <= e.centre <= hi):
+        return f"centre {e.centre:.4g} outside the measured range"
+    w = abs(e.width)
+    inside = np.count_nonzero(np.abs(distinct_targets(prep) - e.centre) <= 2 * w)
+    if inside < 3:
+        return f"only {inside} targets within +-2 widths of the centre: not resolved"
+    if w > np.ptp(prep.x) / 6:
+        return "wider than a sixth of the travel: not local (a trend or curvature)"
+    return None
+
+
+def candidates(prep: Prepared, exclude: set[str] = frozenset()) -> list[Candidate]:
+    """The candidates this recording can support (channels and kind permitting)."""
+    out: list[Candidate] = [
+        Candidate("offset", ("value",), lambda p: [Offset(0.0)], "value"),
+        Candidate("scale", ("ppm",), lambda p: [Scale(0.0)], "ppm"),
+    ]
+    if np.unique(prep.direction).size == 2:
+        out.append(Candidate("backlash", ("reversal",), lambda p: [Backlash(0.0)], "reversal"))
+    if prep.time_s is not None:
+        span = float(np.ptp(prep.time_s))
+        grid = tau_grid(prep)
+        out.append(Candidate(
+            "thermal_drift", ("amplitude", "tau"),
+            lambda p, g=grid: [ThermalDrift(1.0, float(t)) for t in g], "amplitude",
+            trials=float(grid.size), df_single=1,
+            bounds={"tau": (span / 100.0, 20.0 * span)}, physical=_phys_drift))
+    if prep.temperature_c is not None and np.ptp(prep.temperature_c) >= 0.1:
+        out.append(Candidate("thermal_expansion", ("coefficient",),
+                             lambda p: [ThermalExpansion(0.0, 20.0)], "coefficient"))
+    if prep.kind == "rotary" and np.ptp(prep.x) >= 180.0:
+        # at least half a revolution is needed to see a once-per-revolution sine
+        out.append(Candidate("eccentricity", ("amplitude", "phase"),
+                             lambda p: [Eccentricity(1.0, 0.0), Eccentricity(1.0, np.pi / 2)], "amplitude",
+                             df_single=2))
+    p_min, p_max = period_limits(prep)
+    if p_min > 0 and p_max > p_min:
+        span = float(np.ptp(prep.x))
+        # independent frequencies between 1/p_max and 1/p_min (Horne & Baliunas 1986:
+        # about the number of Fourier frequencies in the band)
+        m = max(1.0, span * (1.0 / p_min - 1.0 / p_max))
+        out.append(Candidate("periodic", ("period", "amplitude", "phase"), None, "amplitude",
+                             trials=m, df_single=2,
+                             bounds={"period": (p_min, p_max)}, physical=_phys_periodic))
+    if distinct_targets(prep).size >= 8:
+        widths = width_grid(prep)
+        n_c = distinct_targets(prep).size
+        out.append(Candidate("local_defect", ("centre", "width", "amplitude"), None, "amplitude",
+                             trials=float(n_c * widths.size), df_single=1,
+                             bounds={"width": (0.5 * widths[0], 2.0 * widths[-1]),
+                                     "centre": (float(prep.x.min()), float(prep.x.max()))},
+                             physical=_phys_local))
+    return [c for c in out if c.name not in exclude]
+
+
+#: the measurement that separates two effects that this recording cannot tell apart
+SEPARATING_MEASUREMENT = {
+    frozenset({"backlash", "thermal_drift"}):
+        "a run in reversed order (approach -1 first, then +1) or pilgrim-step runs, with the "
+        "temperature logged: backlash keeps its sign with the direction, drift follows time",
+    frozenset({"scale", "thermal_expansion"}):
+        "a campaign at another temperature, or temperature logging through a warm-up: a scale "
+        "error does not change with temperature, thermal expansion does",
+    frozenset({"offset", "thermal_drift"}):
+        "a longer campaign started from a cold machine, so the drift is seen to settle",
+    frozenset({"eccentricity", "periodic"}):
+        "a full-revolution recording with finer angular steps",
+    frozenset({"periodic", "local_defect"}):
+        "dense short-step runs over the whole travel: a periodic error repeats, a defect does not",
+    frozenset({"scale", "periodic"}):
+        "targets spread over the whole travel with finer steps",
+    frozenset({"scale", "local_defect"}):
+        "dense short-step runs over the whole travel",
+    frozenset({"scale", "thermal_drift"}):
+        "a run in reversed target order: a scale error follows position, drift follows time",
+    frozenset({"offset", "scale"}):
+        "targets nearer the travel's zero",
+}
+
+
+def separating_measurement(a: str, b: str) -> str:
+    return SEPARATING_MEASUREMENT.get(
+        frozenset({a, b}),
+        "more runs with the targets visited in a different order, and the temperature logged")
