@@ -256,13 +256,23 @@ class StationModel:
 
     def relative_pose(self, z_mm, c_deg, *, ideal: bool = False, motions_si=None, **context) -> Rigid:
         """The detection frame N in the part frame M (Eq. 1 ideal, Eq. 9 actual)."""
-        z = np.asarray(z_mm, dtype=float)
-        c = np.asarray(c_deg, dtype=float)
+        z, c = np.broadcast_arrays(np.asarray(z_mm, dtype=float), np.asarray(c_deg, dtype=float))
         if motions_si is None and not ideal:
             motions_si = self.motion_values_si(z, c, **context)
         tool = self._chain_product(self._slots(self.topology.tool_chain, ideal=ideal), z, np.radians(c), motions_si, ideal)
         work = self._chain_product(self._slots(self.topology.workpiece_chain, ideal=ideal), z, np.radians(c), motions_si, ideal)
         return work.inverse() @ tool
+
+    def body_pose(self, body: str, z_mm, c_deg, *, ideal: bool = False, **context) -> Rigid:
+        """Pose of one body's frame in the machine frame R (the chain up to it).
+
+        This is what an instrument fixed to the machine base sees: a laser
+        interferometer's reflector on the endoscope (body N), a rotary calibrator
+        on the table (body C)."""
+        z, c = np.broadcast_arrays(np.asarray(z_mm, dtype=float), np.asarray(c_deg, dtype=float))
+        motions = None if ideal else self.motion_values_si(z, c, **context)
+        chain = self.topology.chain(self.topology.by_name(body).index)
+        return self._chain_product(self._slots(chain, ideal=ideal), z, np.radians(c), motions, ideal)
 
     def ideal_point_mm(self, z_mm, c_deg) -> np.ndarray:
         """Ideal detection point in M, closed form of Eq. (1) with Table 2:

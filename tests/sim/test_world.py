@@ -1,0 +1,76 @@
+"""The simulated world and instruments: the twin errs by the same model that compensation inverts."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from sim.instruments import LaserInterferometer, RotaryCalibrator, iso230_sequence
+from sim.world import World, world_from_dict
+from station.kinematics.inverse import compensate
+from station.kinematics.rigid import RAD_PER_ARCSEC
+
+
+@pytest.fixture(scope="module")
+def world():
+    return World()
+
+
+def test_iso230_sequence_is_bidirectional_and_timed():
+    t, run, d, x = iso230_sequence([0, 50, 100], runs=2, dwell_s=1.0, speed=10.0)
+    assert list(x[:6]) == [0, 50, 100, 100, 50, 0]
+    assert list(d[:6]) == [1, 1, 1, -1, -1, -1]
+    assert list(run) == [1] * 6 + [2] * 6
+    assert np.all(np.diff(t) > 0)
+
+
+def test_laser_reads_positioning_error_plus_abbe(world):
+    """Noise-free, the laser on the endoscope reads EZZ plus the Abbe terms of the
+    slide's tilts times the endoscope offset (first order: EAZ*Dy - EBZ*Dx), zeroed at
+    the first target."""
+    t, run, d, x = iso230_sequence(np.linspace(0, 150, 7), runs=1)
+    rec = LaserInterferometer(world, sigma_um=0.0).measure_z(t, run, d, x)
+    m = world.model.motions["Z"]
+    Dx, Dy, _ = world.model.endoscope_offset_mm
+    expected = m.z.evaluate(x) + (m.a.evaluate(x) * Dy - m.b.evaluate(x) * Dx) * RAD_PER_ARCSEC * 1e3
+    expected -= expected[0]
+    assert rec.deviation == pytest.approx(expected, abs=2e-3)
+    # the Abbe part is not negligible in this station: the check has teeth
+    assert np.max(np.abs(m.b.evaluate(x) * Dx * RAD_PER_ARCSEC * 1e3)) > 0.1
+
+
+def test_calibrator_reads_angular_positioning(world):
+    t, run, d, x = iso230_sequence(np.arange(0.0, 360.0, 45.0), runs=1, speed=30.0)
+    rec = RotaryCalibrator(world, sigma_arcsec=0.0).measure_c(t, run, d, x)
+    ecc = world.model.motions["C"].c.evaluate(x)
+    # to first order the table's tilts do not turn it about z
+    assert rec.deviation == pytest.approx(ecc - ecc[0], abs=0.05)
+
+
+def test_noise_has_the_configured_spread(world):
+    t, run, d, x = iso230_sequence(np.linspace(0, 150, 11), runs=5)
+    clean = LaserInterferometer(world, sigma_um=0.0).measure_z(t, run, d, x).deviation
+    noisy = LaserInterferometer(world, sigma_um=0.5, seed=7).measure_z(t, run, d, x).deviation
+    resid = noisy - clean
+    assert np.std(resid) == pytest.approx(0.5, rel=0.25)
+
+
+def test_compensated_command_lands_on_the_hole(world):
+    """What compensation commands, the world executes: the true point is on target."""
+    hole = world.part.holes[1]
+    sol = compensate(world.model, [hole.axial_mm], [hole.angle_deg])
+    p = world.true_point(float(sol.z_mm[0]), float(sol.c_deg[0]))
+    assert p.axial_mm == pytest.approx(hole.axial_mm, abs=1e-6)
+    assert p.angle_deg == pytest.approx(hole.angle_deg, abs=1e-5)
+    # uncompensated, the same hole is missed by micrometres
+    q = world.true_point(hole.axial_mm, hole.angle_deg)
+    assert abs(q.axial_mm - hole.axial_mm) > 5e-3
+
+
+def test_world_from_scenario_table(tmp_path):
+    w = world_from_dict({"temperature": {"start_c": 21.0, "rise_c": 2.0, "tau_s": 100.0},
+                         "holes": [{"name": "h", "axial_mm": 50.0, "diameter_mm": 0.8}]}, "s.toml")
+    assert w.temperature.at([0.0, 1e9]) == pytest.approx([21.0, 23.0])
+    assert w.part.holes[0].axial_mm == 50.0 and w.part.holes[0].angle_deg == 0.0
+    with pytest.raises(ValueError, match=r"world.holes\[0\] lacks 'diameter_mm'"):
+        world_from_dict({"holes": [{"name": "h", "axial_mm": 1.0}]}, "s.toml")
