@@ -75,8 +75,8 @@ def junctions(model: SegmentModel) -> list[dict]:
     """Every neighbouring pair after sorting: gap/overlap and the jump where they meet.
 
     Returns dicts with ``left``, ``right`` (segments), ``gap`` (``right.x_from −
-    left.x_to``; negative is an overlap) and, where the gap is within tolerance,
-    ``position`` and ``jump`` = right(x) − left(x) at the junction.
+    left.x_to``; negative is an overlap), ``position`` (the junction, mid-gap) and
+    ``jump`` = right(right.x_from) − left(left.x_to), meaningful where the gap is ~0.
     """
     segs = model.sorted().segments
     out = []
