@@ -1,0 +1,73 @@
+"""The OpenCV camera driver on a video file written by the test (MJPG in .avi)."""
+
+from __future__ import annotations
+
+import asyncio
+
+import cv2
+import numpy as np
+import pytest
+
+from drivers.camera import OpenCVCamera
+from drivers.interfaces import CommunicationLost
+
+LEVELS = (0, 60, 120, 180, 240)
+
+
+@pytest.fixture
+def video(tmp_path):
+    path = tmp_path / "bore.avi"
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 10.0, (80, 60))
+    assert writer.isOpened(), "opencv cannot write MJPG/avi here"
+    try:
+        for level in LEVELS:
+            frame = np.full((60, 80, 3), level, np.uint8)
+            frame[20:40, 30:50] = 255 - level  # a square, so frames are not flat
+            writer.write(frame)
+    finally:
+        writer.release()
+    return path
+
+
+def test_frames_are_grey_numbered_and_in_order(video):
+    async def run():
+        cam = OpenCVCamera(video)
+        try:
+            await cam.connect()
+            return [await cam.grab() for _ in LEVELS]
+        finally:
+            await cam.close()
+
+    frames = asyncio.run(run())
+    assert [f.sequence for f in frames] == [1, 2, 3, 4, 5]
+    for f, level in zip(frames, LEVELS):
+        assert f.image.shape == (60, 80) and f.image.dtype == np.uint8
+        assert abs(int(np.median(f.image)) - level) <= 4  # JPEG loses a little
+    assert all(b.timestamp >= a.timestamp for a, b in zip(frames, frames[1:]))
+
+
+def test_end_of_file_is_typed_and_loop_rewinds(video):
+    async def run(loop):
+        cam = OpenCVCamera(video, loop=loop)
+        try:
+            out = [await cam.grab() for _ in LEVELS]
+            out.append(await cam.grab())
+            return out
+        finally:
+            await cam.close()
+
+    with pytest.raises(CommunicationLost, match="end of video"):
+        asyncio.run(run(False))
+    frames = asyncio.run(run(True))
+    assert abs(int(np.median(frames[-1].image)) - LEVELS[0]) <= 4
+
+
+def test_missing_file_is_communication_lost(tmp_path):
+    cam = OpenCVCamera(tmp_path / "none.avi")
+    with pytest.raises(CommunicationLost):
+        asyncio.run(cam.grab())
+
+
+def test_device_sources_use_v4l2():
+    assert OpenCVCamera(0).is_device and OpenCVCamera("/dev/video2").is_device
+    assert not OpenCVCamera("replay.avi").is_device

@@ -1,0 +1,189 @@
+"""The real Modbus driver against the drive twins over TCP on 127.0.0.1, with every fault kind."""
+
+from __future__ import annotations
+
+import asyncio
+
+import pytest
+
+from drivers.interfaces import (
+    AxisState,
+    CommunicationLost,
+    DeviceTimeout,
+    DriveFault,
+    DriverError,
+    FollowingError,
+    ProtocolError,
+)
+from drivers.interfaces.register_map import FaultCode
+from sim.faults import FaultKind
+
+from .conftest import make_axis
+
+pytestmark = pytest.mark.asyncio
+
+
+async def until(predicate, timeout_s=5.0):
+    """Poll an async predicate (bounded: a hang fails the test instead of blocking it)."""
+    loop = asyncio.get_running_loop()
+    deadline = loop.time() + timeout_s
+    while loop.time() < deadline:
+        if await predicate():
+            return
+        await asyncio.sleep(0.02)
+    raise AssertionError("condition not reached in time")
+
+
+async def test_enable_home_move_and_read_back(z_axis, twins):
+    await z_axis.enable()
+    assert (await z_axis.status()).state is AxisState.IDLE
+    await z_axis.home()
+    st = await z_axis.wait_in_position(5.0)
+    assert st.homed
+    await z_axis.move_to(25.4321, velocity=40.0)
+    st = await z_axis.wait_in_position(5.0)
+    assert st.position == pytest.approx(25.4321, abs=1e-9)
+    assert await z_axis.read_position() == pytest.approx(25.4321, abs=1e-9)
+    assert twins.physics["Z"].motor_position() == pytest.approx(25.4321, abs=1e-9)
+    assert z_axis.firmware_id == 0x0102
+
+
+async def test_rotary_axis_scaling_and_device_id(twins):
+    c = make_axis(twins, "C")
+    try:
+        await c.connect()
+        await c.enable()
+        await c.move_to(123.4567)
+        st = await c.wait_in_position(5.0)
+        assert st.position == pytest.approx(123.4567, abs=1e-9)
+        assert twins.physics["C"].motor_position() == pytest.approx(123.4567, abs=1e-9)
+        assert twins.physics["Z"].motor_position() == 0.0  # the other drive did not move
+    finally:
+        await c.close()
+
+
+async def test_move_refused_when_disabled(z_axis):
+    with pytest.raises(DriverError, match="not enabled"):
+        await z_axis.move_to(1.0)
+
+
+async def test_stop_ends_a_move_short_of_its_target(z_axis, twins):
+    await z_axis.enable()
+    await z_axis.move_to(150.0, velocity=5.0)  # 150 mm at 5 mm/s: long enough to stop half way
+    await z_axis.stop()
+    st = await z_axis.wait_in_position(2.0)
+    assert 0.0 < st.position < 150.0 and not st.moving
+
+
+async def test_delay_gives_timeout_then_recovers(z_axis, twins):
+    faults = twins.drives["Z"].faults
+    faults.activate(FaultKind.DELAY, delay_s=1.0)  # longer than the driver's 0.3 s timeout
+    try:
+        with pytest.raises(DeviceTimeout):
+            await z_axis.status()
+    finally:
+        faults.clear(FaultKind.DELAY)
+    assert (await z_axis.status()).ready
+
+
+@pytest.mark.parametrize("kind", [FaultKind.GARBAGE, FaultKind.CHECKSUM])
+async def test_corrupt_replies_give_typed_error_then_recover(z_axis, twins, kind):
+    faults = twins.drives["Z"].faults
+    faults.activate(kind)
+    try:
+        with pytest.raises((ProtocolError, DeviceTimeout)):
+            await z_axis.read_position()
+    finally:
+        faults.clear(kind)
+    assert await z_axis.read_position() == 0.0
+
+
+async def test_dropped_connection_gives_communication_lost_then_recovers(z_axis, twins):
+    faults = twins.drives["Z"].faults
+    faults.activate(FaultKind.DROP_CONNECTION)
+    try:
+        with pytest.raises((CommunicationLost, DeviceTimeout)):
+            await z_axis.status()
+        with pytest.raises((CommunicationLost, DeviceTimeout)):
+            await z_axis.status()
+    finally:
+        faults.clear(FaultKind.DROP_CONNECTION)
+    assert (await z_axis.status()).ready
+
+
+async def test_server_gone_is_communication_lost(twins):
+    axis = make_axis(twins, "Z")
+    await twins.drives["Z"].stop()
+    try:
+        with pytest.raises(CommunicationLost):
+            await axis.connect()
+    finally:
+        await axis.close()
+
+
+async def test_stuck_axis_ends_in_following_error_and_recovers(z_axis, twins):
+    await z_axis.enable()
+    twins.drives["Z"].faults.activate(FaultKind.STUCK_AXIS)
+    await z_axis.move_to(20.0)
+    with pytest.raises(FollowingError) as info:
+        await z_axis.wait_in_position(5.0)
+    assert info.value.code == FaultCode.FOLLOWING_ERROR
+    twins.drives["Z"].faults.clear(FaultKind.STUCK_AXIS)
+    await z_axis.reset_fault()
+    st = await z_axis.status()
+    assert not st.fault and not st.enabled  # reset does not re-enable by itself
+    await z_axis.enable()
+    await z_axis.move_to(20.0)
+    assert (await z_axis.wait_in_position(5.0)).position == pytest.approx(20.0)
+
+
+async def test_injected_drive_fault_reports_its_code(z_axis, twins):
+    await z_axis.enable()
+    twins.drives["Z"].faults.activate(FaultKind.DRIVE_FAULT, code=FaultCode.OVERTEMPERATURE)
+    st = await z_axis.status()
+    assert st.fault and st.fault_code == FaultCode.OVERTEMPERATURE and st.state is AxisState.FAULT
+    with pytest.raises(DriveFault) as info:
+        await z_axis.move_to(5.0)
+    assert info.value.code == 0x21 and "overtemperature" in str(info.value)
+    assert not isinstance(info.value, FollowingError)
+    twins.drives["Z"].faults.clear(FaultKind.DRIVE_FAULT)
+    await z_axis.reset_fault()
+    await z_axis.enable()
+    await z_axis.move_to(5.0)
+    await z_axis.wait_in_position(5.0)
+
+
+async def test_estop_cannot_be_reset_until_released(z_axis, twins):
+    await z_axis.enable()
+    twins.drives["Z"].faults.activate(FaultKind.DRIVE_FAULT, code=FaultCode.ESTOP)
+    await z_axis.reset_fault()
+    st = await z_axis.status()
+    assert st.estop and st.fault_code == FaultCode.ESTOP
+    twins.drives["Z"].faults.clear(FaultKind.DRIVE_FAULT)
+    await z_axis.reset_fault()
+    assert not (await z_axis.status()).fault
+
+
+async def test_watchdog_faults_the_drive_when_the_heartbeat_stops(twins):
+    axis = make_axis(twins, "Z", watchdog_timeout_ms=200, heartbeat_period_s=0.05)
+    try:
+        await axis.connect()
+        await axis.enable()
+        await asyncio.sleep(0.4)  # two watchdog periods with a live heartbeat
+        assert not (await axis.status()).fault
+        axis._heartbeat_task.cancel()  # the master "crashes" but the link stays up
+
+        async def faulted():
+            return (await axis.status()).fault_code == FaultCode.WATCHDOG_EXPIRED
+
+        await until(faulted)
+    finally:
+        await axis.close()
+
+
+async def test_heartbeat_period_must_fit_the_watchdog():
+    with pytest.raises(ValueError):
+        make_axis_args = dict(name="Z", device_id=1, unit_per_count=1e-4, default_velocity=1, default_acceleration=1)
+        from drivers.modbus_axis import ModbusLinearAxis
+
+        ModbusLinearAxis.tcp("127.0.0.1", 1, watchdog_timeout_ms=100, heartbeat_period_s=0.1, **make_axis_args)
