@@ -46,6 +46,7 @@ class SerialTransport(Protocol):
 
     def write(self, data: bytes) -> int | None: ...
     def read(self, size: int = 1) -> bytes: ...
+    # optional: ``in_waiting`` (bytes ready), used to read a reply in one go
     def reset_input_buffer(self) -> None: ...
     def close(self) -> None: ...
 
@@ -153,8 +154,13 @@ class SerialGratingEncoder(PositionEncoder):
         """Bytes up to CR LF (exclusive); DeviceTimeout at the deadline."""
         buf = b""
         while True:
-            chunk = t.read(ep.MAX_REPLY_BYTES)
+            # one byte blocks until the reply starts (or the chunk timeout), then take what
+            # has arrived: a fixed-size read would wait out the timeout on every short reply
+            chunk = t.read(1)
             if chunk:
+                waiting = getattr(t, "in_waiting", 0)
+                if waiting:
+                    chunk += t.read(min(waiting, ep.MAX_REPLY_BYTES))
                 buf += chunk
                 nl = buf.find(b"\n")
                 if nl >= 0:
