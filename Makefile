@@ -16,7 +16,7 @@ install: $(STAMP)
 
 # The station's main job on simulated hardware (the most complete thing that runs today).
 run: $(STAMP)
-	$(BIN)/station demo
+	$(BIN)/station demo --out out/demo
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q

@@ -11,7 +11,7 @@ import typer
 from rich.console import Console
 
 #: human-readable output goes to stderr when stdout carries JSON
-err_console = Console(stderr=True)
+err_console = Console(stderr=True, soft_wrap=True)
 out_console = Console()
 
 

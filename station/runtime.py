@@ -1,0 +1,193 @@
+"""The composition root: build a running station from a config file.
+
+This module (with the CLI) is the only place in ``station`` that imports concrete
+drivers or ``sim``. Nothing else decides "simulated or real": a simulated station
+is the *same real drivers* pointed at twin servers on 127.0.0.1 (and ptys), with the
+world of the scenario plugged into the twins.
+
+Config file (TOML), every key optional; the embedded default is a simulated station:
+
+    [station]
+    mode = "simulated"          # or "hardware"
+    model = "path/to/model.toml"  # geometric error model (default: built-in)
+
+    [simulation]
+    scenario = "path/to/scenario.toml"  # default: sim/scenarios/default.toml
+    time_scale = 20.0           # overrides the scenario's (moves run 20x faster)
+
+    [hardware.Z]                # mode = "hardware" only
+    transport = "tcp"           # or "rtu"
+    host = "192.168.10.11"      # tcp
+    port = 502
+    serial_port = "/dev/ttyUSB0"  # rtu
+    baudrate = 115200
+    device_id = 1
+    unit_per_count = 0.0001
+    default_velocity = 20.0
+    default_acceleration = 200.0
+
+    [hardware.C]                # as Z
+    [hardware.encoder]
+    serial_port = "/dev/ttyUSB1"
+    baudrate = 115200
+    resolution_um = 0.05
+"""
+
+from __future__ import annotations
+
+import hashlib
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from drivers.interfaces import LinearAxis, PositionEncoder, RotaryAxis
+from station.kinematics.model import StationModel, load_model
+
+
+class ConfigError(ValueError):
+    """A station config that cannot be used; names the file and the key."""
+
+
+@dataclass
+class Station:
+    """A built station: drivers, the error model and, when simulated, the twins."""
+
+    z: LinearAxis
+    c: RotaryAxis
+    encoder: PositionEncoder | None
+    model: StationModel
+    mode: str
+    config_hash: str
+    twins: Any = None  # sim.twins.TwinsThread when simulated
+    world: Any = None  # sim.world.World when simulated
+    endpoints: dict[str, Any] = field(default_factory=dict)
+
+    async def connect(self) -> None:
+        await self.z.connect()
+        await self.c.connect()
+        if self.encoder is not None:
+            await self.encoder.connect()
+
+    async def close(self) -> None:
+        """Close drivers, then stop the twins; never raises for a link already gone."""
+        for dev in (self.encoder, self.c, self.z):
+            if dev is None:
+                continue
+            try:
+                await dev.close()
+            except Exception:  # noqa: BLE001 - closing must not hide the first error
+                pass
+        if self.twins is not None:
+            self.twins.stop()
+            self.twins = None
+
+
+def load_config(path: str | Path | None) -> tuple[dict[str, Any], str]:
+    """The config dict and its hash (for traceability); None gives the embedded default."""
+    if path is None:
+        text = '[station]\nmode = "simulated"\n'
+        source = "<embedded default>"
+    else:
+        p = Path(path)
+        try:
+            text = p.read_text()
+        except OSError as exc:
+            raise ConfigError(f"{p}: {exc.strerror}") from None
+        source = str(p)
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{source}: not valid TOML: {exc}") from None
+    data["_source"] = source
+    return data, hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def _axis_driver(cls, name: str, spec: dict[str, Any], source: str):
+    from drivers.modbus_axis import ModbusServoAxis  # noqa: F401 (cls is one of its subclasses)
+
+    transport = spec.get("transport", "tcp")
+    common = dict(
+        name=name,
+        device_id=int(spec.get("device_id", 1)),
+        unit_per_count=float(spec.get("unit_per_count", 1e-4)),
+        default_velocity=float(spec.get("default_velocity", 20.0)),
+        default_acceleration=float(spec.get("default_acceleration", 200.0)),
+    )
+    if "timeout_s" in spec:
+        common["timeout_s"] = float(spec["timeout_s"])
+    if transport == "tcp":
+        if "host" not in spec:
+            raise ConfigError(f"{source}: [hardware.{name}] needs 'host' for transport tcp")
+        return cls.tcp(str(spec["host"]), int(spec.get("port", 502)), **common)
+    if transport == "rtu":
+        if "serial_port" not in spec:
+            raise ConfigError(f"{source}: [hardware.{name}] needs 'serial_port' for transport rtu")
+        return cls.rtu(str(spec["serial_port"]), int(spec.get("baudrate", 115200)), **common)
+    raise ConfigError(f"{source}: [hardware.{name}] transport must be 'tcp' or 'rtu', not {transport!r}")
+
+
+def build_station(config_path: str | Path | None = None, *, scenario: str | Path | None = None,
+                  time_scale: float | None = None) -> Station:
+    """Build (not yet connect) the station the config describes. A simulated station's
+    twins are started here, on 127.0.0.1, and stopped by :meth:`Station.close`."""
+    from drivers.encoder import SerialGratingEncoder
+    from drivers.modbus_axis import ModbusLinearAxis, ModbusRotaryAxis
+
+    data, chash = load_config(config_path)
+    source = data["_source"]
+    st = data.get("station", {})
+    mode = st.get("mode", "simulated")
+    model = load_model(st["model"]) if "model" in st else load_model()
+
+    if mode == "hardware":
+        hw = data.get("hardware", {})
+        for key in ("Z", "C"):
+            if key not in hw:
+                raise ConfigError(f"{source}: mode 'hardware' needs a [hardware.{key}] table")
+        z = _axis_driver(ModbusLinearAxis, "Z", hw["Z"], source)
+        c = _axis_driver(ModbusRotaryAxis, "C", hw["C"], source)
+        enc = None
+        if "encoder" in hw:
+            e = hw["encoder"]
+            enc = SerialGratingEncoder(str(e["serial_port"]), baudrate=int(e.get("baudrate", 115200)),
+                                       resolution_um=float(e.get("resolution_um", 0.05)))
+        return Station(z, c, enc, model, mode, chash)
+
+    if mode != "simulated":
+        raise ConfigError(f"{source}: [station] mode must be 'simulated' or 'hardware', not {mode!r}")
+
+    from sim.twins import TwinsThread, TwinStation, load_scenario
+    from sim.world import load_world
+
+    sim_cfg = data.get("simulation", {})
+    scen_path = scenario or sim_cfg.get("scenario")
+    scen = load_scenario(scen_path)
+    ts = time_scale if time_scale is not None else sim_cfg.get("time_scale")
+    if ts is not None:
+        scen.time_scale = float(ts)
+    world = load_world(scen_path)
+    if "model" in st:
+        world.model = model
+    else:
+        model = world.model
+    twins = TwinsThread(TwinStation(scen))
+    endpoints = twins.start()
+    try:
+        world.attach(twins.station)
+        axes = {}
+        for key, cls in (("Z", ModbusLinearAxis), ("C", ModbusRotaryAxis)):
+            ep = endpoints[key]
+            ax_scen = scen.axes[key]
+            axes[key] = cls.tcp(
+                ep["host"], ep["port"], name=key, device_id=ep["device_id"], unit_per_count=ep["unit_per_count"],
+                default_velocity=ax_scen.config.default_velocity, default_acceleration=ax_scen.config.default_acceleration,
+            )
+        enc = None
+        if "encoder" in endpoints:
+            e = endpoints["encoder"]
+            enc = SerialGratingEncoder(e["path"], baudrate=e["baudrate"], resolution_um=e["resolution_um"])
+    except BaseException:
+        twins.stop()
+        raise
+    return Station(axes["Z"], axes["C"], enc, model, mode, chash, twins=twins, world=world, endpoints=endpoints)
