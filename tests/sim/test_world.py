@@ -32,7 +32,7 @@ def test_laser_reads_positioning_error_plus_abbe(world):
     rec = LaserInterferometer(world, sigma_um=0.0).measure_z(t, run, d, x)
     m = world.model.motions["Z"]
     Dx, Dy, _ = world.model.endoscope_offset_mm
-    expected = m.z.evaluate(x) + (m.a.evaluate(x) * Dy - m.b.evaluate(x) * Dx) * RAD_PER_ARCSEC * 1e3
+    expected = m.z.evaluate(x, direction=d) + (m.a.evaluate(x) * Dy - m.b.evaluate(x) * Dx) * RAD_PER_ARCSEC * 1e3
     expected -= expected[0]
     assert rec.deviation == pytest.approx(expected, abs=2e-3)
     # the Abbe part is not negligible in this station: the check has teeth
