@@ -4,12 +4,12 @@ An ASCII query/response protocol in the style of serial read-head interfaces, wi
 NMEA-like XOR checksum (docs/encoder-protocol.md is the human-readable copy):
 
     host:    ?P<CR>                                   position query
-    reply:   P+0000123456 S01 *3A<CR><LF>             counts, status (hex), checksum
+    reply:   P+0000123456 S01 *2E<CR><LF>             counts, status (hex), checksum
 
     host:    ?I<CR>                                   identity query
-    reply:   I GRT-005 V1.3 *5C<CR><LF>
+    reply:   I GRT-005 V1.3 *4A<CR><LF>
 
-    reply to anything else:  E01 *44<CR><LF>          (error code 01: unknown command)
+    reply to anything else:  E01 *64<CR><LF>          (error code 01: unknown command)
 
 The checksum is the XOR of every byte before ``*``, written as two upper-case hex
 digits.  ASCII was chosen over a binary frame because a technician can read it on a

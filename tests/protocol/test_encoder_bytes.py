@@ -86,6 +86,13 @@ def test_frame_layout_matches_the_document():
     assert ep.error_reply(1) == b"E01 *" + f"{xor(b'E01 '):02X}".encode() + b"\r\n"
 
 
+def test_documented_example_frames_are_exact():
+    """The examples in docs/encoder-protocol.md, byte for byte (checksums included)."""
+    assert GOOD == b"P+0000246914 S01 *25\r\n"
+    assert ep.identity_reply("GRT-005", "V1.3") == b"I GRT-005 V1.3 *4A\r\n"
+    assert ep.error_reply(1) == b"E01 *64\r\n"
+
+
 def test_position_query_exact_bytes_and_scaling():
     fake = FakeSerial([(b"?P\r", [GOOD])])
     position_mm, timestamp, status = read(encoder(fake))
