@@ -25,6 +25,7 @@ from typing import Any, Callable
 
 from sim.encoder.twin import SerialEncoderTwin
 from sim.servo.modbus_face import ModbusDriveTwin
+from sim.servo.null_modem import PtyNullModem
 from sim.servo.physics import ServoAxisConfig, ServoAxisPhysics
 
 DEFAULT_SCENARIO = Path(__file__).with_name("scenarios") / "default.toml"
@@ -40,6 +41,9 @@ class AxisScenario:
     device_id: int = 1
     port: int = 0
     unit_per_count: float = 1e-4
+    #: also serve Modbus RTU on a pty null modem (the driver opens ``endpoints()[name]["rtu_path"]``)
+    rtu: bool = False
+    rtu_baudrate: int = 115200
 
 
 @dataclass
@@ -84,10 +88,14 @@ def scenario_from_dict(data: dict[str, Any], source: str = "<dict>") -> Scenario
         device_id = int(spec.pop("device_id", 1))
         port = int(spec.pop("port", 0))
         unit_per_count = float(spec.pop("unit_per_count", 1e-4))
+        rtu = bool(spec.pop("rtu", False))
+        rtu_baudrate = int(spec.pop("rtu_baudrate", 115200))
         unknown = set(spec) - cfg_names
         if unknown:
             raise ScenarioError(f"{source}: axes.{name} has unknown keys {sorted(unknown)}")
-        axes[name] = AxisScenario(ServoAxisConfig(name=name, **spec), device_id, port, unit_per_count)
+        axes[name] = AxisScenario(
+            ServoAxisConfig(name=name, **spec), device_id, port, unit_per_count, rtu, rtu_baudrate
+        )
     encoder = None
     if "encoder" in data:
         enc = dict(data["encoder"])
@@ -114,6 +122,7 @@ class TwinStation:
             name: ModbusDriveTwin(self.physics[name], device_id=ax.device_id, unit_per_count=ax.unit_per_count, name=name)
             for name, ax in self.scenario.axes.items()
         }
+        self.null_modems: dict[str, PtyNullModem] = {}
         self.encoder: SerialEncoderTwin | None = None
         enc = self.scenario.encoder
         if enc is not None:
@@ -128,7 +137,12 @@ class TwinStation:
     async def start(self) -> dict[str, Any]:
         try:
             for name, drive in self.drives.items():
-                await drive.start(self.scenario.host, self.scenario.axes[name].port)
+                ax = self.scenario.axes[name]
+                rtu_port = None
+                if ax.rtu:
+                    modem = self.null_modems[name] = PtyNullModem(f"{name}-rtu")
+                    rtu_port, _ = modem.start()
+                await drive.start(self.scenario.host, ax.port, rtu_port=rtu_port, baudrate=ax.rtu_baudrate)
             if self.encoder is not None:
                 self.encoder.start()
         except BaseException:
@@ -140,6 +154,9 @@ class TwinStation:
     async def stop(self) -> None:
         for drive in self.drives.values():
             await drive.stop()
+        for modem in self.null_modems.values():
+            modem.stop()
+        self.null_modems.clear()
         if self.encoder is not None:
             self.encoder.stop()
         self.running = False
@@ -157,6 +174,9 @@ class TwinStation:
                 "unit_per_count": ax.unit_per_count,
                 "kind": ax.config.kind,
             }
+            if name in self.null_modems:
+                out[name]["rtu_path"] = self.null_modems[name].client_path
+                out[name]["rtu_baudrate"] = ax.rtu_baudrate
         if self.encoder is not None and self.scenario.encoder is not None:
             out["encoder"] = {
                 "protocol": "serial-ascii",

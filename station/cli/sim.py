@@ -52,7 +52,9 @@ def up(
                 for name, ep in endpoints.items():
                     if "port" in ep:
                         print(f"{name}: modbus-tcp {ep['host']}:{ep['port']} device_id={ep['device_id']} "
-                              f"unit_per_count={ep['unit_per_count']} ({ep['kind']})", flush=True)
+                              f"unit_per_count={ep['unit_per_count']} ({ep['kind']})"
+                              + (f"; modbus-rtu {ep['rtu_path']} baud={ep['rtu_baudrate']}" if "rtu_path" in ep else ""),
+                              flush=True)
                     else:
                         print(f"{name}: serial {ep['path']} baud={ep['baudrate']} "
                               f"resolution_um={ep['resolution_um']} (axis {ep['axis']})", flush=True)

@@ -187,3 +187,35 @@ async def test_heartbeat_period_must_fit_the_watchdog():
         from drivers.modbus_axis import ModbusLinearAxis
 
         ModbusLinearAxis.tcp("127.0.0.1", 1, watchdog_timeout_ms=100, heartbeat_period_s=0.1, **make_axis_args)
+
+
+async def test_rtu_over_a_pty_null_modem_moves_and_survives_crc_errors():
+    import dataclasses
+
+    from drivers.modbus_axis import ModbusLinearAxis
+    from sim.twins import TwinStation
+
+    from .conftest import fast_scenario
+
+    sc = fast_scenario()
+    sc.axes["Z"] = dataclasses.replace(sc.axes["Z"], rtu=True)
+    station = TwinStation(sc)
+    await station.start()
+    ep = station.endpoints()["Z"]
+    axis = ModbusLinearAxis.rtu(
+        ep["rtu_path"], ep["rtu_baudrate"], name="Z", device_id=1, unit_per_count=1e-4,
+        default_velocity=20.0, default_acceleration=200.0, timeout_s=0.3,
+    )
+    try:
+        await axis.connect()
+        await axis.enable()
+        await axis.move_to(3.25)
+        assert (await axis.wait_in_position(5.0)).position == pytest.approx(3.25)
+        station.drives["Z"].faults.activate(FaultKind.CHECKSUM)
+        with pytest.raises((DeviceTimeout, ProtocolError)):  # a frame with a bad CRC is dropped
+            await axis.status()
+        station.drives["Z"].faults.clear()
+        assert (await axis.status()).position == pytest.approx(3.25)
+    finally:
+        await axis.close()
+        await station.stop()
