@@ -67,8 +67,12 @@ class TrapezoidalMove:
             return d_acc + vp * tc + vp * td - 0.5 * a * td * td, vp - a * td
         return abs(self.target - self.start), 0.0
 
+    @property
+    def t_end(self) -> float:
+        return self.t0 + self.duration
+
     def position(self, t: float) -> float:
-        if t - self.t0 >= self.duration:
+        if t >= self.t_end:
             return self.target  # exactly, not start + rounded distance
         d, _ = self._travelled(t - self.t0)
         return self.start + self.direction * d
@@ -78,7 +82,7 @@ class TrapezoidalMove:
         return self.direction * v
 
     def done(self, t: float) -> bool:
-        return t - self.t0 >= self.duration
+        return t >= self.t_end
 
     def time_at_distance_from(self, point: float, distance: float, t_from: float) -> float | None:
         """First time after ``t_from`` the profile is ``distance`` away from ``point`` (bisection),

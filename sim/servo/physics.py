@@ -28,6 +28,7 @@ from typing import Callable
 
 from drivers.interfaces.register_map import FaultCode
 from sim.servo.motion import TrapezoidalMove
+from station.effects import ErrorCurve, k_for_kind
 
 #: ``actual_offset(motor_position, direction, time_s) -> deviation`` in the axis unit (mm or deg)
 OffsetHook = Callable[[float, int, float], float]
@@ -36,6 +37,19 @@ OffsetHook = Callable[[float, int, float], float]
 def zero_offset(motor_position: float, direction: int, time_s: float) -> float:
     """The default world: the carriage is exactly where the motor says."""
     return 0.0
+
+
+def offset_from_curve(curve: ErrorCurve) -> OffsetHook:
+    """An ``actual_offset`` hook from a ``station.effects.ErrorCurve`` (deviation in um or
+    arcsec, converted to mm or deg by the contract's ``k``): the simplest world, one
+    axis' positioning error.  The lead's world may compose richer hooks the same way.
+    """
+    k = k_for_kind(curve.kind)  # um per mm or arcsec per deg
+
+    def hook(motor_position: float, direction: int, time_s: float) -> float:
+        return float(curve.evaluate([motor_position], direction=[direction], time_s=[time_s])[0]) / k
+
+    return hook
 
 
 @dataclass

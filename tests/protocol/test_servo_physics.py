@@ -143,3 +143,20 @@ def test_world_offset_moves_the_carriage_not_the_motor():
     assert p.motor_position() == 20.0
     assert p.carriage_position() == pytest.approx(20.0 + 0.02 + 0.002)
     assert calls[-1] == (20.0, 1)
+
+
+def test_offset_from_an_error_curve_converts_um_to_mm_and_uses_direction():
+    from sim.servo.physics import offset_from_curve
+    from station.effects import Backlash, ErrorCurve, Scale
+
+    curve = ErrorCurve.table([0.0, 100.0], [0.0, 10.0], kind="linear", effects=[Backlash(reversal=4.0), Scale(ppm=0.0)])
+    p, clock = _physics()
+    p.actual_offset = offset_from_curve(curve)
+    p.enable(True)
+    p.start_move(50.0, 10.0, 1000.0)
+    clock.t += 10.0
+    # baseline 5 um at 50 mm, backlash +2 um approaching upwards: 7 um = 0.007 mm
+    assert p.carriage_position() == pytest.approx(50.007)
+    p.start_move(40.0, 10.0, 1000.0)
+    clock.t += 10.0
+    assert p.carriage_position() == pytest.approx(40.0 + 0.004 - 0.002)
