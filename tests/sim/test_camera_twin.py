@@ -1,0 +1,107 @@
+"""The camera twin renders the wall where the error model puts the endoscope."""
+
+from __future__ import annotations
+
+import asyncio
+
+import numpy as np
+import pytest
+
+from drivers.interfaces import CommunicationLost, DeviceTimeout
+from sim.camera.twin import CameraTwin, small_optics
+from sim.faults import FaultKind
+from sim.twins import TwinStation, load_scenario
+from sim.world import World
+from station.kinematics.inverse import compensate
+
+
+class ManualClock:
+    def __init__(self):
+        self.t = 0.0
+
+    def __call__(self):
+        return self.t
+
+
+@pytest.fixture()
+def rig():
+    clock = ManualClock()
+    twins = TwinStation(load_scenario(), clock=clock)  # physics only: no servers started
+    world = World()
+    world.attach(twins)
+    z, c = twins.physics["Z"], twins.physics["C"]
+    for ax in (z, c):
+        ax.enable(True)
+        assert ax.home()
+    clock.t += 60.0
+    cam = CameraTwin(world, z, c, small_optics(), seed=3)
+    asyncio.run(cam.connect())
+    return clock, world, z, c, cam
+
+
+def move(clock, axis, target):
+    assert axis.start_move(target)
+    clock.t += 60.0  # long enough for any move of the stroke
+    assert abs(axis.motor_position() - target) < 1e-9
+
+
+def grab(cam):
+    return asyncio.run(cam.grab())
+
+
+def test_hole_appears_where_the_true_pose_puts_it(rig):
+    clock, world, z, c, cam = rig
+    hole = world.part.holes[1]
+    move(clock, z, hole.axial_mm)  # uncompensated: the nominal command
+    frame = grab(cam)
+    truth = cam.last_truth
+    assert frame.image.shape == (256, 320) and frame.image.dtype == np.uint8
+    seen = {h[0]: h for h in truth.holes}
+    assert hole.name in seen
+    _, x, y, d, d_mm, partial = seen[hole.name]
+    s = cam.optics.mm_per_px
+    # the hole sits off-centre by exactly the model's axial error at this pose
+    true = world.true_point(hole.axial_mm, 0.0, z.direction, 0, z.now())
+    assert y - (256 - 1) / 2 == pytest.approx((true.axial_mm - hole.axial_mm) / s, abs=1e-9)
+    assert abs(true.axial_mm - hole.axial_mm) > 5e-3  # micrometres: visible as ~1 px
+    assert d == pytest.approx(hole.diameter_mm / s) and not partial
+    # the hole is dark in the image at its true place
+    yi, xi = int(round(y)), int(round(x))
+    assert frame.image[yi, xi] < 0.5 * np.median(frame.image)
+
+
+def test_compensated_command_centres_the_hole(rig):
+    clock, world, z, c, cam = rig
+    hole = world.part.holes[0]
+    sol = compensate(world.model, [hole.axial_mm], [hole.angle_deg], direction_z=+1, direction_c=+1)
+    move(clock, c, float(sol.c_deg[0]))
+    move(clock, z, float(sol.z_mm[0]))
+    grab(cam)
+    _, x, y, *_ = {h[0]: h for h in cam.last_truth.holes}[hole.name]
+    assert y == pytest.approx((256 - 1) / 2, abs=1e-3)
+    assert x == pytest.approx((320 - 1) / 2, abs=1e-2)
+
+
+def test_camera_faults(rig):
+    clock, world, z, c, cam = rig
+    move(clock, z, world.part.holes[0].axial_mm)
+    first = grab(cam)
+    cam.faults.activate(FaultKind.FROZEN_FRAME)
+    frozen = grab(cam)
+    assert frozen.sequence == first.sequence + 1 and np.array_equal(frozen.image, first.image)
+    cam.faults.clear()
+    cam.faults.activate(FaultKind.BLACK_FRAME)
+    assert grab(cam).image.max() == 0
+    cam.faults.clear()
+    assert grab(cam).image.max() > 50
+    cam.grab_timeout_s = 0.05
+    cam.faults.activate(FaultKind.DELAY, delay_s=1.0)
+    with pytest.raises(DeviceTimeout):
+        grab(cam)
+    cam.faults.clear()
+    cam.faults.activate(FaultKind.DROP_CONNECTION)
+    with pytest.raises(CommunicationLost):
+        grab(cam)
+    cam.faults.clear()
+    asyncio.run(cam.connect())  # the link comes back
+    assert grab(cam).image.max() > 50
