@@ -138,7 +138,14 @@ def build_station(config_path: str | Path | None = None, *, scenario: str | Path
     source = data["_source"]
     st = data.get("station", {})
     mode = st.get("mode", "simulated")
-    model = load_model(st["model"]) if "model" in st else load_model()
+    base = Path(source).parent if config_path is not None else Path.cwd()
+
+    def resolve(p: str) -> Path:
+        """Paths in a config are relative to the config file."""
+        q = Path(p)
+        return q if q.is_absolute() else base / q
+
+    model = load_model(resolve(st["model"])) if "model" in st else load_model()
 
     if mode == "hardware":
         hw = data.get("hardware", {})
@@ -161,7 +168,7 @@ def build_station(config_path: str | Path | None = None, *, scenario: str | Path
     from sim.world import load_world
 
     sim_cfg = data.get("simulation", {})
-    scen_path = scenario or sim_cfg.get("scenario")
+    scen_path = scenario or (resolve(sim_cfg["scenario"]) if "scenario" in sim_cfg else None)
     scen = load_scenario(scen_path)
     ts = time_scale if time_scale is not None else sim_cfg.get("time_scale")
     if ts is not None:

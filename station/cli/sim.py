@@ -27,14 +27,19 @@ def up(
 ) -> None:
     """Start all twin servers and serve until Ctrl-C."""
     from sim.twins import ScenarioError, TwinStation, load_scenario
+    from sim.world import load_world
+    from station.kinematics.model import ModelConfigError
 
     try:
         sc = load_scenario(scenario)
-    except ScenarioError as exc:
+        world = load_world(scenario)
+    except (ScenarioError, ModelConfigError, ValueError) as exc:
         fail(str(exc))
 
     async def serve() -> None:
         station = TwinStation(sc)
+        # the drives' carriages and the grating err as the scenario's error model says
+        world.attach(station)
         try:
             endpoints = await station.start()
         except OSError as exc:

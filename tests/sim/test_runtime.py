@@ -1,0 +1,64 @@
+"""The composition root: a simulated station is the real drivers on the twins."""
+
+from __future__ import annotations
+
+import asyncio
+
+import pytest
+
+from station.runtime import ConfigError, build_station
+
+
+def test_simulated_station_moves_and_the_grating_reads_the_true_carriage():
+    station = build_station(time_scale=50.0)
+
+    async def go():
+        await station.connect()
+        try:
+            await station.z.enable(True)
+            await station.z.home()
+            await station.z.wait_in_position(timeout=30.0)
+            await station.z.move_to(85.19)
+            await station.z.wait_in_position(timeout=30.0)
+            motor = await station.z.read_position()
+            grating = (await station.encoder.read()).position_mm
+            return motor, grating
+        finally:
+            await station.close()
+
+    motor, grating = asyncio.run(go())
+    assert motor == pytest.approx(85.19, abs=2e-4)
+    curve = station.model.motions["Z"].z
+    expected = 85.19 + float(curve.evaluate([85.19], direction=[1])[0]) * 1e-3
+    # the grating reads the carriage: the motor position plus EZZ, to its 0.05 um resolution
+    assert grating == pytest.approx(expected, abs=1e-4)
+    assert grating - motor > 0.010  # the screw's error at 85 mm is over 10 um
+    assert station.twins is None  # close() stopped the twins
+
+
+def test_config_errors_name_file_and_key(tmp_path):
+    p = tmp_path / "station.toml"
+    p.write_text('[station]\nmode = "warp"\n')
+    with pytest.raises(ConfigError, match=r"station.toml: \[station\] mode must be"):
+        build_station(p)
+    p.write_text('[station]\nmode = "hardware"\n[hardware.Z]\nhost = "x"\n')
+    with pytest.raises(ConfigError, match=r"needs a \[hardware.C\] table"):
+        build_station(p)
+    p.write_text('[station]\nmode = "hardware"\n[hardware.Z]\ntransport = "can"\n[hardware.C]\nhost = "h"\n')
+    with pytest.raises(ConfigError, match=r"\[hardware.Z\] transport must be 'tcp' or 'rtu'"):
+        build_station(p)
+    p.write_text("[station\n")
+    with pytest.raises(ConfigError, match="not valid TOML"):
+        build_station(p)
+
+
+def test_example_hardware_config_builds_drivers_without_connecting(tmp_path):
+    from pathlib import Path
+
+    example = Path(__file__).resolve().parents[2] / "deploy" / "station.hardware.example.toml"
+    # the example names the plant's model file; here the built-in one stands in for it
+    text = "\n".join(l for l in example.read_text().splitlines() if not l.startswith("model ="))
+    (tmp_path / "station.toml").write_text(text)
+    st = build_station(tmp_path / "station.toml")
+    assert st.mode == "hardware" and st.twins is None
+    assert st.z.device_id == 1 and st.c.device_id == 2 and st.encoder is not None
