@@ -52,7 +52,10 @@ class LaserInterferometer:
     seed: int = 0
     c_deg: float = 0.0  # table angle during the Z campaign
 
-    def measure_z(self, time_s, run, direction, target_mm) -> Recording:
+    def measure_z(self, time_s, run, direction, target_mm, approach_error_mm=None) -> Recording:
+        """The laser's recording of the given approaches. ``approach_error_mm`` is the
+        axis's own random error at each approach (``World.approach_error`` read while
+        the axis stood there), which the laser sees like any other error."""
         rng = np.random.default_rng(self.seed)
         temp = self.world.temperature.at(time_s)
         model = self.world.model
@@ -60,6 +63,8 @@ class LaserInterferometer:
         actual = model.body_pose("N", target_mm, self.c_deg, **ctx).p[..., 2]
         ideal = model.body_pose("N", target_mm, self.c_deg, ideal=True).p[..., 2]
         dev_um = (actual - ideal) * 1e3
+        if approach_error_mm is not None:
+            dev_um = dev_um + np.asarray(approach_error_mm, dtype=float) * 1e3
         dev_um = dev_um - dev_um[0] + _ar1_noise(rng, dev_um.size, self.sigma_um, self.ar1)
         return Recording(np.asarray(time_s, float), np.asarray(run), np.asarray(direction), np.asarray(target_mm, float),
                          dev_um, temperature_c=temp,

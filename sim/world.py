@@ -79,21 +79,48 @@ class TruePoint:
 
 
 @dataclass
+class Repeatability:
+    """Random error of each approach (ISO 230-2's s): one normal draw per move,
+    held until the next move starts. Z in um, C in arcsec."""
+
+    z_um: float = 0.0
+    c_arcsec: float = 0.0
+    seed: int = 0
+
+
+@dataclass
 class World:
     model: StationModel = field(default_factory=load_model)
     part: PartTruth = STANDARD_SAMPLE
     temperature: Temperature = field(default_factory=Temperature)
+    repeatability: Repeatability = field(default_factory=Repeatability)
+
+    def __post_init__(self):
+        self._rng = np.random.default_rng(self.repeatability.seed)
+        #: the present approach's random error of each axis (mm, deg)
+        self._approach_error = {"Z": 0.0, "C": 0.0}
+
+    def approach_error(self, axis: str) -> float:
+        """The present approach's random error of ``axis`` (mm for Z, deg for C)."""
+        return self._approach_error[axis]
+
+    def new_approach(self, axis: str) -> None:
+        """A move started on ``axis``: draw its repeatability error."""
+        sigma = self.repeatability.z_um * 1e-3 if axis == "Z" else self.repeatability.c_arcsec / 3600.0
+        self._approach_error[axis] = float(self._rng.normal(0.0, sigma)) if sigma > 0 else 0.0
 
     # -------------------------------------------------------------- per axis
     def z_offset_mm(self, motor_mm: float, direction: int, time_s: float) -> float:
         """Carriage minus motor position of Z: the positioning error motion EZZ."""
         curve = self.model._motions("Z").z
-        return float(curve.evaluate([motor_mm], [direction], [time_s], self.temperature.at([time_s]))[0]) * 1e-3
+        deviation_um = curve.evaluate([motor_mm], [direction], [time_s], self.temperature.at([time_s]))[0]
+        return float(deviation_um) * 1e-3 + self._approach_error["Z"]
 
     def c_offset_deg(self, motor_deg: float, direction: int, time_s: float) -> float:
         """Table minus motor angle of C: the angular positioning error ECC."""
         curve = self.model._motions("C").c
-        return float(curve.evaluate([motor_deg], [direction], [time_s], self.temperature.at([time_s]))[0]) / 3600.0
+        deviation_arcsec = curve.evaluate([motor_deg], [direction], [time_s], self.temperature.at([time_s]))[0]
+        return float(deviation_arcsec) / 3600.0 + self._approach_error["C"]
 
     # -------------------------------------------------------------- the detection point
     def true_points(self, z_mm, c_deg, direction_z=0, direction_c=0, time_s=0.0):
@@ -127,16 +154,17 @@ class World:
         """Plug into a running ``sim.twins.TwinStation``: the drives' carriages move
         with the error model, and the grating reads the true carriage."""
         physics = twins.physics
-        if "Z" in physics:
-            physics["Z"].actual_offset = self.z_offset_mm
-        if "C" in physics:
-            physics["C"].actual_offset = self.c_offset_deg
+        for axis, hook in (("Z", self.z_offset_mm), ("C", self.c_offset_deg)):
+            if axis in physics:
+                physics[axis].actual_offset = hook
+                physics[axis].move_listeners.append(lambda target, direction, t, axis=axis: self.new_approach(axis))
 
 
 def world_from_dict(data: dict[str, Any], source: str = "<dict>", base: Path | None = None) -> World:
     """Build a world from a scenario's ``[world]`` table (all keys optional):
     ``model`` (a station model TOML, relative to the scenario), ``[world.temperature]``
-    (start_c, rise_c, tau_s) and ``[[world.holes]]`` (name, axial_mm, angle_deg, diameter_mm)."""
+    (start_c, rise_c, tau_s), ``[world.repeatability]`` (z_um, c_arcsec, seed) and
+    ``[[world.holes]]`` (name, axial_mm, angle_deg, diameter_mm)."""
     model_path = data.get("model")
     if model_path is not None:
         p = Path(model_path)
@@ -150,6 +178,11 @@ def world_from_dict(data: dict[str, Any], source: str = "<dict>", base: Path | N
     if unknown:
         raise ValueError(f"{source}: [world.temperature] unknown keys {sorted(unknown)}")
     temperature = Temperature(**{k: float(v) for k, v in temp.items()})
+    rep = data.get("repeatability", {})
+    unknown = set(rep) - {"z_um", "c_arcsec", "seed"}
+    if unknown:
+        raise ValueError(f"{source}: [world.repeatability] unknown keys {sorted(unknown)}")
+    repeatability = Repeatability(float(rep.get("z_um", 0.0)), float(rep.get("c_arcsec", 0.0)), int(rep.get("seed", 0)))
     holes = STANDARD_SAMPLE.holes
     if "holes" in data:
         holes = []
@@ -161,13 +194,16 @@ def world_from_dict(data: dict[str, Any], source: str = "<dict>", base: Path | N
         holes = tuple(holes)
     part = PartTruth(str(data.get("part_number", STANDARD_SAMPLE.part_number)),
                      float(data.get("bore_diameter_mm", STANDARD_SAMPLE.bore_diameter_mm)), holes)
-    return World(model, part, temperature)
+    return World(model, part, temperature, repeatability)
 
 
 def load_world(scenario_path: str | Path | None = None) -> World:
-    """The world of a scenario file (its ``[world]`` table), or the default world."""
+    """The world of a scenario file (its ``[world]`` table); the default scenario's
+    when none is named."""
     if scenario_path is None:
-        return World()
+        from sim.twins import DEFAULT_SCENARIO
+
+        scenario_path = DEFAULT_SCENARIO
     p = Path(scenario_path)
     data = tomllib.loads(p.read_text())
     return world_from_dict(data.get("world", {}), str(p), p.parent)

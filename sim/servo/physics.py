@@ -119,6 +119,9 @@ class ServoAxisPhysics:
         self._t0_real = clock()
         #: the world's hook: deviation of the carriage from the motor position (axis unit)
         self.actual_offset: OffsetHook = actual_offset
+        #: called as fn(target, direction, time_s) when a move (or homing) starts: the
+        #: world draws the approach's repeatability error there, once per approach
+        self.move_listeners: list[Callable[[float, int, float], None]] = []
         self._lock = threading.RLock()
         self._enabled = False
         self._homed = False
@@ -253,6 +256,8 @@ class ServoAxisPhysics:
         self._target = float(target)
         if self._move.direction:
             self._direction = self._move.direction
+        for listener in self.move_listeners:
+            listener(float(target), self._direction, t)
 
     def start_move(self, target: float, velocity: float = 0.0, acceleration: float = 0.0) -> bool:
         """Begin an absolute move; ignored (False) if disabled or faulted, faults outside the limits."""

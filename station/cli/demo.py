@@ -56,7 +56,8 @@ async def _iso_cycle(station, runs: int, progress, task, overrun_mm: float = 2.0
                 await z.wait_in_position(timeout=60.0)
                 reading = await enc.read() if enc is not None else None
                 rows.append((physics.now(), run, direction, float(target),
-                             reading.position_mm if reading is not None else float("nan")))
+                             reading.position_mm if reading is not None else float("nan"),
+                             station.world.approach_error("Z")))
                 progress.advance(task)
             await z.move_to(float(seq[-1] + direction * overrun_mm))
             await z.wait_in_position(timeout=60.0)
@@ -102,7 +103,7 @@ async def _run_demo(out: Path, runs: int, time_scale: float, seed: int) -> dict:
     grating_mm = np.array([r[4] for r in rows])
     time_s = time_s - time_s[0]
     laser = LaserInterferometer(station.world, sigma_um=0.25, seed=seed)
-    rec = laser.measure_z(time_s, run, direction, target)
+    rec = laser.measure_z(time_s, run, direction, target, approach_error_mm=np.array([r[5] for r in rows]))
     rec.to_csv(out / "z_laser_run.csv")
 
     # 3. ISO 230-2 and grating vs laser

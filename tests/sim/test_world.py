@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from sim.instruments import LaserInterferometer, RotaryCalibrator, iso230_sequence
-from sim.world import World, world_from_dict
+from sim.world import Repeatability, World, world_from_dict
 from station.kinematics.inverse import compensate
 from station.kinematics.rigid import RAD_PER_ARCSEC
 
@@ -74,3 +74,29 @@ def test_world_from_scenario_table(tmp_path):
     assert w.part.holes[0].axial_mm == 50.0 and w.part.holes[0].angle_deg == 0.0
     with pytest.raises(ValueError, match=r"world.holes\[0\] lacks 'diameter_mm'"):
         world_from_dict({"holes": [{"name": "h", "axial_mm": 1.0}]}, "s.toml")
+
+
+def test_repeatability_is_drawn_once_per_approach():
+    from sim.twins import TwinStation, load_scenario
+
+    class Clock:
+        t = 0.0
+
+        def __call__(self):
+            return self.t
+
+    clock = Clock()
+    twins = TwinStation(load_scenario(), clock=clock)
+    world = World(repeatability=Repeatability(z_um=0.5, seed=4))
+    world.attach(twins)
+    z = twins.physics["Z"]
+    z.enable(True)
+    errs = []
+    for i in range(200):
+        assert z.start_move(50.0 + (i % 2))
+        clock.t += 30.0
+        a = z.carriage_position() - z.motor_position()
+        clock.t += 1.0
+        assert z.carriage_position() - z.motor_position() == a  # held while the axis rests
+        errs.append(a - world.model.motions["Z"].z.evaluate([z.motor_position()], direction=[z.direction])[0] * 1e-3)
+    assert np.std(errs) * 1e3 == pytest.approx(0.5, rel=0.2)
