@@ -118,6 +118,10 @@ class Whitener:
         self.phi = float(phi)
         self.first = prev < 0
         self.scale_first = np.sqrt(1.0 - self.phi ** 2)
+        idx = np.arange(prev.size)
+        #: runs contiguous in file order (the usual case): the previous row is the row
+        #: before, and the transform is a slice difference instead of a gather
+        self.contiguous = bool(np.all(prev[~self.first] == idx[~self.first] - 1))
 
     def __call__(self, v: np.ndarray) -> np.ndarray:
         if self.phi == 0.0:
@@ -125,4 +129,17 @@ class Whitener:
         p = np.maximum(self.prev, 0)
         w = v - self.phi * v[p]
         w[self.first] = self.scale_first * v[self.first]
+        return w
+
+    def along_last(self, v: np.ndarray) -> np.ndarray:
+        """The same transform on rows-as-last-axis arrays, shape (..., N): many series at once."""
+        if self.phi == 0.0:
+            return v
+        if self.contiguous:
+            w = np.empty_like(v)
+            np.subtract(v[..., 1:], self.phi * v[..., :-1], out=w[..., 1:])
+            w[..., 0] = v[..., 0]
+        else:
+            w = v - self.phi * v[..., np.maximum(self.prev, 0)]
+        w[..., self.first] = self.scale_first * v[..., self.first]
         return w

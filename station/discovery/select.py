@@ -24,8 +24,8 @@ from scipy import stats
 from station.effects import Eccentricity, Periodic, ThermalDrift, EvalContext
 from station.discovery.data import Prepared
 from station.discovery.fit import FitResult, Term, fit_terms
-from station.discovery.library import Candidate, LocalDefect, candidates, distinct_targets, period_limits, \
-    separating_measurement, width_grid
+from station.discovery.library import Candidate, LocalDefect, candidates, local_defect_columns, local_defect_grid, \
+    period_limits, separating_measurement
 from station.discovery.noise import Whitener
 from station.discovery.scans import best_column, periodic_scan
 
@@ -80,12 +80,10 @@ def _init_terms(c: Candidate, prep: Prepared, W: Whitener, r_cur: np.ndarray) ->
         e = Periodic(scan.best_period, scan.best_amplitude, scan.best_phase)
         return Term(e, c.free, c.bounds)
     if c.name == "local_defect":
-        centres = distinct_targets(prep)
-        widths = width_grid(prep)
-        grid = [LocalDefect(float(cx), float(w), 1.0) for w in widths for cx in centres]
-        cols = np.column_stack([g.evaluate(ctx) for g in grid])
+        centres, widths = local_defect_grid(prep)
+        cols = local_defect_columns(prep, centres, widths)
         k, coef, _ = best_column(r_cur, cols, W, np.column_stack([trend, prep.x ** 2]))
-        return Term(grid[k].with_parameters(amplitude=coef), c.free, c.bounds)
+        return Term(LocalDefect(float(centres[k]), float(widths[k]), coef), c.free, c.bounds)
     inits = c.inits(prep)
     if c.name == "thermal_drift":
         cols = np.column_stack([e.evaluate(ctx) for e in inits])

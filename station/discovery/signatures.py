@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from station.discovery.data import Prepared
-from station.discovery.library import distinct_targets, period_limits, width_grid, LocalDefect
+from station.discovery.library import distinct_targets, local_defect_columns, local_defect_grid, period_limits
 from station.discovery.noise import Whitener
 from station.discovery.scans import PeriodicScan, best_column, linear_test, periodic_scan
 
@@ -88,15 +88,12 @@ def find_signatures(prep: Prepared, r: np.ndarray, W: Whitener) -> tuple[list[di
                            f"{scan.best_amplitude:.3g} {du} (false-alarm probability {scan.fap:.2g}, "
                            f"{scan.n_independent:.0f} independent frequencies scanned)"}))
 
-    centres = distinct_targets(prep)
-    if centres.size >= 8:
-        widths = width_grid(prep)
-        grid = [(float(c), float(w)) for w in widths for c in centres]
-        ctx = prep.ctx()
-        cols = np.column_stack([LocalDefect(c, w, 1.0).evaluate(ctx) for c, w in grid])
+    if distinct_targets(prep).size >= 8:
+        centres, widths = local_defect_grid(prep)
+        cols = local_defect_columns(prep, centres, widths)
         k, coef, p1 = best_column(r, cols, W, np.column_stack([ones, xn, xn ** 2]))
-        c, w = grid[k]
-        p = min(1.0, p1 * len(grid))
+        c, w = float(centres[k]), float(widths[k])
+        p = min(1.0, p1 * centres.size)
         tests.append(("local", p, {
             "range": [max(whole[0], c - 2 * w), min(whole[1], c + 2 * w)], "direction": "both",
             "description": f"a local {'bump' if coef > 0 else 'dip'} of {abs(coef):.3g} {du} around "
