@@ -160,6 +160,15 @@ def _phys_drift(e: ThermalDrift, prep: Prepared) -> str | None:
     span = float(np.ptp(prep.time_s))
     if e.tau <= 0:
         return f"tau = {e.tau:.4g} s is not positive"
+    # the warm-up must be observed: at the fifth reading at least half of it is
+    # still to come; otherwise it is carried by a handful of early points and is,
+    # for the rest of the data, an offset
+    times = np.sort(prep.time_s)
+    t5 = float(times[min(4, times.size - 1)])
+    seen = float(np.exp(-t5 / e.tau))
+    if seen < 0.5:
+        return (f"tau = {e.tau:.4g} s: only {seen:.0%} of the drift happens after the fifth reading "
+                f"(t = {t5:.4g} s); that is an offset")
     if e.tau > 10 * span:
         return f"tau = {e.tau:.4g} s is over ten campaign lengths: a straight drift, amplitude and tau not separable"
     return None
