@@ -228,10 +228,34 @@ class Eccentricity(Effect):
         return self.amplitude * np.sin(np.radians(ctx.x) + self.phase)
 
 
-#: the contract's vocabulary by name (discovery may register more, in the same way)
+@dataclass(frozen=True)
+class LocalDefect(Effect):
+    """A Gaussian bump: ``amplitude * exp(-((x - centre) / width)^2 / 2)``.
+
+    Not in the contract's vocabulary; defined here beside it so that a model file
+    naming ``local_defect`` is understood by the twin and by discovery alike.
+    """
+
+    centre: float = 0.0
+    width: float = 1.0
+    amplitude: float = 0.0
+    name: ClassVar[str] = "local_defect"
+    explanation: ClassVar[str] = (
+        "a bump or dip confined to one part of the travel: a damaged, dirty or "
+        "re-glued spot of the scale, a worn or dented stretch of the screw or "
+        "guideway, a joint between scale segments; modelled as a Gaussian bump "
+        "(amplitude at the centre, width = its standard deviation, in position units)"
+    )
+
+    def evaluate(self, ctx):
+        w = np.maximum(np.abs(self.width), 1e-12)
+        return self.amplitude * np.exp(-0.5 * ((ctx.x - self.centre) / w) ** 2)
+
+
+#: the contract's vocabulary by name, plus the effects the station adds to it
 VOCABULARY: dict[str, type[Effect]] = {
     cls.name: cls
-    for cls in (Offset, Scale, Backlash, Periodic, ThermalExpansion, ThermalDrift, Eccentricity)
+    for cls in (Offset, Scale, Backlash, Periodic, ThermalExpansion, ThermalDrift, Eccentricity, LocalDefect)
 }
 
 

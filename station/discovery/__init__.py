@@ -6,7 +6,7 @@ physics by a principled criterion, fit them jointly and report (contract:
 ``shared/spec/discovery.md``; method: ``docs/discovery.md``).
 """
 
-from station.discovery.library import EXTRA_EFFECTS, LocalDefect  # registers the extra effects
+from station.discovery.library import EXTRA_EFFECTS, LocalDefect
 from station.discovery.engine import Discovery, discover, write_outputs
 
 __all__ = ["Discovery", "discover", "write_outputs", "LocalDefect", "EXTRA_EFFECTS"]
