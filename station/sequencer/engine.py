@@ -1,0 +1,318 @@
+"""The run engine: one state machine that carries out plans on the station's devices.
+
+States (``State``): idle, homing, ready, running, paused, stopping, aborting,
+faulted, estopped. Transitions:
+
+    idle --home--> homing --> ready --run--> running --> ready (plan done)
+    running --pause--> (at the next checkpoint) paused --resume--> running
+    running/paused --stop--> stopping (at the next checkpoint) --> ready, plan ends "stopped"
+    running/paused --abort--> aborting (axes stopped at once) --> ready, plan ends "aborted"
+    any --driver fault--> faulted (axes stopped, reason kept) --reset--> idle
+    any --e-stop seen--> estopped --reset (after release)--> idle
+
+Transient driver errors (timeout, lost link, garbled reply) are retried within a
+budget for idempotent steps; a drive fault, a following error or an exhausted
+budget faults the engine. The engine, not the plan, talks to drivers.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import enum
+import inspect as _inspect
+import time
+from dataclasses import dataclass, field
+from typing import Any, Awaitable, Callable, Generator
+
+from drivers.interfaces import (
+    Camera,
+    CommunicationLost,
+    DeviceTimeout,
+    DriveFault,
+    DriverError,
+    LinearAxis,
+    PositionEncoder,
+    ProtocolError,
+    RotaryAxis,
+)
+from station.sequencer import messages as m
+
+
+class State(str, enum.Enum):
+    IDLE = "idle"
+    HOMING = "homing"
+    READY = "ready"
+    RUNNING = "running"
+    PAUSED = "paused"
+    STOPPING = "stopping"
+    ABORTING = "aborting"
+    FAULTED = "faulted"
+    ESTOPPED = "estopped"
+
+
+class PlanEnded(Exception):
+    """A plan did not complete: ``outcome`` is "stopped", "aborted" or "faulted"."""
+
+    def __init__(self, outcome: str, reason: str):
+        super().__init__(f"{outcome}: {reason}")
+        self.outcome = outcome
+        self.reason = reason
+
+
+class EngineStateError(RuntimeError):
+    """A command that the present state does not allow (e.g. run while faulted)."""
+
+
+#: errors worth repeating an idempotent step for: the link, not the machine
+TRANSIENT = (DeviceTimeout, CommunicationLost, ProtocolError)
+
+
+@dataclass
+class Devices:
+    z: LinearAxis
+    c: RotaryAxis
+    encoder: PositionEncoder | None = None
+    camera: Camera | None = None
+    #: image -> list of hole measurements (the vision stage), run off the event loop
+    measure: Callable[[Any], Any] | None = None
+
+    def axis(self, name: str):
+        if name == "Z":
+            return self.z
+        if name == "C":
+            return self.c
+        raise ValueError(f"unknown axis {name!r}")
+
+
+@dataclass
+class Timeouts:
+    move_s: float = 60.0  #: longest move of the stroke at the slowest speed, with margin
+    home_s: float = 120.0
+
+
+@dataclass
+class EngineEvent:
+    time: float
+    kind: str  # "state", "progress", "note", "retry", "fault"
+    state: State
+    text: str = ""
+    data: dict = field(default_factory=dict)
+
+
+class Engine:
+    def __init__(self, devices: Devices, *, retries: int = 3, retry_backoff_s: float = 0.05,
+                 timeouts: Timeouts | None = None, sleep: Callable[[float], Awaitable[None]] = asyncio.sleep):
+        self.devices = devices
+        self.retries = retries
+        self.retry_backoff_s = retry_backoff_s
+        self.timeouts = timeouts or Timeouts()
+        self._sleep = sleep
+        self.state = State.IDLE
+        self.reason = ""
+        self.progress: tuple[int, int, str] = (0, 0, "")
+        self._listeners: list[Callable[[EngineEvent], None]] = []
+        self._resume = asyncio.Event()
+        self._resume.set()
+        self._stop_requested = False
+        self._abort_requested: str | None = None
+        self._pause_requested = False
+        self._task: asyncio.Task | None = None
+        self.retries_used = 0
+
+    # ------------------------------------------------------------------ events
+    def subscribe(self, fn: Callable[[EngineEvent], None]) -> None:
+        self._listeners.append(fn)
+
+    def _emit(self, kind: str, text: str = "", **data) -> None:
+        ev = EngineEvent(time.time(), kind, self.state, text, data)
+        for fn in list(self._listeners):
+            try:
+                fn(ev)
+            except Exception:  # noqa: BLE001 - a broken listener must not stop the machine
+                pass
+
+    def _set(self, state: State, reason: str = "") -> None:
+        self.state = state
+        if reason:
+            self.reason = reason
+        self._emit("state", reason)
+
+    # ------------------------------------------------------------------ commands
+    async def home(self) -> None:
+        """Enable and home both axes; idle (or ready) -> homing -> ready."""
+        if self.state not in (State.IDLE, State.READY):
+            raise EngineStateError(f"cannot home while {self.state.value}")
+        self._set(State.HOMING)
+        try:
+            for ax in (self.devices.z, self.devices.c):
+                await self._with_retries(lambda ax=ax: ax.enable(True), "enable")
+                await self._with_retries(ax.home, "home")
+            for ax in (self.devices.z, self.devices.c):
+                await ax.wait_in_position(timeout=self.timeouts.home_s)
+        except DriverError as exc:
+            await self._fault(exc)
+            raise PlanEnded("faulted", self.reason) from exc
+        self._set(State.READY, "homed")
+
+    def pause(self) -> None:
+        if self.state == State.RUNNING:
+            self._pause_requested = True
+            self._resume.clear()
+
+    def resume(self) -> None:
+        if self.state in (State.PAUSED, State.RUNNING):
+            self._pause_requested = False
+            self._resume.set()
+
+    def stop(self) -> None:
+        """Controlled stop: the plan ends at its next checkpoint, the current move completes."""
+        if self.state in (State.RUNNING, State.PAUSED):
+            self._stop_requested = True
+            self._resume.set()
+
+    def abort(self, reason: str = "aborted by operator") -> None:
+        """Stop the axes now and end the plan as aborted."""
+        if self.state in (State.RUNNING, State.PAUSED, State.STOPPING):
+            self._abort_requested = reason
+            self._resume.set()
+            if self._task is not None:
+                self._task.cancel()
+
+    async def reset(self) -> None:
+        """Acknowledge a fault or a released e-stop: reset the drives, back to idle (home again)."""
+        if self.state not in (State.FAULTED, State.ESTOPPED, State.IDLE, State.READY):
+            raise EngineStateError(f"cannot reset while {self.state.value}")
+        for ax in (self.devices.z, self.devices.c):
+            try:
+                await ax.reset_fault()
+            except DriverError as exc:
+                self._set(State.FAULTED, f"reset failed on {getattr(ax, 'name', 'axis')}: {exc}")
+                raise PlanEnded("faulted", self.reason) from exc
+        self.reason = ""
+        self._set(State.IDLE, "reset")
+
+    # ------------------------------------------------------------------ running plans
+    async def run(self, plan: Generator[m.Msg, Any, Any]) -> Any:
+        """Carry out ``plan``; returns its return value, or raises :class:`PlanEnded`."""
+        if self.state != State.READY:
+            raise EngineStateError(f"cannot run a plan while {self.state.value} (home first)")
+        self._stop_requested = False
+        self._abort_requested = None
+        self._pause_requested = False
+        self._resume.set()
+        self.retries_used = 0
+        self._set(State.RUNNING)
+        self._task = asyncio.create_task(self._drive(plan))
+        try:
+            return await self._task
+        except asyncio.CancelledError:
+            if self._abort_requested is None:
+                raise
+            reason = self._abort_requested
+            self._set(State.ABORTING, reason)
+            await self._stop_axes()
+            plan.close()
+            self._set(State.READY, reason)
+            raise PlanEnded("aborted", reason) from None
+        finally:
+            self._task = None
+
+    async def _drive(self, plan) -> Any:
+        result: Any = None
+        while True:
+            try:
+                msg = plan.send(result)
+            except StopIteration as done:
+                self._set(State.READY, "plan complete")
+                return done.value
+            try:
+                result = await self._execute(msg)
+            except PlanEnded:
+                plan.close()
+                raise
+            except DriverError as exc:
+                plan.close()
+                await self._fault(exc)
+                raise PlanEnded("faulted", self.reason) from exc
+
+    async def _execute(self, msg: m.Msg) -> Any:
+        d = self.devices
+        if isinstance(msg, m.Checkpoint):
+            if self._pause_requested:
+                self._set(State.PAUSED, msg.label)
+                await self._resume.wait()
+                if not self._stop_requested:
+                    self._set(State.RUNNING, "resumed")
+            if self._stop_requested:
+                self._set(State.STOPPING, "stop requested")
+                await self._stop_axes()
+                self._set(State.READY, "stopped by operator")
+                raise PlanEnded("stopped", "stopped by operator")
+            return None
+        if isinstance(msg, m.Progress):
+            self.progress = (msg.done, msg.total, msg.text)
+            self._emit("progress", msg.text, done=msg.done, total=msg.total)
+            return None
+        if isinstance(msg, m.Note):
+            self._emit("note", msg.text)
+            return None
+        if isinstance(msg, m.Settle):
+            await self._sleep(msg.seconds)
+            return None
+        if isinstance(msg, m.Move):
+            ax = d.axis(msg.axis)
+            await self._with_retries(lambda: ax.move_to(msg.position, msg.velocity), f"move {msg.axis}")
+            if msg.wait:
+                status = await ax.wait_in_position(timeout=self.timeouts.move_s)
+                self._check_estop(status)
+            return None
+        if isinstance(msg, m.ReadAxis):
+            return await self._with_retries(d.axis(msg.axis).read_position, f"read {msg.axis}")
+        if isinstance(msg, m.ReadEncoder):
+            if d.encoder is None:
+                raise EngineStateError("the plan reads an encoder, but the station has none")
+            return await self._with_retries(d.encoder.read, "read encoder")
+        if isinstance(msg, m.Capture):
+            if d.camera is None:
+                raise EngineStateError("the plan captures a frame, but the station has no camera")
+            return await self._with_retries(d.camera.grab, "grab frame")
+        if isinstance(msg, m.Measure):
+            if d.measure is None:
+                raise EngineStateError("the plan measures, but the station has no vision stage")
+            return await asyncio.to_thread(d.measure, msg.image)
+        raise TypeError(f"unknown message {msg!r}")
+
+    async def _with_retries(self, call: Callable[[], Awaitable[Any]], what: str) -> Any:
+        attempt = 0
+        while True:
+            try:
+                out = call()
+                return await out if _inspect.isawaitable(out) else out
+            except TRANSIENT as exc:
+                if attempt >= self.retries:
+                    raise
+                attempt += 1
+                self.retries_used += 1
+                self._emit("retry", f"{what}: {exc} (retry {attempt} of {self.retries})")
+                await asyncio.sleep(self.retry_backoff_s * attempt)
+
+    def _check_estop(self, status) -> None:
+        if getattr(status, "estop", False):
+            raise DriveFault(0x12, "emergency stop", "station")
+
+    async def _stop_axes(self) -> None:
+        """Best effort: every axis gets a stop, whatever the others answer."""
+        for ax in (self.devices.z, self.devices.c):
+            try:
+                await asyncio.wait_for(ax.stop(), timeout=2.0)
+            except Exception:  # noqa: BLE001 - stopping must try every axis
+                pass
+
+    async def _fault(self, exc: DriverError) -> None:
+        await self._stop_axes()
+        code = getattr(exc, "code", None)
+        estop = code == 0x12
+        where = getattr(exc, "device", "") or "station"
+        reason = f"{type(exc).__name__} on {where}: {exc}"
+        self._emit("fault", reason, error=type(exc).__name__, code=code)
+        self._set(State.ESTOPPED if estop else State.FAULTED, reason)

@@ -1,0 +1,85 @@
+"""The small steps a plan yields, Bluesky-style.
+
+A plan is a generator: it yields one message at a time, the engine carries it out
+and sends the result back (``result = yield Move(...)``). Plans hold no device
+handles and do no I/O of their own, so the engine alone decides about pausing,
+aborting, retrying and faults, and a plan can be tested by feeding it results.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+
+@dataclass(frozen=True)
+class Msg:
+    """Base of all messages."""
+
+    #: retried on a transient driver error (the step is idempotent)
+    retryable = True
+
+
+@dataclass(frozen=True)
+class Move(Msg):
+    """Absolute move of one axis ("Z" mm or "C" deg); returns when the move is
+    started. ``wait`` also waits until it is in position (the common case)."""
+
+    axis: str
+    position: float
+    wait: bool = True
+    velocity: float | None = None
+
+
+@dataclass(frozen=True)
+class Settle(Msg):
+    """Let vibration die out after a move (seconds of the station's clock)."""
+
+    seconds: float
+
+
+@dataclass(frozen=True)
+class ReadEncoder(Msg):
+    """The grating's reading of Z (an ``EncoderReading``)."""
+
+
+@dataclass(frozen=True)
+class ReadAxis(Msg):
+    """A drive's reported position of ``axis``."""
+
+    axis: str
+
+
+@dataclass(frozen=True)
+class Capture(Msg):
+    """One camera frame (a ``drivers.interfaces.Frame``)."""
+
+
+@dataclass(frozen=True)
+class Measure(Msg):
+    """Run the vision stage on a frame's image; returns its hole measurements."""
+
+    image: Any
+
+
+@dataclass(frozen=True)
+class Checkpoint(Msg):
+    """A place where a pause or a controlled stop may take effect."""
+
+    label: str = ""
+
+
+@dataclass(frozen=True)
+class Progress(Msg):
+    """Tell the world how far the plan is (``done`` of ``total`` steps)."""
+
+    done: int
+    total: int
+    text: str = ""
+
+
+@dataclass(frozen=True)
+class Note(Msg):
+    """Something worth recording in the event log."""
+
+    text: str

@@ -1,0 +1,210 @@
+"""The run engine's state machine, on in-memory axes (the end-to-end tests use the twins)."""
+
+from __future__ import annotations
+
+import asyncio
+
+import pytest
+
+from drivers.interfaces import AxisStatus, DeviceTimeout, DriveFault, LinearAxis, RotaryAxis
+from station.sequencer import messages as m
+from station.sequencer.engine import Devices, Engine, EngineStateError, PlanEnded, State
+
+
+class FakeAxis(LinearAxis):
+    """An axis that moves instantly, counts its calls and can be told to fail."""
+
+    def __init__(self, name):
+        self.name = name
+        self.position = 0.0
+        self.stops = 0
+        self.fail_next: list[Exception] = []
+        self.move_gate: asyncio.Event | None = None
+
+    async def connect(self):
+        pass
+
+    async def close(self):
+        pass
+
+    async def enable(self, on=True):
+        pass
+
+    async def move_to(self, position, velocity=None):
+        if self.fail_next:
+            raise self.fail_next.pop(0)
+        self.position = position
+
+    async def stop(self):
+        self.stops += 1
+
+    async def home(self):
+        self.position = 0.0
+
+    async def wait_in_position(self, timeout):
+        if self.move_gate is not None:
+            await self.move_gate.wait()
+        return AxisStatus(True, True, False, True, True, False, False, False, 0, self.position, 0.0)
+
+    async def read_position(self):
+        return self.position
+
+    async def status(self):
+        return await self.wait_in_position(1.0)
+
+    async def reset_fault(self):
+        pass
+
+
+class FakeRotary(FakeAxis, RotaryAxis):
+    pass
+
+
+def make_engine():
+    z, c = FakeAxis("Z"), FakeRotary("C")
+    eng = Engine(Devices(z, c), retry_backoff_s=0.0, sleep=lambda s: asyncio.sleep(0))
+    states = []
+    eng.subscribe(lambda ev: states.append(ev.state) if ev.kind == "state" else None)
+    return eng, z, c, states
+
+
+def scan_plan(n=5, log=None):
+    for i in range(n):
+        yield m.Move("Z", 10.0 * i)
+        yield m.Checkpoint(f"point {i}")
+        pos = yield m.ReadAxis("Z")
+        if log is not None:
+            log.append(pos)
+        yield m.Progress(i + 1, n)
+    return "done"
+
+
+def test_plan_runs_and_returns_its_value():
+    async def go():
+        eng, z, c, states = make_engine()
+        with pytest.raises(EngineStateError, match="home first"):
+            await eng.run(scan_plan())
+        await eng.home()
+        log = []
+        out = await eng.run(scan_plan(4, log))
+        return eng, out, log, states
+
+    eng, out, log, states = asyncio.run(go())
+    assert out == "done" and log == [0.0, 10.0, 20.0, 30.0]
+    assert eng.state == State.READY and eng.progress[:2] == (4, 4)
+    assert states[:3] == [State.HOMING, State.READY, State.RUNNING]
+
+
+def test_pause_takes_effect_at_a_checkpoint_and_resume_continues():
+    async def go():
+        eng, z, c, states = make_engine()
+        await eng.home()
+        log = []
+        z.move_gate = asyncio.Event()
+        task = asyncio.create_task(eng.run(scan_plan(3, log)))
+        await asyncio.sleep(0.01)
+        eng.pause()  # requested while the first move is under way
+        assert eng.state == State.RUNNING
+        z.move_gate.set()
+        for _ in range(100):
+            await asyncio.sleep(0.001)
+            if eng.state == State.PAUSED:
+                break
+        paused_state, logged_while_paused = eng.state, list(log)
+        eng.resume()
+        out = await task
+        return paused_state, logged_while_paused, out, log
+
+    paused_state, logged_while_paused, out, log = asyncio.run(go())
+    assert paused_state == State.PAUSED
+    assert logged_while_paused == []  # paused at the first checkpoint, before its read
+    assert out == "done" and log == [0.0, 10.0, 20.0]
+
+
+def test_abort_stops_axes_and_ends_aborted():
+    async def go():
+        eng, z, c, states = make_engine()
+        await eng.home()
+        z.move_gate = asyncio.Event()  # the move never finishes by itself
+        task = asyncio.create_task(eng.run(scan_plan()))
+        await asyncio.sleep(0.01)
+        eng.abort("operator pressed abort")
+        with pytest.raises(PlanEnded) as exc:
+            await task
+        return eng, z, c, exc.value
+
+    eng, z, c, ended = asyncio.run(go())
+    assert ended.outcome == "aborted" and "operator" in ended.reason
+    assert z.stops == 1 and c.stops == 1
+    assert eng.state == State.READY
+
+
+def test_controlled_stop_ends_at_next_checkpoint():
+    async def go():
+        eng, z, c, _ = make_engine()
+        await eng.home()
+        log = []
+        z.move_gate = asyncio.Event()
+        task = asyncio.create_task(eng.run(scan_plan(5, log)))
+        await asyncio.sleep(0.01)
+        eng.stop()
+        z.move_gate.set()
+        with pytest.raises(PlanEnded) as exc:
+            await task
+        return eng, exc.value, log
+
+    eng, ended, log = asyncio.run(go())
+    assert ended.outcome == "stopped" and log == []
+    assert eng.state == State.READY
+
+
+def test_transient_errors_are_retried_within_budget():
+    async def go():
+        eng, z, c, _ = make_engine()
+        await eng.home()
+        z.fail_next = [DeviceTimeout("no reply", "Z"), DeviceTimeout("no reply", "Z")]
+        out = await eng.run(scan_plan(2))
+        return eng, out
+
+    eng, out = asyncio.run(go())
+    assert out == "done" and eng.retries_used == 2
+
+
+def test_budget_exhausted_or_drive_fault_faults_the_engine_and_reset_recovers():
+    async def go():
+        eng, z, c, _ = make_engine()
+        await eng.home()
+        z.fail_next = [DeviceTimeout("no reply", "Z")] * 4
+        with pytest.raises(PlanEnded) as e1:
+            await eng.run(scan_plan(2))
+        s1, stops1 = eng.state, z.stops
+        with pytest.raises(EngineStateError):
+            await eng.run(scan_plan(2))
+        await eng.reset()
+        await eng.home()
+        z.fail_next = [DriveFault(0x20, "overcurrent", "Z")]
+        with pytest.raises(PlanEnded) as e2:
+            await eng.run(scan_plan(2))
+        s2, retries = eng.state, eng.retries_used
+        await eng.reset()
+        await eng.home()
+        out = await eng.run(scan_plan(2))
+        return e1.value, s1, stops1, e2.value, s2, retries, out
+
+    e1, s1, stops1, e2, s2, retries, out = asyncio.run(go())
+    assert e1.outcome == "faulted" and "DeviceTimeout" in e1.reason and s1 == State.FAULTED and stops1 == 1
+    assert e2.outcome == "faulted" and "overcurrent" in e2.reason and s2 == State.FAULTED
+    assert retries == 0  # a drive fault is not retried
+    assert out == "done"
+
+
+def test_estop_code_puts_engine_in_estopped():
+    async def go():
+        eng, z, c, _ = make_engine()
+        await eng.home()
+        z.fail_next = [DriveFault(0x12, "emergency stop", "Z")]
+        with pytest.raises(PlanEnded):
+            await eng.run(scan_plan(1))
+        return eng.state
+
+    assert asyncio.run(go()) == State.ESTOPPED
