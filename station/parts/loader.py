@@ -1,0 +1,205 @@
+"""Reading part spec files: from a path, or built in by part number.
+
+Built-in specs live in ``station/data/parts/<part number>.toml`` and are read through
+:mod:`importlib.resources`, so they are found the same way from a checkout, an
+editable install or a wheel. Every problem of a file is reported at once, each with
+the file, the line where the offending key (or its table) is written, and the field
+in the path notation a person reads (``holes[1].position.tol``; list indexes count
+from 0, as in the file's order).
+"""
+
+from __future__ import annotations
+
+import re
+import tomllib
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+
+from pydantic import ValidationError
+
+from station.parts.spec import PartSpec, SpecProblems, is_part_number
+
+#: where the built-in part specs live inside the ``station`` package
+_BUILTIN_DIR = ("data", "parts")
+
+
+@dataclass(frozen=True)
+class Problem:
+    """One thing wrong with a spec file."""
+
+    source: str
+    line: int | None
+    field: str
+    message: str
+
+    def __str__(self) -> str:
+        where = self.source + (f", line {self.line}" if self.line is not None else "")
+        return f"{where}: {self.field}: {self.message}" if self.field else f"{where}: {self.message}"
+
+
+class PartSpecError(ValueError):
+    """A part spec that cannot be used. ``problems`` lists every one found; the
+    message is one line per problem."""
+
+    def __init__(self, problems: list[Problem]):
+        self.problems = problems
+        super().__init__("\n".join(str(p) for p in problems))
+
+
+def field_path(loc: tuple) -> str:
+    """Pydantic's loc as a person writes it: ``('holes', 1, 'position', 'tol')`` ->
+    ``holes[1].position.tol``."""
+    out = ""
+    for part in loc:
+        if isinstance(part, int):
+            out += f"[{part}]"
+        else:
+            out += ("." if out else "") + str(part)
+    return out
+
+
+_TABLE_ARRAY = re.compile(r"^\s*\[\[\s*([^\[\]]+?)\s*\]\]")
+_TABLE = re.compile(r"^\s*\[\s*([^\[\]]+?)\s*\]")
+_KEY = re.compile(r"^\s*([A-Za-z0-9_.\-\s\"']+?)\s*=")
+
+
+def _split_key(key: str) -> tuple[str, ...]:
+    return tuple(p.strip().strip("\"'") for p in key.split("."))
+
+
+def line_of(text: str, loc: tuple) -> int | None:
+    """Best-effort line number where ``loc`` (a pydantic loc) is written in TOML text.
+
+    A small line scanner, not a TOML parser: it follows ``[table]`` and ``[[array]]``
+    headers and ``key =`` lines and returns the line of the longest prefix of ``loc``
+    it sees (the key itself, else the table that lacks it). Multi-line strings or
+    arrays may mislead it; then the message still names file and field.
+    """
+    arrays: dict[tuple, int] = {}  # array-of-tables path (as written) -> current index
+    current: tuple = ()
+    best_depth, best_line = 0, None
+
+    def expand(path: tuple[str, ...]) -> tuple:
+        out: tuple = ()
+        for i in range(len(path)):
+            out += (path[i],)
+            if path[: i + 1] in arrays:
+                out += (arrays[path[: i + 1]],)
+        return out
+
+    def consider(path: tuple, lineno: int) -> None:
+        nonlocal best_depth, best_line
+        n = len(path)
+        if n > best_depth and tuple(loc[:n]) == path:
+            best_depth, best_line = n, lineno
+
+    for lineno, raw in enumerate(text.splitlines(), start=1):
+        line = raw.split("#", 1)[0] if '"' not in raw and "'" not in raw else raw
+        if m := _TABLE_ARRAY.match(line):
+            path = _split_key(m.group(1))
+            arrays[path] = arrays.get(path, -1) + 1
+            current = expand(path)
+            consider(current, lineno)
+        elif m := _TABLE.match(line):
+            current = expand(_split_key(m.group(1)))
+            consider(current, lineno)
+        elif m := _KEY.match(line):
+            consider(current + _split_key(m.group(1)), lineno)
+    return best_line
+
+
+def _problems_of(exc: ValidationError, text: str, source: str) -> list[Problem]:
+    problems = []
+    for err in exc.errors():
+        cause = (err.get("ctx") or {}).get("error")
+        if isinstance(cause, SpecProblems):
+            for loc, msg in cause.problems:
+                full = tuple(err["loc"]) + tuple(loc)
+                problems.append(Problem(source, line_of(text, full), field_path(full), msg))
+            continue
+        loc = tuple(err["loc"])
+        msg = err["msg"]
+        if err["type"] == "value_error":
+            msg = msg.removeprefix("Value error, ")
+        elif err["type"] == "extra_forbidden":
+            msg = "unknown key (misspelt?)"
+        elif err["type"] == "missing":
+            msg = "required key is missing"
+        problems.append(Problem(source, line_of(text, loc), field_path(loc), msg))
+    # in file order, so a reader fixes the file top to bottom
+    return sorted(problems, key=lambda p: (p.line is None, p.line or 0))
+
+
+def parse_part(text: str, source: str = "<text>") -> PartSpec:
+    """Validate TOML text as a part spec; :class:`PartSpecError` lists every problem."""
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        m = re.search(r"line (\d+)", str(exc))
+        raise PartSpecError([Problem(source, int(m.group(1)) if m else None, "", f"not valid TOML: {exc}")]) from None
+    try:
+        return PartSpec.model_validate(data)
+    except ValidationError as exc:
+        raise PartSpecError(_problems_of(exc, text, source)) from None
+
+
+def read_part_file(path: str | Path) -> PartSpec:
+    """Read and validate a spec file at a path."""
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise PartSpecError([Problem(str(p), None, "", f"cannot read: {exc.strerror or exc}")]) from None
+    except UnicodeDecodeError as exc:
+        raise PartSpecError([Problem(str(p), None, "", f"not UTF-8 text: {exc.reason}")]) from None
+    return parse_part(text, str(p))
+
+
+def _builtin_dir():
+    return resources.files("station").joinpath(*_BUILTIN_DIR)
+
+
+def builtin_part_numbers() -> list[str]:
+    """Part numbers of the built-in specs (file names), sorted."""
+    d = _builtin_dir()
+    if not d.is_dir():
+        return []
+    return sorted(f.name.removesuffix(".toml") for f in d.iterdir() if f.name.endswith(".toml"))
+
+
+def _read_builtin(part_number: str) -> PartSpec:
+    f = _builtin_dir().joinpath(f"{part_number}.toml")
+    source = f"station/data/parts/{part_number}.toml"
+    spec = parse_part(f.read_text(encoding="utf-8"), source)
+    if spec.part_number != part_number:
+        # the file name is the look-up key: a mismatch would load the wrong part
+        raise PartSpecError([Problem(source, line_of(f.read_text(encoding="utf-8"), ("part_number",)),
+                                     "part_number", f"{spec.part_number!r} differs from the file name")])
+    return spec
+
+
+def load_part(part_number_or_path: str | Path) -> PartSpec:
+    """A built-in spec by part number, or a spec file by path.
+
+    A :class:`~pathlib.Path`, or a string that ends in ``.toml`` or contains a path
+    separator, is read as a file; anything else is a part number. An unknown part
+    number raises :class:`PartSpecError` naming the known ones.
+    """
+    arg = part_number_or_path
+    if isinstance(arg, Path) or arg.endswith(".toml") or "/" in arg or "\\" in arg:
+        return read_part_file(arg)
+    known = builtin_part_numbers()
+    if not is_part_number(arg) or arg not in known:
+        raise PartSpecError([Problem(
+            repr(arg), None, "",
+            "no built-in part spec of that number, and not a .toml path (built in: "
+            + (", ".join(known) or "none") + ")",
+        )])
+    return _read_builtin(arg)
+
+
+def list_parts() -> list[PartSpec]:
+    """Every built-in part spec, sorted by part number (raises if one is broken:
+    a shipped spec that does not load is a packaging bug, not something to skip)."""
+    return [_read_builtin(pn) for pn in builtin_part_numbers()]

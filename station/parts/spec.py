@@ -1,0 +1,231 @@
+"""What a part must be: the validated model of a part spec file.
+
+A part spec names the bore and, for every compensating hole, the two characteristics
+the station measures (diameter and axial position) with their tolerances. The
+sequencer plans the scan from the holes, and the results store copies each
+characteristic's nominal and limits into the inspection record, so that a record
+stays readable after the spec file changes.
+
+Pydantic v2 validates the file; unknown keys are refused (``extra="forbid"``) because
+a misspelt tolerance key silently ignored would inspect parts against the wrong limits.
+Numbers are strict (TOML strings are not numbers) and must be finite (TOML allows
+``inf`` and ``nan``).
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from decimal import Decimal
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+
+#: hole ids become characteristic ids (``hole_1.diameter``) and image names: keep
+#: them lowercase identifiers so they are safe in file names, URLs and QIF ids
+HOLE_ID_PATTERN = r"^[a-z][a-z0-9_]{0,31}$"
+#: part numbers name the built-in spec files (``<part number>.toml``): no path
+#: separators, no leading dot
+PART_NUMBER_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9._-]{0,63}$"
+
+#: the two characteristics measured on each compensating hole (paper, Table 4)
+CHARACTERISTIC_KINDS = ("diameter", "position")
+
+
+def _decimal_sum(a: float, b: float) -> float:
+    """``a + b`` as the nearest double to the decimal sum of the numbers as written.
+
+    Binary floats make 71.03 + 0.1 come out as 71.13000000000001; a measurement of
+    exactly 71.130 (paper, Table 4, hole 1 before compensation) must compare against
+    the limit a person reads on the drawing, 71.13. ``repr`` gives the shortest decimal
+    that round-trips, which for TOML literals is the literal itself.
+    """
+    return float(Decimal(repr(a)) + Decimal(repr(b)))
+
+
+class SpecProblems(ValueError):
+    """Problems found across fields (after each field was valid on its own), each with
+    the field it belongs to, so that a file's report names every one precisely."""
+
+    def __init__(self, problems: list[tuple[tuple, str]]):
+        self.problems = problems
+        super().__init__("; ".join(f"{'.'.join(map(str, loc))}: {msg}" for loc, msg in problems))
+
+
+class _SpecModel(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True, strict=True, allow_inf_nan=False)
+
+
+class Tolerance(_SpecModel):
+    """A nominal value with either a symmetric ``tol`` (nominal ± tol) or separate
+    signed deviations ``upper`` and ``lower`` (limits nominal + upper, nominal + lower,
+    as on a drawing: 0.7 +0.1/-0.05 is ``upper = 0.1, lower = -0.05``)."""
+
+    nominal: float
+    tol: float | None = Field(default=None, description="symmetric tolerance: nominal ± tol (mm)")
+    upper: float | None = Field(default=None, description="upper deviation from nominal (mm, signed)")
+    lower: float | None = Field(default=None, description="lower deviation from nominal (mm, signed)")
+
+    @field_validator("tol")
+    @classmethod
+    def _tol_positive(cls, v: float | None) -> float | None:
+        if v is not None and not v > 0:
+            raise ValueError(f"must be positive (got {v})")
+        return v
+
+    @model_validator(mode="after")
+    def _one_form(self) -> Tolerance:
+        asym = (self.upper is not None, self.lower is not None)
+        if self.tol is not None and any(asym):
+            raise ValueError("give either tol (symmetric ±) or upper and lower, not both")
+        if self.tol is None:
+            if not any(asym):
+                raise ValueError("needs a tolerance: tol (symmetric ±) or upper and lower")
+            if not all(asym):
+                missing = "lower" if self.lower is None else "upper"
+                raise ValueError(f"upper and lower go together: {missing} is missing")
+            if not self.upper > self.lower:
+                raise ValueError(f"upper ({self.upper}) must be above lower ({self.lower})")
+        return self
+
+    @property
+    def lower_limit(self) -> float:
+        dev = -self.tol if self.tol is not None else self.lower
+        return _decimal_sum(self.nominal, dev)
+
+    @property
+    def upper_limit(self) -> float:
+        dev = self.tol if self.tol is not None else self.upper
+        return _decimal_sum(self.nominal, dev)
+
+
+class Bore(_SpecModel):
+    """The cylinder bore the endoscope enters."""
+
+    diameter_mm: float
+    depth_mm: float
+
+    @field_validator("diameter_mm", "depth_mm")
+    @classmethod
+    def _positive(cls, v: float) -> float:
+        if not v > 0:
+            raise ValueError(f"must be positive (got {v})")
+        return v
+
+
+class Hole(_SpecModel):
+    """A compensating hole: its diameter and its axial position (distance of its centre
+    from the part's datum face, the face that sits on the rotary table), both in mm,
+    and the nominal angle about the bore axis where it lies."""
+
+    id: str = Field(pattern=HOLE_ID_PATTERN)
+    angle_deg: float = Field(description="nominal angle about the bore axis, [0, 360) deg")
+    diameter: Tolerance
+    position: Tolerance
+
+    @field_validator("angle_deg")
+    @classmethod
+    def _angle_range(cls, v: float) -> float:
+        if not 0.0 <= v < 360.0:
+            raise ValueError(f"must be in [0, 360) deg (got {v})")
+        return v
+
+    @field_validator("diameter")
+    @classmethod
+    def _diameter_positive(cls, v: Tolerance) -> Tolerance:
+        if not v.lower_limit > 0:
+            raise ValueError(f"the lower limit {v.lower_limit:g} mm must be above 0: a hole has a size")
+        return v
+
+
+@dataclass(frozen=True)
+class Characteristic:
+    """One measured characteristic with its limits, as the sequencer and store use it.
+
+    ``id`` is ``<hole id>.<kind>`` (``hole_1.position``); limits are inclusive.
+    """
+
+    id: str
+    hole_id: str
+    kind: str
+    unit: str
+    nominal: float
+    lower_limit: float
+    upper_limit: float
+
+    def conforms(self, measured: float) -> bool:
+        """Plain acceptance, limits inclusive. No guard band for measurement
+        uncertainty is applied: that decision rule belongs to the sequencer."""
+        return self.lower_limit <= measured <= self.upper_limit
+
+
+class PartSpec(_SpecModel):
+    """A part spec file, validated."""
+
+    part_number: str = Field(pattern=PART_NUMBER_PATTERN)
+    description: str = ""
+    unit: Literal["mm"] = "mm"
+    bore: Bore
+    holes: list[Hole] = Field(min_length=1)
+
+    @model_validator(mode="after")
+    def _holes_fit_bore(self) -> PartSpec:
+        problems: list[tuple[tuple, str]] = []
+        seen: dict[str, int] = {}
+        for i, h in enumerate(self.holes):
+            if h.id in seen:
+                problems.append((("holes", i, "id"), f"{h.id!r} is already the id of holes[{seen[h.id]}]"))
+            seen.setdefault(h.id, i)
+            if h.diameter.upper_limit >= self.bore.diameter_mm:
+                problems.append((("holes", i, "diameter"),
+                                 f"upper limit {h.diameter.upper_limit:g} mm is not smaller than the bore "
+                                 f"({self.bore.diameter_mm:g} mm)"))
+            radius_mm = h.diameter.upper_limit / 2.0
+            lo, hi = h.position.lower_limit - radius_mm, h.position.upper_limit + radius_mm
+            if lo < 0.0 or hi > self.bore.depth_mm:
+                problems.append((("holes", i, "position"),
+                                 f"the hole spans {lo:g}..{hi:g} mm along the axis, outside the bore "
+                                 f"(0..{self.bore.depth_mm:g} mm deep)"))
+        if problems:
+            raise SpecProblems(problems)
+        return self
+
+    def characteristics(self) -> tuple[Characteristic, ...]:
+        """Every characteristic in file order: per hole, diameter then position."""
+        out = []
+        for h in self.holes:
+            for kind in CHARACTERISTIC_KINDS:
+                tol: Tolerance = getattr(h, kind)
+                out.append(Characteristic(
+                    id=f"{h.id}.{kind}", hole_id=h.id, kind=kind, unit=self.unit,
+                    nominal=tol.nominal, lower_limit=tol.lower_limit, upper_limit=tol.upper_limit,
+                ))
+        return tuple(out)
+
+    def characteristic(self, characteristic_id: str) -> Characteristic:
+        """The characteristic of that id; KeyError naming the known ids otherwise."""
+        for c in self.characteristics():
+            if c.id == characteristic_id:
+                return c
+        known = ", ".join(c.id for c in self.characteristics())
+        raise KeyError(f"{self.part_number} has no characteristic {characteristic_id!r} (known: {known})")
+
+    def hole(self, hole_id: str) -> Hole:
+        for h in self.holes:
+            if h.id == hole_id:
+                return h
+        raise KeyError(f"{self.part_number} has no hole {hole_id!r}")
+
+    def to_json(self) -> dict:
+        """The spec as written, plus the derived characteristics (what `parts show --json` prints)."""
+        data = self.model_dump(mode="json", exclude_none=True)
+        data["characteristics"] = [
+            {"id": c.id, "unit": c.unit, "nominal": c.nominal,
+             "lower_limit": c.lower_limit, "upper_limit": c.upper_limit}
+            for c in self.characteristics()
+        ]
+        return data
+
+
+def is_part_number(text: str) -> bool:
+    return re.fullmatch(PART_NUMBER_PATTERN, text) is not None
