@@ -1,0 +1,58 @@
+"""Running the store's Alembic migrations from code.
+
+No ``alembic.ini`` is needed at run time: the configuration is built here, with
+``script_location`` pointing at the ``migrations`` folder inside this package (found
+by the package's own path, so it works from a checkout, an editable install or a wheel).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from alembic import command
+from alembic.config import Config
+from alembic.runtime.migration import MigrationContext
+from alembic.script import ScriptDirectory
+from sqlalchemy import Connection, Engine
+
+from station.store.engine import WRITE_OPTION, make_engine
+
+MIGRATIONS_DIR = Path(__file__).resolve().parent / "migrations"
+
+
+def alembic_config(url: str | None = None) -> Config:
+    """An Alembic config for the store (``url`` only for the alembic command line)."""
+    cfg = Config()
+    cfg.set_main_option("script_location", str(MIGRATIONS_DIR))
+    if url is not None:
+        # ConfigParser interpolation: a literal % (in a password) is written %%
+        cfg.set_main_option("sqlalchemy.url", url.replace("%", "%%"))
+    return cfg
+
+
+def head_revision() -> str:
+    return ScriptDirectory.from_config(alembic_config()).get_current_head()
+
+
+def current_revision(connection: Connection) -> str | None:
+    return MigrationContext.configure(connection).get_current_revision()
+
+
+def upgrade_engine(engine: Engine) -> None:
+    """Bring the engine's database to the newest revision, in one write transaction
+    (on SQLite the write lock is taken first, so two processes opening a fresh store at
+    once migrate one after the other; the second finds nothing to do)."""
+    with engine.connect().execution_options(**{WRITE_OPTION: True}) as conn:
+        cfg = alembic_config()
+        cfg.attributes["connection"] = conn
+        command.upgrade(cfg, "head")
+        conn.commit()
+
+
+def upgrade_to_head(url: str) -> None:
+    """Bring the database at ``url`` to the newest revision (creates it when new)."""
+    engine = make_engine(url)
+    try:
+        upgrade_engine(engine)
+    finally:
+        engine.dispose()

@@ -1,0 +1,1 @@
+"""Alembic migrations of the results store (run by :func:`station.store.migrate.upgrade_to_head`)."""

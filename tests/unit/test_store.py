@@ -1,0 +1,373 @@
+"""Results store: round trip, filters and paging, idempotency, final results, crash
+recovery with a killed process, migrations equal to the models, and the typed
+errors of a locked or full database."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import signal
+import sqlite3
+import subprocess
+import sys
+import textwrap
+from datetime import datetime, timedelta, timezone
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+from alembic.autogenerate import compare_metadata
+from alembic.runtime.migration import MigrationContext
+from sqlalchemy import event, inspect, select
+from typer.testing import CliRunner
+
+from station.cli import app
+from station.parts import load_part
+from station.store import (
+    DuplicateIdempotencyKey,
+    InspectionNotFound,
+    InspectionStateError,
+    Measurement,
+    Store,
+    StoreError,
+    StoreIntegrityError,
+    StoreLocked,
+    StoreUnavailable,
+    Traceability,
+    upgrade_to_head,
+)
+from station.store.engine import make_engine
+from station.store.migrate import current_revision, head_revision
+from station.store.models import Base, Event
+
+REPO = Path(__file__).resolve().parents[2]
+PART = "ZDZG-22.2-12.3851"
+T0 = datetime(2025, 3, 1, 8, 0, tzinfo=timezone.utc)
+
+
+@pytest.fixture
+def spec():
+    return load_part(PART)
+
+
+@pytest.fixture
+def store(tmp_path):
+    s = Store.open(data_dir=tmp_path / "data")
+    yield s
+    s.close()
+
+
+def _m(spec, cid: str, value: float | None, **kw) -> Measurement:
+    c = spec.characteristic(cid)
+    passed = kw.pop("passed", value is not None and c.conforms(value))
+    return Measurement.of(c, value, passed=passed, **kw)
+
+
+def test_round_trip_with_characteristics_and_image(store, spec):
+    trace = Traceability(model_version="m-3", compensation_version="c-7", calibration_id="cal-2025-02",
+                         config_hash="abc123", scenario="default", extra={"operator": "shift-b"})
+    iid = store.begin_inspection(PART, serial="SN-1", order_id="PO-9", traceability=trace, idempotency_key="mes-1")
+    store.record_characteristic(iid, _m(spec, "hole_1.diameter", 0.675, uncertainty_k2=0.004, true_value=0.7))
+    crop = np.arange(24 * 32, dtype=np.uint8).reshape(24, 32)
+    image = store.add_image(iid, "hole_1", "hole_1_diameter", crop)
+    done = store.finish(iid, "complete", "fail", "hole_2 position out of tolerance", measurements=[
+        _m(spec, "hole_1.position", 71.130), _m(spec, "hole_2.diameter", 0.708), _m(spec, "hole_2.position", 85.080),
+    ])
+
+    again = store.get(iid)
+    assert again == done
+    assert (again.part_number, again.serial, again.order_id) == (PART, "SN-1", "PO-9")
+    assert (again.state, again.result, again.reason) == ("complete", "fail", "hole_2 position out of tolerance")
+    assert again.idempotency_key == "mes-1"
+    assert again.traceability == trace.to_json()
+    assert again.started_at.tzinfo is timezone.utc and again.finished_at >= again.started_at
+    assert [c.characteristic_id for c in again.characteristics] == [c.id for c in spec.characteristics()]
+    d1 = again.characteristic("hole_1.diameter")
+    assert (d1.measured, d1.uncertainty_k2, d1.true_value, d1.passed, d1.unit) == (0.675, 0.004, 0.7, True, "mm")
+    assert (d1.lower_limit, d1.upper_limit, d1.nominal) == (0.575, 0.825, 0.7)
+    assert again.characteristic("hole_1.position").passed  # on the limit: inside (Table 4)
+    assert not again.characteristic("hole_2.position").passed
+
+    (img,) = again.images
+    assert img == image and img.subject == "hole_1"
+    assert img.path == f"images/{iid}/hole_1_diameter.png"
+    on_disk = store.image_path(img)
+    assert on_disk == store.data_dir / "images" / iid / "hole_1_diameter.png"
+    assert hashlib.sha256(on_disk.read_bytes()).hexdigest() == img.sha256
+    np.testing.assert_array_equal(cv2.imread(str(on_disk), cv2.IMREAD_UNCHANGED), crop)
+    assert not [p for p in on_disk.parent.iterdir() if p.name.startswith(".")]  # no temporary left
+
+    kinds = [(e.kind, e.message) for e in store.events(iid)]
+    assert kinds == [("state", f"running: part {PART}, serial SN-1"),
+                     ("state", "complete: fail (hole_2 position out of tolerance)")]
+    assert json.dumps(again.to_json())  # serialisable for the API and the CLI
+
+
+def test_filters_and_paging_newest_first(store):
+    ids = {}
+    for i, (part, serial, result) in enumerate([("P-A", "S1", "pass"), ("P-A", "S2", "fail"), ("P-B", "S3", "pass"),
+                                                ("P-A", "S4", None), ("P-B", "S5", "fail")]):
+        iid = store.begin_inspection(part, serial=serial, started_at=T0 + timedelta(minutes=i))
+        if result is None:
+            store.finish(iid, "aborted", reason="operator abort")
+        else:
+            store.record_characteristic(iid, Measurement("c", 1.0, 0.5, 1.5, 1.0, result == "pass"))
+            store.finish(iid, "complete", result)
+        ids[serial] = iid
+
+    def serials(**kw):
+        return [r.serial for r in store.list_inspections(**kw)]
+
+    assert serials() == ["S5", "S4", "S3", "S2", "S1"]
+    assert serials(part_number="P-A") == ["S4", "S2", "S1"]
+    assert serials(result="pass") == ["S3", "S1"]
+    assert serials(state="aborted") == ["S4"]
+    assert serials(serial="S2") == ["S2"]
+    assert serials(part_number="P-B", result="fail") == ["S5"]
+    assert serials(since=T0 + timedelta(minutes=1), until=T0 + timedelta(minutes=3)) == ["S3", "S2"]
+    assert store.count_inspections(part_number="P-A") == 3
+
+    pages = [serials(limit=2, offset=o) for o in (0, 2, 4)]
+    assert pages == [["S5", "S4"], ["S3", "S2"], ["S1"]]
+    with pytest.raises(ValueError):
+        store.list_inspections(result="maybe")
+    with pytest.raises(ValueError):
+        store.list_inspections(since=datetime(2025, 1, 1))  # naive: whose time?
+
+
+def test_idempotency_key_is_unique_and_names_the_holder(store):
+    first = store.begin_inspection(PART, idempotency_key="mes-42")
+    with pytest.raises(DuplicateIdempotencyKey) as info:
+        store.begin_inspection(PART, serial="other", idempotency_key="mes-42")
+    assert info.value.inspection_id == first
+    assert store.count_inspections() == 1  # the refused one left nothing
+    assert store.find_by_idempotency_key("mes-42") == first
+    # no key: as many as wanted (NULLs never collide)
+    store.begin_inspection(PART)
+    store.begin_inspection(PART)
+    assert store.count_inspections() == 3
+
+
+def test_results_of_a_finished_inspection_are_final(store, spec):
+    iid = store.begin_inspection(PART)
+    store.record_characteristic(iid, _m(spec, "hole_1.diameter", 0.7))
+    with pytest.raises(StoreIntegrityError, match="already has a result for hole_1.diameter"):
+        store.record_characteristic(iid, _m(spec, "hole_1.diameter", 0.71))
+    # a pass with a failed characteristic is a contradiction: refused, nothing written
+    with pytest.raises(ValueError, match="all passed"):
+        store.finish(iid, "complete", "pass", measurements=[_m(spec, "hole_2.position", 85.08)])
+    assert store.get(iid).state == "running" and len(store.get(iid).characteristics) == 1
+    store.finish(iid, "complete", "pass")
+    with pytest.raises(InspectionStateError, match="complete"):
+        store.record_characteristic(iid, _m(spec, "hole_2.diameter", 0.7))
+    with pytest.raises(InspectionStateError):
+        store.add_image(iid, "hole_2", "late", np.zeros((4, 4), np.uint8))
+    with pytest.raises(InspectionStateError):
+        store.finish(iid, "aborted")
+    with pytest.raises(InspectionNotFound):
+        store.get("00000000-0000-0000-0000-000000000000")
+    with pytest.raises(ValueError):
+        store.finish(iid, "interrupted")  # only recovery interrupts
+    with pytest.raises(ValueError):
+        Measurement("x", 1.0, 0.5, 1.5, None, True)  # not measured cannot pass
+
+
+def test_image_names_cannot_escape_the_folder(store, tmp_path):
+    iid = store.begin_inspection(PART)
+    crop = np.zeros((8, 8, 3), np.uint8)
+    for name in ("../evil", "a/b", "/etc/passwd", ".hidden", "..", "x\\y", ""):
+        with pytest.raises(ValueError, match="refused"):
+            store.add_image(iid, "hole_1", name, crop)
+    with pytest.raises(ValueError):
+        store.add_image("../../etc", "hole_1", "x", crop)  # the id is checked too
+    with pytest.raises(ValueError, match="uint8"):
+        store.add_image(iid, "hole_1", "float", crop.astype(np.float32))
+    store.add_image(iid, "hole_1", "ok.png", crop)
+    with pytest.raises(StoreIntegrityError):
+        store.add_image(iid, "hole_1", "ok", np.full((8, 8, 3), 255, np.uint8))  # never overwritten
+    written = sorted(p.relative_to(store.data_dir).as_posix() for p in store.data_dir.rglob("*.png"))
+    assert written == [f"images/{iid}/ok.png"]
+    assert cv2.imread(str(store.data_dir / written[0])).max() == 0
+
+
+def test_event_log_is_append_only(store):
+    store.log_event("alarm", "Z axis following error")
+    with store._write_sessions() as s:
+        ev = s.scalars(select(Event)).one()
+        ev.message = "nothing happened"
+        with pytest.raises(StoreError, match="append-only"):
+            s.commit()
+        s.rollback()
+        s.delete(ev)
+        with pytest.raises(StoreError, match="append-only"):
+            s.commit()
+        s.rollback()
+    assert [e.message for e in store.events(kind="alarm")] == ["Z axis following error"]
+
+
+def test_one_owner_per_data_folder_and_readers_do_not_recover(store, tmp_path):
+    iid = store.begin_inspection(PART)
+    with pytest.raises(StoreLocked, match="another station process"):
+        Store.open(data_dir=store.data_dir)
+    with Store(data_dir=store.data_dir) as reader:  # a report or the CLI
+        assert reader.get(iid).state == "running"  # the live inspection is not cut off
+
+
+def _child(data_dir: Path, body: str) -> subprocess.Popen:
+    code = textwrap.dedent(f"""
+        import sys
+        from station.store import Store, Measurement
+        store = Store.open(data_dir={str(data_dir)!r})
+        iid = store.begin_inspection("{PART}", serial="killed")
+        print(iid, flush=True)
+    """) + textwrap.dedent(body)
+    return subprocess.Popen([sys.executable, "-c", code], cwd=REPO, stdout=subprocess.PIPE, text=True)
+
+
+def _kill(proc: subprocess.Popen) -> None:
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait()
+    proc.stdout.close()
+
+
+def _integrity(data_dir: Path) -> str:
+    with sqlite3.connect(data_dir / "station.db") as con:
+        return con.execute("PRAGMA integrity_check").fetchone()[0]
+
+
+def test_killed_process_leaves_an_interrupted_inspection(tmp_path):
+    data = tmp_path / "data"
+    proc = _child(data, """
+        for i in range(3):
+            store.record_characteristic(iid, Measurement(f"c{i}", 1.0, 0.5, 1.5, 1.0 + i / 10, True))
+        print("recorded", flush=True)
+        import time
+        while True:
+            time.sleep(1)  # waits here to be killed, never finishes
+    """)
+    try:
+        iid = proc.stdout.readline().strip()
+        assert proc.stdout.readline().strip() == "recorded"
+    finally:
+        _kill(proc)
+    assert proc.returncode == -signal.SIGKILL
+
+    with Store.open(data_dir=data) as store:
+        rec = store.get(iid)
+        assert rec.state == "interrupted" and rec.result is None and rec.finished_at is not None
+        assert "stopped before the inspection finished" in rec.reason
+        assert [c.characteristic_id for c in rec.characteristics] == ["c0", "c1", "c2"]
+        assert [e.kind for e in store.events(iid)] == ["state", "recovery"]
+        assert store.recover_interrupted() == []  # nothing left to recover
+    assert _integrity(data) == "ok"
+
+
+def test_kill_while_writing_keeps_every_reported_result(tmp_path):
+    """A process killed in the middle of a stream of commits: every result it reported
+    (printed after the call returned) is in the store, and the database is sound."""
+    data = tmp_path / "data"
+    proc = _child(data, """
+        i = 0
+        while True:
+            store.record_characteristic(iid, Measurement(f"c{i}", 1.0, 0.5, 1.5, 1.0, True))
+            print(f"c{i}", flush=True)
+            i += 1
+    """)
+    reported = []
+    try:
+        iid = proc.stdout.readline().strip()
+        while len(reported) < 20:
+            reported.append(proc.stdout.readline().strip())
+    finally:
+        _kill(proc)
+    assert _integrity(data) == "ok"
+    with Store.open(data_dir=data) as store:
+        rec = store.get(iid)
+        stored = [c.characteristic_id for c in rec.characteristics]
+        assert stored[: len(reported)] == reported
+        assert stored == [f"c{i}" for i in range(len(stored))]  # no gap, no half row
+        assert rec.state == "interrupted"
+
+
+def test_migrated_schema_equals_the_models(tmp_path):
+    url = f"sqlite:///{tmp_path / 'm.db'}"
+    upgrade_to_head(url)
+    upgrade_to_head(url)  # a second run has nothing to do
+    engine = make_engine(url)
+    try:
+        with engine.connect() as conn:
+            assert current_revision(conn) == head_revision() == "0001"
+            ctx = MigrationContext.configure(conn, opts={"compare_type": True, "compare_server_default": True})
+            assert compare_metadata(ctx, Base.metadata) == []
+            assert set(inspect(conn).get_table_names()) == set(Base.metadata.tables) | {"alembic_version"}
+            # the comparison does see a difference when there is one
+            conn.exec_driver_sql("DROP INDEX ix_inspection_serial")
+            diffs = compare_metadata(ctx, Base.metadata)
+            assert [d[0] for d in diffs] == ["add_index"]
+    finally:
+        engine.dispose()
+
+
+def test_locked_database_raises_store_error(tmp_path):
+    data = tmp_path / "data"
+    with Store(data_dir=data, busy_timeout_s=0.05) as store:
+        iid = store.begin_inspection(PART)
+        other = sqlite3.connect(data / "station.db", isolation_level=None, timeout=0.05)
+        try:
+            other.execute("BEGIN EXCLUSIVE")
+            with pytest.raises(StoreUnavailable, match="locked by another process") as info:
+                store.record_characteristic(iid, Measurement("c", 1.0, 0.5, 1.5, 1.0, True))
+            assert isinstance(info.value, StoreError) and str(data / "station.db") in str(info.value)
+            with pytest.raises(StoreUnavailable, match="locked"):
+                store.finish(iid, "aborted")
+        finally:
+            other.execute("ROLLBACK")
+            other.close()
+        assert store.get(iid).characteristics == ()  # the refused call wrote nothing
+        store.finish(iid, "aborted")  # and the store works once the lock is gone
+        assert store.get(iid).state == "aborted"
+
+
+def test_full_database_raises_store_error(tmp_path):
+    """SQLite's max_page_count caps the file, which fails exactly as a full disk does."""
+    with Store(data_dir=tmp_path / "data") as store:
+        store.engine.dispose()  # new connections get the cap
+
+        @event.listens_for(store.engine, "connect")
+        def _cap(dbapi_conn, _rec):
+            pages = dbapi_conn.execute("PRAGMA page_count").fetchone()[0]
+            dbapi_conn.execute(f"PRAGMA max_page_count = {pages}")
+
+        with pytest.raises(StoreUnavailable, match="full"):
+            store.log_event("info", "x" * 200_000)
+        assert store.events() == []
+
+
+def test_cli_results_list_and_show(tmp_path, spec):
+    data = tmp_path / "data"
+    with Store.open(data_dir=data) as store:
+        a = store.begin_inspection(PART, serial="SN-A", started_at=T0)
+        store.finish(a, "complete", "pass", measurements=[_m(spec, c.id, c.nominal) for c in spec.characteristics()])
+        b = store.begin_inspection(PART, serial="SN-B", started_at=T0 + timedelta(hours=1))
+        store.finish(b, "complete", "fail", measurements=[_m(spec, "hole_2.position", 85.08)])
+    runner = CliRunner()
+    listed = runner.invoke(app, ["results", "list", "--data", str(data), "--json"])
+    assert listed.exit_code == 0, listed.output
+    assert [r["serial"] for r in json.loads(listed.stdout)] == ["SN-B", "SN-A"]
+    failed = runner.invoke(app, ["results", "list", "--data", str(data), "--result", "fail", "--json"])
+    assert [r["id"] for r in json.loads(failed.stdout)] == [b]
+    limited = runner.invoke(app, ["results", "list", "--data", str(data), "--limit", "1", "--serial", "SN-A"])
+    assert limited.exit_code == 0 and "SN-A" in limited.stdout and "SN-B" not in limited.stdout
+
+    shown = runner.invoke(app, ["results", "show", a, "--data", str(data), "--json"])
+    assert shown.exit_code == 0
+    assert len(json.loads(shown.stdout)["characteristics"]) == 4
+    table = runner.invoke(app, ["results", "show", b, "--data", str(data)])
+    assert table.exit_code == 0 and "hole_2.position" in table.stdout and "85.08" in table.stdout
+    missing = runner.invoke(app, ["results", "show", "nope", "--data", str(data)])
+    assert missing.exit_code != 0 and "no inspection" in missing.stderr
+    empty = runner.invoke(app, ["results", "list", "--data", str(tmp_path / "none"), "--json"])
+    assert empty.exit_code == 0 and json.loads(empty.stdout) == []
+    assert not (tmp_path / "none").exists()  # reading never creates a store
