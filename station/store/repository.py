@@ -80,7 +80,7 @@ FINISH_STATES = ("complete", "aborted", "faulted")
 #: cannot make the station read its whole history at once
 MAX_PAGE = 1000
 LOCK_FILE = "store.lock"
-#: event kinds are short identifiers (``state``, ``alarm``, ``recovery`` ...)
+#: event kinds are short identifiers (``state`` for every state change, ``alarm``, ``info`` ...)
 EVENT_KIND_LEN = 32
 
 
@@ -377,7 +377,7 @@ class Store:
             now = utcnow()
             for insp in stale:
                 insp.state, insp.result, insp.reason, insp.finished_at = "interrupted", None, reason, now
-                s.add(Event(inspection_id=insp.id, at=now, kind="recovery", message=f"interrupted: {reason}"))
+                s.add(Event(inspection_id=insp.id, at=now, kind="state", message=f"interrupted: {reason}"))
             return [i.id for i in stale]
 
     def log_event(self, kind: str, message: str, inspection_id: str | None = None) -> EventRecord:
