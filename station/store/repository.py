@@ -24,6 +24,7 @@ Rules this class keeps, and why:
 from __future__ import annotations
 
 import fcntl
+import json
 import os
 import uuid
 from contextlib import contextmanager
@@ -35,7 +36,8 @@ from typing import Any, Iterable, Iterator, Mapping
 from sqlalchemy import event as sa_event
 from sqlalchemy import func, select
 from sqlalchemy.engine import make_url
-from sqlalchemy.exc import DBAPIError, IntegrityError, OperationalError
+from alembic.util.exc import CommandError
+from sqlalchemy.exc import DBAPIError, IntegrityError, OperationalError, SQLAlchemyError
 from sqlalchemy.orm import Session, selectinload, sessionmaker
 
 from station.store import images as img
@@ -128,7 +130,11 @@ class Store:
                                             class_=_StoreSession, expire_on_commit=False)
         self._lock_fd: int | None = None
         if migrate:
-            self._guard("bring the database schema up to date", lambda: upgrade_engine(self.engine))
+            try:
+                self._guard("bring the database schema up to date", lambda: upgrade_engine(self.engine))
+            except BaseException:
+                self.engine.dispose()  # no half-open store left behind
+                raise
 
     # -- life cycle ---------------------------------------------------------------------------
 
@@ -204,6 +210,9 @@ class Store:
             raise StoreIntegrityError(f"results store: cannot {what}: {exc.orig}") from exc
         except (OperationalError, DBAPIError) as exc:
             raise StoreUnavailable(self._explain(exc, what)) from exc
+        except CommandError as exc:
+            # e.g. a database migrated by a newer station than this one
+            raise StoreError(f"results store {self._where()}: cannot {what}: {exc}") from exc
 
     @contextmanager
     def _transaction(self, what: str, *, write: bool = True) -> Iterator[Session]:
@@ -217,6 +226,8 @@ class Store:
             raise StoreIntegrityError(f"results store: cannot {what}: {exc.orig}") from exc
         except (OperationalError, DBAPIError) as exc:
             raise StoreUnavailable(self._explain(exc, what)) from exc
+        except SQLAlchemyError as exc:
+            raise StoreError(f"results store {self._where()}: cannot {what}: {exc}") from exc
 
     @staticmethod
     def _running(session: Session, inspection_id: str, what: str) -> Inspection:
@@ -248,6 +259,10 @@ class Store:
         if traceability is None:
             traceability = Traceability()
         trace = traceability.to_json() if isinstance(traceability, Traceability) else dict(traceability)
+        try:
+            json.dumps(trace, allow_nan=False)
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"traceability must be plain JSON (str, numbers, lists, dicts): {exc}") from None
         inspection_id = str(uuid.uuid4())
         try:
             with self._transaction("begin an inspection") as s:

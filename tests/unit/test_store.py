@@ -380,3 +380,37 @@ def test_cli_results_list_and_show(tmp_path, spec):
     empty = runner.invoke(app, ["results", "list", "--data", str(tmp_path / "none"), "--json"])
     assert empty.exit_code == 0 and json.loads(empty.stdout) == []
     assert not (tmp_path / "none").exists()  # reading never creates a store
+
+
+def test_sqlite_connections_are_durable_and_writes_lock_early(store):
+    """WAL, synchronous=FULL, foreign keys on; writes begin IMMEDIATE (the write lock is
+    waited for at BEGIN), reads plain BEGIN (they never block the station)."""
+    with store.engine.connect() as conn:
+        pragma = {p: conn.exec_driver_sql(f"PRAGMA {p}").scalar() for p in ("journal_mode", "synchronous",
+                                                                             "foreign_keys", "busy_timeout")}
+    assert pragma == {"journal_mode": "wal", "synchronous": 2, "foreign_keys": 1, "busy_timeout": 5000}
+    begins = []
+
+    @event.listens_for(store.engine, "before_cursor_execute")
+    def _seen(_conn, _cur, statement, *_args):
+        if statement.startswith("BEGIN"):
+            begins.append(statement)
+
+    iid = store.begin_inspection(PART)
+    store.get(iid)
+    assert begins == ["BEGIN IMMEDIATE", "BEGIN"]
+
+
+def test_database_of_a_newer_station_and_odd_traceability_are_refused(tmp_path):
+    data = tmp_path / "data"
+    with Store(data_dir=data) as store:
+        with pytest.raises(ValueError, match="plain JSON"):
+            store.begin_inspection(PART, traceability={"calibration": object()})
+        with pytest.raises(ValueError, match="naive"):
+            store.begin_inspection(PART, started_at=datetime(2025, 1, 1))
+        assert store.count_inspections() == 0
+    with sqlite3.connect(data / "station.db") as con:
+        con.execute("UPDATE alembic_version SET version_num = '0999'")  # as a newer station would leave it
+    con.close()
+    with pytest.raises(StoreError, match="schema up to date: Can't locate revision"):
+        Store(data_dir=data)
