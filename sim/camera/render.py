@@ -1,0 +1,291 @@
+"""Synthetic endoscope frames of the honed bore wall with compensating holes.
+
+Why a renderer: sub-pixel claims need ground truth that a real camera cannot give.
+Each frame is built the way the physics orders it, so that every effect the measurer
+must survive is present and its size is known:
+
+1. scene radiance in *ideal* (undistorted) pixel coordinates: the honed wall
+   (cross-hatch grooves at +/-30 deg, fine grain, low-frequency blotches) and dark
+   holes (discs or ellipses);
+2. the lens: Brown distortion moves the geometry (each sensor pixel asks which ideal
+   point it sees), vignetting darkens the corners, Gaussian blur spreads edges;
+3. the sensor: each pixel integrates its area (hole edges are rendered by 16x16
+   supersampling of the edge band, i.e. exact area coverage to 1/256), shot noise,
+   read noise, 8-bit quantisation.
+
+Pixel convention (shared with ``station.vision``): the centre of pixel (0, 0) is at
+(0, 0), x to the right, y down; pixel (i, j) covers [j-0.5, j+0.5] x [i-0.5, i+0.5].
+
+Ground truth is given in ideal pixel coordinates (what a calibrated measurement
+recovers); without distortion those are the image coordinates.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import cv2
+import numpy as np
+from scipy.ndimage import gaussian_filter1d
+
+from sim.camera.lens import BrownLens, ideal_pixel_grid
+
+#: supersampling per axis for hole-edge pixels: 256 samples -> coverage to 1/256
+SUPERSAMPLE = 16
+#: honing cross-hatch half-angle; plateau-honed cylinder bores use 20-35 deg
+#: (typical specification 30 deg +/- 5, e.g. Sunnen/Nagel honing guides)
+HONING_ANGLE_DEG = 30.0
+
+
+@dataclass(frozen=True)
+class HoleSpec:
+    """One hole in ideal pixel coordinates.
+
+    ``diameter_px`` is the mean diameter (sum of the two semi-axes); ``aspect`` is
+    major/minor axis (a round hole seen on the curved bore wall looks slightly oval).
+    """
+
+    x_px: float
+    y_px: float
+    diameter_px: float
+    aspect: float = 1.0
+    angle_deg: float = 0.0
+
+    @property
+    def semi_axes_px(self) -> tuple[float, float]:
+        b = self.diameter_px / (1.0 + self.aspect)
+        return self.aspect * b, b
+
+
+@dataclass(frozen=True)
+class HoleTruth:
+    """Ground truth of one rendered hole.
+
+    ``x_px``, ``y_px``, ``diameter_px`` are ideal (undistorted) pixel coordinates;
+    ``image_x_px``/``image_y_px`` where the lens puts the centre on the sensor.
+    ``partial`` when part of the hole lies outside the frame.
+    """
+
+    x_px: float
+    y_px: float
+    diameter_px: float
+    image_x_px: float
+    image_y_px: float
+    partial: bool
+    aspect: float = 1.0
+
+
+@dataclass(frozen=True)
+class FrameParams:
+    """Everything that shapes a frame besides the holes (levels in DN of an 8-bit sensor)."""
+
+    width_px: int = 1280
+    height_px: int = 1024
+    wall_level_dn: float = 150.0
+    hole_level_dn: float = 35.0
+    groove_depth: float = 0.10  # mean relative darkening of one honing groove
+    groove_spacing_px: float = 14.0  # mean distance between grooves of one direction
+    grain: float = 0.03  # relative std of the fine grain
+    blotch: float = 0.05  # relative std of low-frequency reflectance variation
+    blur_sigma_px: float = 1.2
+    gain_e_per_dn: float = 10.0  # shot noise: sigma_dn = sqrt(signal_dn / gain)
+    read_noise_dn: float = 1.5
+    vignetting: float = 0.35  # relative fall-off at the frame corner (r^2 law)
+    lens: BrownLens | None = None
+
+
+@dataclass
+class Frame:
+    image: np.ndarray  # uint8, (height, width)
+    holes: list[HoleTruth] = field(default_factory=list)
+    params: FrameParams | None = None
+
+
+def _groove_profile(rng: np.random.Generator, length_px: float, params: FrameParams, step_px: float = 0.25):
+    """1-D darkening profile across one groove family: Poisson-placed Gaussian grooves."""
+    n = int(length_px / step_px) + 8
+    profile = np.zeros(n)
+    for sigma_px in (0.8, 1.5, 3.0):  # fine, medium and coarse stones of a honing tool
+        count = rng.poisson(length_px / params.groove_spacing_px / 3.0)
+        idx = rng.integers(0, n, count)
+        depth = rng.exponential(params.groove_depth, count)
+        impulses = np.zeros(n)
+        np.add.at(impulses, idx, depth)
+        # a Gaussian groove of peak depth d: impulse d * sqrt(2 pi) sigma / step, then smoothed
+        profile += gaussian_filter1d(impulses * np.sqrt(2 * np.pi) * sigma_px / step_px, sigma_px / step_px)
+    return profile
+
+
+def _lowfreq(rng: np.random.Generator, width_px: int, height_px: int, cell_px: int) -> np.ndarray:
+    """Smooth unit-std random field with features of about ``cell_px``."""
+    coarse = rng.standard_normal((height_px // cell_px + 2, width_px // cell_px + 2)).astype(np.float32)
+    field_ = cv2.resize(coarse, (width_px, height_px), interpolation=cv2.INTER_CUBIC)
+    return field_ / max(float(field_.std()), 1e-6)
+
+
+def wall_radiance(rng: np.random.Generator, xu: np.ndarray, yu: np.ndarray, params: FrameParams) -> np.ndarray:
+    """Honed wall reflectance (DN) at ideal coordinates ``xu``, ``yu``."""
+    h, w = xu.shape
+    rel = np.zeros((h, w), np.float32)
+    for sign in (+1.0, -1.0):
+        phi = np.deg2rad(sign * HONING_ANGLE_DEG)
+        u = (-np.sin(phi) * xu + np.cos(phi) * yu).astype(np.float32)
+        u0 = float(u.min()) - 4.0
+        profile = _groove_profile(rng, float(u.max()) - u0 + 8.0, params)
+        grid = u0 + 0.25 * np.arange(profile.size)
+        grooves = np.interp(u, grid, profile).astype(np.float32)
+        # grooves fade in and out along their length (worn stones, plateau honing)
+        rel -= grooves * (0.6 + 0.4 * np.tanh(_lowfreq(rng, w, h, 96)))
+    grain = rng.standard_normal((h, w), dtype=np.float32)
+    grain = cv2.GaussianBlur(grain, (0, 0), 0.7)
+    rel += params.grain * grain / max(float(grain.std()), 1e-6)
+    rel += params.blotch * _lowfreq(rng, w, h, 64)
+    return params.wall_level_dn * (1.0 + rel)
+
+
+def _inside(hole: HoleSpec, xu: np.ndarray, yu: np.ndarray) -> np.ndarray:
+    """Normalised ellipse radius q (q < 1 inside) at ideal coordinates."""
+    a, b = hole.semi_axes_px
+    t = np.deg2rad(hole.angle_deg)
+    dx, dy = xu - hole.x_px, yu - hole.y_px
+    xr = dx * np.cos(t) + dy * np.sin(t)
+    yr = -dx * np.sin(t) + dy * np.cos(t)
+    return np.sqrt((xr / a) ** 2 + (yr / b) ** 2)
+
+
+def hole_coverage(hole: HoleSpec, params: FrameParams) -> tuple[tuple[int, int, int, int], np.ndarray, bool, tuple]:
+    """Area fraction of each pixel inside the hole, over the hole's bounding box.
+
+    Returns (x0, y0, x1, y1), coverage (y1-y0, x1-x0), partial flag, image centre.
+    """
+    lens = params.lens
+    a, b = hole.semi_axes_px
+    t = np.linspace(0, 2 * np.pi, 256, endpoint=False)
+    th = np.deg2rad(hole.angle_deg)
+    ex = hole.x_px + a * np.cos(t) * np.cos(th) - b * np.sin(t) * np.sin(th)
+    ey = hole.y_px + a * np.cos(t) * np.sin(th) + b * np.sin(t) * np.cos(th)
+    if lens is not None and lens.has_distortion:
+        ex, ey = lens.distort_px(ex, ey)
+        icx, icy = lens.distort_px(np.array(hole.x_px), np.array(hole.y_px))
+    else:
+        icx, icy = np.array(hole.x_px), np.array(hole.y_px)
+    w, h = params.width_px, params.height_px
+    partial = bool(ex.min() < -0.5 or ey.min() < -0.5 or ex.max() > w - 0.5 or ey.max() > h - 0.5)
+    x0 = int(np.clip(np.floor(ex.min()) - 3, 0, w))
+    x1 = int(np.clip(np.ceil(ex.max()) + 4, 0, w))
+    y0 = int(np.clip(np.floor(ey.min()) - 3, 0, h))
+    y1 = int(np.clip(np.ceil(ey.max()) + 4, 0, h))
+    if x1 <= x0 or y1 <= y0:
+        return (x0, y0, x0, y0), np.zeros((0, 0)), True, (float(icx), float(icy))
+    yy, xx = np.mgrid[y0:y1, x0:x1].astype(np.float64)
+    xu, yu = (lens.undistort_px(xx, yy) if lens is not None and lens.has_distortion else (xx, yy))
+    q = _inside(hole, xu, yu)
+    cover = (q < 1.0).astype(np.float64)
+    # band where a pixel may be cut by the edge: distance ~ (q-1)*b, pixel half-diagonal
+    # 0.71 px, widened for the local magnification of the lens
+    band = np.abs(q - 1.0) * b < 1.5
+    if band.any():
+        off = (np.arange(SUPERSAMPLE) + 0.5) / SUPERSAMPLE - 0.5
+        ox, oy = np.meshgrid(off, off)
+        sx = xx[band][:, None] + ox.ravel()[None, :]
+        sy = yy[band][:, None] + oy.ravel()[None, :]
+        if lens is not None and lens.has_distortion:
+            sx, sy = lens.undistort_px(sx, sy)
+        cover[band] = (_inside(hole, sx, sy) < 1.0).mean(axis=1)
+    return (x0, y0, x1, y1), cover, partial, (float(icx), float(icy))
+
+
+def render_frame(params: FrameParams, holes: list[HoleSpec], seed: int | None = 0) -> Frame:
+    """Render one frame; the same (params, holes, seed) gives the same image."""
+    rng = np.random.default_rng(seed)
+    w, h = params.width_px, params.height_px
+    xu, yu = ideal_pixel_grid(params.lens, w, h)
+    radiance = wall_radiance(rng, xu, yu, params)
+    truths: list[HoleTruth] = []
+    for hole in holes:
+        (x0, y0, x1, y1), cover, partial, (icx, icy) = hole_coverage(hole, params)
+        if cover.size:
+            # the hole's far side: dark, with a faint low-frequency sheen
+            inner = params.hole_level_dn * (1.0 + 0.03 * rng.standard_normal())
+            patch = radiance[y0:y1, x0:x1]
+            radiance[y0:y1, x0:x1] = patch * (1.0 - cover) + inner * cover
+        truths.append(HoleTruth(hole.x_px, hole.y_px, hole.diameter_px, icx, icy, partial, hole.aspect))
+    if params.blur_sigma_px > 0:
+        radiance = cv2.GaussianBlur(radiance, (0, 0), params.blur_sigma_px, borderType=cv2.BORDER_REFLECT)
+    if params.vignetting:
+        cx = params.lens.cx_px if params.lens else (w - 1) / 2
+        cy = params.lens.cy_px if params.lens else (h - 1) / 2
+        yy, xx = np.ogrid[0:h, 0:w]
+        r2 = ((xx - cx) ** 2 + (yy - cy) ** 2) / ((w / 2) ** 2 + (h / 2) ** 2)
+        radiance *= (1.0 - params.vignetting * r2).astype(np.float32)
+    signal = np.clip(radiance, 0, None)
+    noise = np.sqrt(signal / params.gain_e_per_dn) * rng.standard_normal((h, w), dtype=np.float32)
+    noise += params.read_noise_dn * rng.standard_normal((h, w), dtype=np.float32)
+    image = np.clip(np.rint(signal + noise), 0, 255).astype(np.uint8)
+    return Frame(image=image, holes=truths, params=params)
+
+
+def random_params(rng: np.random.Generator, **overrides) -> FrameParams:
+    """A frame condition drawn across the ranges the station must cope with."""
+    wall = rng.uniform(110, 190)
+    contrast = rng.uniform(0.3, 0.8)  # relative darkness of a hole: low to good contrast
+    p = FrameParams(
+        wall_level_dn=wall,
+        hole_level_dn=wall * (1.0 - contrast),
+        groove_depth=rng.uniform(0.05, 0.15),
+        grain=rng.uniform(0.01, 0.05),
+        blotch=rng.uniform(0.02, 0.06),
+        blur_sigma_px=rng.uniform(0.8, 2.0),
+        gain_e_per_dn=rng.uniform(5.0, 20.0),
+        read_noise_dn=rng.uniform(0.5, 3.0),
+        vignetting=rng.uniform(0.1, 0.5),
+    )
+    return replace(p, **overrides)
+
+
+def random_holes(
+    rng: np.random.Generator,
+    params: FrameParams,
+    n_whole: int,
+    n_partial: int = 0,
+    diameter_range_px: tuple[float, float] = (20.0, 100.0),
+    max_aspect: float = 1.0,
+    border_clearance_px: float = 12.0,
+) -> list[HoleSpec]:
+    """Non-overlapping holes: whole ones clear of the border, partial ones cut by it."""
+    w, h = params.width_px, params.height_px
+    holes: list[HoleSpec] = []
+    attempts = 0
+    while len(holes) < n_whole + n_partial and attempts < 1000:
+        attempts += 1
+        d = rng.uniform(*diameter_range_px)
+        r = d / 2 * max_aspect
+        if len(holes) < n_whole:
+            m = r + border_clearance_px
+            x, y = rng.uniform(m, w - 1 - m), rng.uniform(m, h - 1 - m)
+        else:  # centre near an edge so that 15-60 % of the diameter is cut off
+            cut = rng.uniform(0.15, 0.6) * d
+            side = rng.integers(4)
+            along = rng.uniform(r + 2, (h if side < 2 else w) - r - 2)
+            inset = r - cut
+            x, y = {0: (inset, along), 1: (w - 1 - inset, along), 2: (along, inset), 3: (along, h - 1 - inset)}[
+                int(side)
+            ]
+        # keep neighbours apart so that one hole's search rays never reach the other's edge
+        if any(np.hypot(x - o.x_px, y - o.y_px) < 1.6 * (r + o.diameter_px / 2 * max_aspect) for o in holes):
+            continue
+        aspect = rng.uniform(1.0, max_aspect) if max_aspect > 1 else 1.0
+        holes.append(HoleSpec(float(x), float(y), float(d), float(aspect), float(rng.uniform(0, 180))))
+    return holes
+
+
+def random_frame(seed: int, n_whole: int | None = None, n_partial: int | None = None, **overrides) -> Frame:
+    """A random frame (condition and holes) from one seed: the tests' and bench's unit of work."""
+    rng = np.random.default_rng(seed)
+    params = random_params(rng, **overrides)
+    if n_whole is None:
+        n_whole = int(rng.integers(0, 4))
+    if n_partial is None:
+        n_partial = int(rng.integers(0, 2))
+    holes = random_holes(rng, params, n_whole, n_partial)
+    return render_frame(params, holes, seed=int(rng.integers(2**31)))
