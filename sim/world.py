@@ -112,13 +112,13 @@ class World:
     # -------------------------------------------------------------- per axis
     def z_offset_mm(self, motor_mm: float, direction: int, time_s: float) -> float:
         """Carriage minus motor position of Z: the positioning error motion EZZ."""
-        curve = self.model._motions("Z").z
+        curve = self.model.motions_of("Z").z
         deviation_um = curve.evaluate([motor_mm], [direction], [time_s], self.temperature.at([time_s]))[0]
         return float(deviation_um) * 1e-3 + self._approach_error["Z"]
 
     def c_offset_deg(self, motor_deg: float, direction: int, time_s: float) -> float:
         """Table minus motor angle of C: the angular positioning error ECC."""
-        curve = self.model._motions("C").c
+        curve = self.model.motions_of("C").c
         deviation_arcsec = curve.evaluate([motor_deg], [direction], [time_s], self.temperature.at([time_s]))[0]
         return float(deviation_arcsec) / 3600.0 + self._approach_error["C"]
 

@@ -206,7 +206,8 @@ class StationModel:
     def _static(self, body: str) -> SixDof:
         return self.static_errors.get(body, SixDof())
 
-    def _motions(self, body: str) -> ErrorMotions:
+    def motions_of(self, body: str) -> ErrorMotions:
+        """The six error motions of a joint body (zero curves where none are configured)."""
         b = self.topology.by_name(body)
         kind = "rotary" if b.joint == "revolute_z" else "linear"
         return self.motions.get(body, ErrorMotions.zero(kind))
@@ -226,9 +227,9 @@ class StationModel:
         out = {}
         for b in self.topology.bodies:
             if b.joint == "prismatic_z":
-                out[b.name] = self._motions(b.name).evaluate_si(z_mm, direction_z, time_s, temperature_c)
+                out[b.name] = self.motions_of(b.name).evaluate_si(z_mm, direction_z, time_s, temperature_c)
             elif b.joint == "revolute_z":
-                out[b.name] = self._motions(b.name).evaluate_si(c_deg, direction_c, time_s, temperature_c)
+                out[b.name] = self.motions_of(b.name).evaluate_si(c_deg, direction_c, time_s, temperature_c)
         return out
 
     def _chain_product(self, slots: list[Slot], z_mm, c_rad, motions_si, ideal: bool) -> Rigid:

@@ -1,0 +1,1 @@
+"""The inspection cycle: the compensated bore scan plan and the inspection service."""

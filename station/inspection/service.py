@@ -1,0 +1,153 @@
+"""One inspection, from the part spec to the committed result.
+
+The service owns the engine and the store: it begins the inspection record, runs
+the bore scan, judges every characteristic, saves the hole crops and commits the
+result (all characteristics and the final state in one transaction) before it
+reports anything. A plan that ends early (stopped, aborted, faulted) is recorded
+with its reason; a crash leaves the record ``running``, which the next start of
+the store marks ``interrupted``.
+
+Decision rule: simple acceptance (ISO 14253-1's "shared risk"): a value inside the
+limits, inclusive, conforms; the expanded uncertainty is recorded beside it.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+import platform
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+from station import __version__
+from station.inspection.scan import CameraGeometry, HoleResult, HoleTarget, ScanSettings, bore_scan
+from station.kinematics.model import StationModel
+from station.parts.spec import PartSpec
+from station.sequencer.engine import Engine, EngineEvent, PlanEnded, State
+from station.store.records import Measurement
+
+
+@dataclass
+class CharacteristicOutcome:
+    id: str
+    nominal: float
+    lower_limit: float
+    upper_limit: float
+    measured: float | None
+    uncertainty_k2: float | None
+    passed: bool
+    true_value: float | None = None
+
+    def to_json(self) -> dict:
+        return dict(self.__dict__)
+
+
+@dataclass
+class InspectionOutcome:
+    id: str
+    part_number: str
+    serial: str
+    state: str  # complete | aborted | faulted
+    result: str | None  # pass | fail | None
+    reason: str = ""
+    characteristics: list[CharacteristicOutcome] = field(default_factory=list)
+    holes: list[HoleResult] = field(default_factory=list)
+
+    def to_json(self, with_truth: bool = False) -> dict:
+        chars = []
+        for c in self.characteristics:
+            d = c.to_json()
+            if not with_truth:
+                d.pop("true_value", None)
+            chars.append(d)
+        return {"id": self.id, "part_number": self.part_number, "serial": self.serial, "state": self.state,
+                "result": self.result, "reason": self.reason, "characteristics": chars}
+
+
+def hole_targets(part: PartSpec) -> list[HoleTarget]:
+    return [HoleTarget(h.id, h.position.nominal, h.angle_deg, h.diameter.nominal) for h in part.holes]
+
+
+class InspectionService:
+    def __init__(self, engine: Engine, store, model: StationModel, geometry: CameraGeometry,
+                 settings: ScanSettings | None = None, *, traceability: dict | None = None,
+                 truth: Callable[[str, str], float | None] | None = None):
+        self.engine = engine
+        self.store = store
+        self.model = model
+        self.geometry = geometry
+        self.settings = settings or ScanSettings()
+        self.traceability = traceability or {}
+        #: simulation only: (hole id, kind) -> the twin's true value
+        self.truth = truth
+
+    async def ensure_ready(self) -> None:
+        """Home when needed; after a fault or a released e-stop, reset first."""
+        if self.engine.state in (State.FAULTED, State.ESTOPPED):
+            await self.engine.reset()
+        if self.engine.state == State.IDLE:
+            await self.engine.home()
+
+    async def inspect(self, part: PartSpec, serial: str, *, order_id: str | None = None,
+                      idempotency_key: str | None = None) -> InspectionOutcome:
+        trace = {
+            "software_version": __version__,
+            "python": platform.python_version(),
+            "model": self.model.name,
+            "part_spec": part.part_number,
+            **self.traceability,
+        }
+        iid = await asyncio.to_thread(self.store.begin_inspection, part.part_number, serial=serial, order_id=order_id,
+                                      traceability=trace, idempotency_key=idempotency_key)
+        log = lambda ev: self._log(iid, ev)  # noqa: E731
+        self.engine.subscribe(log)
+        try:
+            try:
+                await self.ensure_ready()
+                results: list[HoleResult] = await self.engine.run(
+                    bore_scan(self.model, hole_targets(part), self.geometry, self.settings))
+            except PlanEnded as ended:
+                state = "faulted" if ended.outcome == "faulted" else "aborted"
+                await asyncio.to_thread(self.store.finish, iid, state, None, ended.reason)
+                return InspectionOutcome(iid, part.part_number, serial, state, None, ended.reason)
+            outcome = self._judge(iid, part, serial, results)
+            for r in results:
+                if r.crop is not None and r.crop.size:
+                    await asyncio.to_thread(self.store.add_image, iid, r.name, f"{r.name}", r.crop)
+            measurements = [Measurement(c.id, c.nominal, c.lower_limit, c.upper_limit, c.measured, c.passed,
+                                        uncertainty_k2=c.uncertainty_k2, true_value=c.true_value)
+                            for c in outcome.characteristics]
+            await asyncio.to_thread(self.store.finish, iid, "complete", outcome.result, outcome.reason or None,
+                                    measurements=measurements)
+            return outcome
+        finally:
+            self.engine._listeners.remove(log)
+
+    def _judge(self, iid: str, part: PartSpec, serial: str, results: list[HoleResult]) -> InspectionOutcome:
+        by_hole = {r.name: r for r in results}
+        chars = []
+        reasons = []
+        for c in part.characteristics():
+            r = by_hole.get(c.hole_id)
+            if r is None or not r.found:
+                value, u = None, None
+                reasons.append(r.reason if r is not None else f"{c.hole_id} not scanned")
+            elif c.kind == "position":
+                value, u = r.position_mm, r.position_u_mm
+            else:
+                value, u = r.diameter_mm, r.diameter_u_mm
+            ok = value is not None and math.isfinite(value) and c.conforms(value)
+            truth = self.truth(c.hole_id, c.kind) if self.truth is not None else None
+            chars.append(CharacteristicOutcome(c.id, c.nominal, c.lower_limit, c.upper_limit, value, u, ok, truth))
+        result = "pass" if all(c.passed for c in chars) else "fail"
+        reason = "; ".join(dict.fromkeys(reasons))
+        if result == "fail" and not reason:
+            reason = "out of tolerance: " + ", ".join(c.id for c in chars if not c.passed)
+        return InspectionOutcome(iid, part.part_number, serial, "complete", result, reason, chars, results)
+
+    def _log(self, iid: str, ev: EngineEvent) -> None:
+        if ev.kind in ("state", "fault", "retry", "note"):
+            try:
+                self.store.log_event(ev.kind, f"{ev.state.value}: {ev.text}" if ev.kind == "state" else ev.text, iid)
+            except Exception:  # noqa: BLE001 - the event log must not stop the inspection
+                pass
