@@ -31,6 +31,14 @@ Config file (TOML), every key optional; the embedded default is a simulated stat
     serial_port = "/dev/ttyUSB1"
     baudrate = 115200
     resolution_um = 0.05
+
+    [hardware.camera]
+    device = "/dev/video0"      # or an index
+    width = 1280
+    height = 1024
+    mm_per_px = 0.010           # scale at the bore wall, from `station vision calibrate`
+    exposure = 100.0            # optional, driver units
+    gain = 0.0                  # optional
 """
 
 from __future__ import annotations
@@ -41,7 +49,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from drivers.interfaces import LinearAxis, PositionEncoder, RotaryAxis
+from drivers.interfaces import Camera, LinearAxis, PositionEncoder, RotaryAxis
 from station.kinematics.model import StationModel, load_model
 
 
@@ -59,6 +67,10 @@ class Station:
     model: StationModel
     mode: str
     config_hash: str
+    camera: Camera | None = None
+    #: the camera's scale at the bore wall and its frame size
+    mm_per_px: float = 0.010
+    frame_size_px: tuple[int, int] = (1280, 1024)
     twins: Any = None  # sim.twins.TwinsThread when simulated
     world: Any = None  # sim.world.World when simulated
     endpoints: dict[str, Any] = field(default_factory=dict)
@@ -68,10 +80,12 @@ class Station:
         await self.c.connect()
         if self.encoder is not None:
             await self.encoder.connect()
+        if self.camera is not None:
+            await self.camera.connect()
 
     async def close(self) -> None:
         """Close drivers, then stop the twins; never raises for a link already gone."""
-        for dev in (self.encoder, self.c, self.z):
+        for dev in (self.camera, self.encoder, self.c, self.z):
             if dev is None:
                 continue
             try:
@@ -159,7 +173,18 @@ def build_station(config_path: str | Path | None = None, *, scenario: str | Path
             e = hw["encoder"]
             enc = SerialGratingEncoder(str(e["serial_port"]), baudrate=int(e.get("baudrate", 115200)),
                                        resolution_um=float(e.get("resolution_um", 0.05)))
-        return Station(z, c, enc, model, mode, chash)
+        cam, scale, size = None, 0.010, (1280, 1024)
+        if "camera" in hw:
+            from drivers.camera import OpenCVCamera
+
+            k = hw["camera"]
+            if "mm_per_px" not in k:
+                raise ConfigError(f"{source}: [hardware.camera] needs 'mm_per_px' (from a calibration)")
+            dev = k.get("device", 0)
+            size = (int(k.get("width", 1280)), int(k.get("height", 1024)))
+            cam = OpenCVCamera(dev, width=size[0], height=size[1], exposure=k.get("exposure"), gain=k.get("gain"))
+            scale = float(k["mm_per_px"])
+        return Station(z, c, enc, model, mode, chash, camera=cam, mm_per_px=scale, frame_size_px=size)
 
     if mode != "simulated":
         raise ConfigError(f"{source}: [station] mode must be 'simulated' or 'hardware', not {mode!r}")
@@ -194,7 +219,13 @@ def build_station(config_path: str | Path | None = None, *, scenario: str | Path
         if "encoder" in endpoints:
             e = endpoints["encoder"]
             enc = SerialGratingEncoder(e["path"], baudrate=e["baudrate"], resolution_um=e["resolution_um"])
+        from sim.camera.twin import CameraOptics, CameraTwin
+
+        optics = CameraOptics()
+        cam = CameraTwin(world, twins.station.physics["Z"], twins.station.physics["C"], optics)
     except BaseException:
         twins.stop()
         raise
-    return Station(axes["Z"], axes["C"], enc, model, mode, chash, twins=twins, world=world, endpoints=endpoints)
+    return Station(axes["Z"], axes["C"], enc, model, mode, chash, camera=cam, mm_per_px=optics.mm_per_px,
+                   frame_size_px=(optics.params.width_px, optics.params.height_px),
+                   twins=twins, world=world, endpoints=endpoints)
