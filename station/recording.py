@@ -19,8 +19,9 @@ REQUIRED_COLUMNS = ("time_s", "run", "direction", "target", "deviation")
 OPTIONAL_COLUMNS = ("temperature_c",)
 
 
-class RecordingError(ValueError):
-    """A recording that cannot be read; the message names file, line and column."""
+class LocatedInputError(ValueError):
+    """Bad input, with where it is: the message names file, line and column.
+    The base of every file-reading error of the station's text formats."""
 
     def __init__(self, path: str, line: int | None, column: str | None, message: str):
         self.path, self.line, self.column = path, line, column
@@ -30,6 +31,10 @@ class RecordingError(ValueError):
         if column is not None:
             where += f", column '{column}'"
         super().__init__(f"{where}: {message}")
+
+
+class RecordingError(LocatedInputError):
+    """A recording that cannot be read; the message names file, line and column."""
 
 
 @dataclass

@@ -34,6 +34,7 @@ from typing import Any
 
 import numpy as np
 
+from station.recording import LocatedInputError
 from station.compensation.check import Problem
 from station.compensation.segments import QUANTITIES, Segment, SegmentModel
 from station.compensation.table import ERROR_UNIT, POSITION_UNIT, CompensationTable
@@ -59,17 +60,8 @@ _DECIMAL_PRECISION = 80
 _MAX_DIGITS = 40
 
 
-class FormatError(ValueError):
+class FormatError(LocatedInputError):
     """A compensation file that cannot be read; the message names file, line and column."""
-
-    def __init__(self, path: str, line: int | None, column: str | None, message: str):
-        self.path, self.line, self.column = path, line, column
-        where = path
-        if line is not None:
-            where += f", line {line}"
-        if column is not None:
-            where += f", column '{column}'"
-        super().__init__(f"{where}: {message}")
 
 
 # ---------------------------------------------------------------- exact unit conversion
