@@ -108,7 +108,7 @@ def _groove_profile(rng: np.random.Generator, length_px: float, params: FramePar
     for sigma_px in (0.8, 1.5, 3.0):  # fine, medium and coarse stones of a honing tool
         count = rng.poisson(length_px / params.groove_spacing_px / 3.0)
         idx = rng.integers(0, n, count)
-        depth = rng.exponential(params.groove_depth, count)
+        depth = np.minimum(rng.exponential(params.groove_depth, count), 3 * params.groove_depth)
         impulses = np.zeros(n)
         np.add.at(impulses, idx, depth)
         # a Gaussian groove of peak depth d: impulse d * sqrt(2 pi) sigma / step, then smoothed
@@ -228,17 +228,17 @@ def render_frame(params: FrameParams, holes: list[HoleSpec], seed: int | None = 
 def random_params(rng: np.random.Generator, **overrides) -> FrameParams:
     """A frame condition drawn across the ranges the station must cope with."""
     wall = rng.uniform(110, 190)
-    contrast = rng.uniform(0.3, 0.8)  # relative darkness of a hole: low to good contrast
+    contrast = rng.uniform(0.4, 0.85)  # relative darkness of a hole: low to good contrast
     p = FrameParams(
         wall_level_dn=wall,
         hole_level_dn=wall * (1.0 - contrast),
-        groove_depth=rng.uniform(0.05, 0.15),
+        groove_depth=rng.uniform(0.03, 0.08),  # diffuse ring light: grooves a few % deep
         grain=rng.uniform(0.01, 0.05),
         blotch=rng.uniform(0.02, 0.06),
         blur_sigma_px=rng.uniform(0.8, 2.0),
-        gain_e_per_dn=rng.uniform(5.0, 20.0),
+        gain_e_per_dn=rng.uniform(20.0, 60.0),  # full well 5k-15k e- at 255 DN: small-pixel CCDs
         read_noise_dn=rng.uniform(0.5, 3.0),
-        vignetting=rng.uniform(0.1, 0.5),
+        vignetting=rng.uniform(0.1, 0.4),
     )
     return replace(p, **overrides)
 

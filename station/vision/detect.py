@@ -1,0 +1,100 @@
+"""Coarse hole detection: where are dark discs, roughly, in a whole frame?
+
+Why this way: the fine stage is accurate but needs a start within a few pixels; the
+coarse stage must be fast (a 1280x1024 frame in about a millisecond) and must not be
+fooled by the honed texture, vignetting or low contrast.  So it works on a 4x
+area-downsampled frame (holes of 20-100 px become 5-25 px, honing grooves of 1-3 px
+are averaged away), divides by a local background made by a grey-level closing larger
+than the largest hole (vignetting and blotches cancel), thresholds the relative
+darkness against the frame's own robust spread, removes thin structures by an opening,
+and keeps connected components whose area, fill and darkness look like a hole.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+#: downsampling factor of the coarse stage (holes >= 20 px stay >= 5 px across)
+COARSE_FACTOR = 4
+
+
+@dataclass(frozen=True)
+class DetectConfig:
+    min_diameter_px: float = 16.0  # smaller than the smallest hole we measure (20 px)
+    max_diameter_px: float = 120.0  # larger than the largest (100 px)
+    #: minimum relative darkness of a hole against its local wall.  The station's
+    #: lighting gives holes 30-80 % darker than the wall (renderer's contrast range);
+    #: honing grooves averaged over 4x4 px darken by < 10 %.
+    min_darkness: float = 0.15
+    #: threshold in robust standard deviations of the frame's darkness (texture + noise)
+    k_sigma: float = 6.0
+    min_fill: float = 0.45  # area / bounding-box area; a disc has pi/4 = 0.785
+
+
+@dataclass(frozen=True)
+class Candidate:
+    x_px: float
+    y_px: float
+    radius_px: float
+    touches_border: bool
+    darkness: float  # median relative darkness inside (0..1)
+
+
+def _odd(n: float) -> int:
+    n = int(np.ceil(n))
+    return n + 1 - n % 2
+
+
+def detect_candidates(image: np.ndarray, cfg: DetectConfig = DetectConfig()) -> list[Candidate]:
+    """Dark disc-like blobs of a grey frame, in full-resolution pixel coordinates."""
+    f = COARSE_FACTOR
+    h, w = image.shape
+    hc, wc = h // f * f, w // f * f
+    small = cv2.resize(image[:hc, :wc], (wc // f, hc // f), interpolation=cv2.INTER_AREA).astype(np.float32)
+    # closing wider than the largest hole fills every hole: what remains is the wall
+    k = _odd(cfg.max_diameter_px / f + 3)
+    kernel = cv2.getStructuringElement(cv2.MORPH_RECT, (k, k))
+    background = cv2.morphologyEx(small, cv2.MORPH_CLOSE, kernel, borderType=cv2.BORDER_REPLICATE)
+    background = cv2.blur(background, (k, k), borderType=cv2.BORDER_REPLICATE)
+    darkness = 1.0 - small / np.maximum(background, 1.0)
+    # robust spread of texture + noise; every 2nd pixel each way is plenty for a median
+    sample = darkness[::2, ::2]
+    med = float(np.median(sample))
+    spread = 1.4826 * float(np.median(np.abs(sample - med)))  # MAD -> sigma for Gaussian data
+    threshold = med + max(cfg.k_sigma * spread, cfg.min_darkness)
+    mask = (darkness > threshold).astype(np.uint8)
+    mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (3, 3)))
+    n, labels, stats, centroids = cv2.connectedComponentsWithStats(mask, connectivity=8)
+    min_area = np.pi / 4 * (cfg.min_diameter_px / f) ** 2
+    max_area = np.pi / 4 * (cfg.max_diameter_px / f) ** 2
+    out: list[Candidate] = []
+    for i in range(1, n):
+        x, y, bw, bh, area = stats[i]
+        touches = x == 0 or y == 0 or x + bw >= mask.shape[1] or y + bh >= mask.shape[0]
+        # partial holes may be small slivers; demand at least a quarter of the minimum area
+        if area > max_area or area < (0.25 if touches else 1.0) * min_area:
+            continue
+        if area / float(bw * bh) < cfg.min_fill:
+            continue
+        if not touches and not (0.5 <= bw / bh <= 2.0):
+            continue
+        inside = darkness[labels == i]
+        cx_s, cy_s = centroids[i]
+        if touches:
+            radius_s = max(bw, bh) / 2.0  # the cut component's area under-states the hole
+        else:
+            radius_s = np.sqrt(area / np.pi)
+        # small pixel j covers full pixels f*j .. f*j+f-1, whose centre is f*j + (f-1)/2
+        out.append(
+            Candidate(
+                x_px=float(cx_s * f + (f - 1) / 2),
+                y_px=float(cy_s * f + (f - 1) / 2),
+                radius_px=float(radius_s * f),
+                touches_border=bool(touches),
+                darkness=float(np.median(inside)),
+            )
+        )
+    return out

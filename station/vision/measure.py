@@ -1,0 +1,187 @@
+"""Find and measure the compensating holes of one frame with sub-pixel accuracy.
+
+The pipeline (each stage in its own module):
+
+1. ``detect``: coarse candidates on a 4x downsampled, background-normalised frame;
+2. ``edges``: per candidate, a wide ray search, a robust circle (RANSAC + IRLS), then
+   a narrow ray search around that circle from its centre for the final edge points,
+   their widths, and the blur-curvature correction of the radius;
+3. ``fit``: geometric circle fit with Tukey weights (optionally on edge points
+   undistorted by a camera calibration), and a direct ellipse fit for ovality.
+
+Pixel convention: the centre of pixel (0, 0) is at (0, 0), x right, y down.  With a
+calibration, positions and diameters are in *ideal* (undistorted) pixels of the same
+camera matrix, so that mm follow from one scale.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from station.vision.calibration import CameraCalibration
+from station.vision.detect import Candidate, DetectConfig, detect_candidates
+from station.vision.edges import KERNEL_RADIUS_PX, deblurred_radius, gradient, ray_edges
+from station.vision.fit import fit_ellipse_direct, ransac_circle, robust_circle, taubin_circle
+
+
+@dataclass(frozen=True)
+class MeasureConfig:
+    detect: DetectConfig = DetectConfig()
+    #: half-width of the final ray window (px): holds the peak +/-1 px for edge widths
+    #: up to sigma ~ 2.5 px (camera blur 2 px + pixel area + our 1 px smoothing)
+    fine_window_px: float = 4.5
+    min_valid_rays: int = 24
+    min_inlier_fraction: float = 0.5
+    max_rms_px: float = 1.0
+    #: minimum share of the rim that must be measurable (a quarter: 90 deg of arc)
+    min_coverage: float = 0.25
+
+
+@dataclass(frozen=True)
+class HoleMeasurement:
+    x_px: float
+    y_px: float
+    diameter_px: float
+    partial: bool
+    confidence: float
+    fit_rms_px: float
+    edge_contrast_dn: float
+    edge_sigma_px: float
+    n_edge_points: int
+    coverage: float  # share of the rim measured (valid rays / rays)
+    major_px: float | None = None
+    minor_px: float | None = None
+    angle_deg: float | None = None
+    diameter_mm: float | None = None
+
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        return {k: v for k, v in d.items() if v is not None}
+
+
+def _profile_weights(sigma2: np.ndarray) -> np.ndarray:
+    """0/1 weights dropping rays whose edge width is far from the rim's typical width.
+
+    A blurred rim has one width all round; a ray whose profile is twice as wide or
+    half as narrow has merged with a groove or grain, and its peak is displaced.
+    """
+    med = np.nanmedian(sigma2)
+    ratio = sigma2 / med
+    return ((ratio > 0.5) & (ratio < 2.0)).astype(float)
+
+
+def _fine(image: np.ndarray, cx: float, cy: float, r_min: float, r_max: float, n_rays: int, step_px: float = 0.5):
+    """Gradient over an ROI holding radii up to ``r_max`` and the rays' edges."""
+    h, w = image.shape
+    pad = r_max + KERNEL_RADIUS_PX + 3
+    x0, x1 = max(int(np.floor(cx - pad)), 0), min(int(np.ceil(cx + pad)) + 1, w)
+    y0, y1 = max(int(np.floor(cy - pad)), 0), min(int(np.ceil(cy + pad)) + 1, h)
+    gx, gy = gradient(image[y0:y1, x0:x1])
+    return ray_edges(gx, gy, (x0, y0), (h, w), (cx, cy), r_min, r_max, n_rays, step_px)
+
+
+def measure_candidate(
+    image: np.ndarray,
+    cand: Candidate,
+    cfg: MeasureConfig,
+    calibration: CameraCalibration | None = None,
+    rng: np.random.Generator | None = None,
+) -> HoleMeasurement | None:
+    """Sub-pixel measurement of one candidate, or None when it is not a hole."""
+    rng = rng if rng is not None else np.random.default_rng(0)
+    r0 = cand.radius_px
+    # pass 1: wide search (the coarse radius is good to ~1 coarse pixel for whole
+    # holes; for cut holes the centroid is pulled inwards, hence the wide window)
+    wide = _fine(image, cand.x_px, cand.y_px, 0.5 * r0, 1.6 * r0 + 4, 72, step_px=1.0)
+    if len(wide.points) < cfg.min_valid_rays // 2:
+        return None
+    inl = ransac_circle(wide.points, 1.0, rng)
+    if inl.sum() < 6:
+        return None
+    first = robust_circle(wide.points[inl], taubin_circle(wide.points[inl]), min_scale_px=0.2)
+    cx, cy, r = first.cx, first.cy, first.r
+    # pass 2 (twice: a cut hole's first centre may be off by a pixel): narrow window
+    for attempt in range(2):
+        if not (2.0 < r < cfg.detect.max_diameter_px):
+            return None
+        n_rays = int(np.clip(round(2 * np.pi * r), 64, 360))  # about one ray per px of rim
+        edges = _fine(image, cx, cy, max(r - cfg.fine_window_px, 1.0), r + cfg.fine_window_px, n_rays)
+        if len(edges.points) < cfg.min_valid_rays:
+            return None
+        fit = robust_circle(edges.points, (cx, cy, r), weights=_profile_weights(edges.sigma2))
+        moved = np.hypot(fit.cx - cx, fit.cy - cy)
+        cx, cy, r = fit.cx, fit.cy, fit.r
+        # rays cast from a centre 0.3 px off are still radial to within 0.3/r rad: the
+        # edge they find moves by a negligible (0.3/r)^2 r / 2; recast only beyond that
+        if moved < 0.3:
+            break
+    coverage = edges.n_valid / edges.n_rays
+    inlier_fraction = fit.inliers.sum() / max(edges.n_valid, 1)
+    if coverage < cfg.min_coverage or inlier_fraction < cfg.min_inlier_fraction or fit.rms_px > cfg.max_rms_px:
+        return None
+    sigma2 = edges.sigma2[fit.inliers]
+    sigma_px = float(np.sqrt(np.nanmedian(sigma2))) if np.isfinite(sigma2).any() else float("nan")
+    # a Gaussian-blurred step of height c has a derivative peak c / (sqrt(2 pi) sigma)
+    contrast_dn = float(np.median(edges.peak[fit.inliers]) * np.sqrt(2 * np.pi) * sigma_px)
+    r_true = deblurred_radius(r, sigma_px)
+    pts = edges.points + (r_true - r) * edges.directions
+    if calibration is not None:
+        pts = calibration.undistort_px(pts)
+        cal = robust_circle(pts[fit.inliers], taubin_circle(pts[fit.inliers]))
+        cx, cy, r_true = cal.cx, cal.cy, cal.r
+    diameter = 2.0 * r_true
+    if not (cfg.detect.min_diameter_px * 0.8 <= diameter <= cfg.detect.max_diameter_px * 1.2):
+        return None
+    ell = fit_ellipse_direct(pts[fit.inliers]) if not edges.cut_by_border else None
+    # heuristic confidence: share of consistent edge points, share of rim seen (full
+    # weight from half the rim), and fit quality against a 0.25 px residual scale
+    confidence = float(
+        inlier_fraction * min(1.0, 2.0 * coverage) / (1.0 + (fit.rms_px / 0.25) ** 2)
+    )
+    return HoleMeasurement(
+        x_px=float(cx),
+        y_px=float(cy),
+        diameter_px=float(diameter),
+        partial=bool(edges.cut_by_border),
+        confidence=float(np.clip(confidence, 0.0, 1.0)),
+        fit_rms_px=float(fit.rms_px),
+        edge_contrast_dn=contrast_dn,
+        edge_sigma_px=sigma_px,
+        n_edge_points=int(fit.inliers.sum()),
+        coverage=float(coverage),
+        major_px=2 * ell[2] if ell else None,
+        minor_px=2 * ell[3] if ell else None,
+        angle_deg=ell[4] if ell else None,
+    )
+
+
+def measure_holes(
+    image: np.ndarray,
+    mm_per_px: float | None = None,
+    calibration: CameraCalibration | None = None,
+    cfg: MeasureConfig = MeasureConfig(),
+) -> list[HoleMeasurement]:
+    """All holes of a grey (or BGR) frame, sorted by y then x.
+
+    The scale comes from ``mm_per_px`` or else from the calibration's own scale; when
+    neither is known ``diameter_mm`` stays None.
+    """
+    if image.ndim == 3:
+        image = image[..., :3].mean(axis=2).astype(np.uint8)
+    if mm_per_px is None and calibration is not None:
+        mm_per_px = calibration.mm_per_px
+    rng = np.random.default_rng(0)  # fixed: the same frame always gives the same result
+    found: list[HoleMeasurement] = []
+    for cand in detect_candidates(image, cfg.detect):
+        m = measure_candidate(image, cand, cfg, calibration, rng)
+        if m is None:
+            continue
+        # two candidates (a hole split by a deep groove) may converge on one hole
+        if any(np.hypot(m.x_px - o.x_px, m.y_px - o.y_px) < 0.5 * o.diameter_px / 2 for o in found):
+            continue
+        if mm_per_px is not None:
+            m = HoleMeasurement(**{**asdict(m), "diameter_mm": m.diameter_px * mm_per_px})
+        found.append(m)
+    return sorted(found, key=lambda m: (m.y_px, m.x_px))
