@@ -119,7 +119,7 @@ def measure_candidate(
             break
     coverage = edges.n_valid / edges.n_rays
     inlier_fraction = fit.inliers.sum() / max(edges.n_valid, 1)
-    if coverage < cfg.min_coverage or inlier_fraction < cfg.min_inlier_fraction or fit.rms_px > cfg.max_rms_px:
+    if coverage < cfg.min_coverage or inlier_fraction < cfg.min_inlier_fraction:
         return None
     sigma2 = edges.sigma2[fit.inliers]
     sigma_px = float(np.sqrt(np.nanmedian(sigma2))) if np.isfinite(sigma2).any() else float("nan")
@@ -131,6 +131,11 @@ def measure_candidate(
         pts = calibration.undistort_px(pts)
         cal = robust_circle(pts[fit.inliers], taubin_circle(pts[fit.inliers]))
         cx, cy, r_true = cal.cx, cal.cy, cal.r
+        rms_px = cal.rms_px  # a distorted rim is no circle: judge the fit where it is one
+    else:
+        rms_px = fit.rms_px
+    if rms_px > cfg.max_rms_px:
+        return None
     diameter = 2.0 * r_true
     if not (cfg.detect.min_diameter_px * 0.8 <= diameter <= cfg.detect.max_diameter_px * 1.2):
         return None
@@ -138,7 +143,7 @@ def measure_candidate(
     # heuristic confidence: share of consistent edge points, share of rim seen (full
     # weight from half the rim), and fit quality against a 0.25 px residual scale
     confidence = float(
-        inlier_fraction * min(1.0, 2.0 * coverage) / (1.0 + (fit.rms_px / 0.25) ** 2)
+        inlier_fraction * min(1.0, 2.0 * coverage) / (1.0 + (rms_px / 0.25) ** 2)
     )
     return HoleMeasurement(
         x_px=float(cx),
@@ -146,7 +151,7 @@ def measure_candidate(
         diameter_px=float(diameter),
         partial=bool(edges.cut_by_border),
         confidence=float(np.clip(confidence, 0.0, 1.0)),
-        fit_rms_px=float(fit.rms_px),
+        fit_rms_px=float(rms_px),
         edge_contrast_dn=contrast_dn,
         edge_sigma_px=sigma_px,
         n_edge_points=int(fit.inliers.sum()),

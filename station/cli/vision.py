@@ -1,0 +1,106 @@
+"""``station vision ...``: measure compensating holes in a frame; calibrate the camera."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Optional
+
+import typer
+from rich.table import Table
+
+from station.cli.common import fail, out_console, print_json
+
+vision_app = typer.Typer(help="Vision: sub-pixel hole measurement and camera calibration.", no_args_is_help=True)
+
+
+def _pattern(text: str) -> tuple[int, int]:
+    try:
+        cols, rows = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        fail(f"--pattern must look like 9x7 (inner corners), not {text!r}")
+    return cols, rows
+
+
+@vision_app.command("measure")
+def measure(
+    image: Path = typer.Argument(..., help="frame to measure (any format OpenCV reads)"),
+    mm_per_px: Optional[float] = typer.Option(None, "--mm-per-px", help="scale at the bore wall"),
+    calibration: Optional[Path] = typer.Option(None, "--calibration", help="JSON from `station vision calibrate`"),
+    as_json: bool = typer.Option(False, "--json", help="one JSON object on stdout"),
+) -> None:
+    """Find the compensating holes in IMAGE and measure them sub-pixel."""
+    from station.vision.calibration import CameraCalibration
+    from station.vision.imageio import ImageReadError, read_grey
+    from station.vision.measure import measure_holes
+
+    if mm_per_px is not None and calibration is not None:
+        fail("give --mm-per-px or --calibration, not both")
+    if mm_per_px is not None and not mm_per_px > 0:
+        fail("--mm-per-px must be positive")
+    cal = None
+    if calibration is not None:
+        try:
+            cal = CameraCalibration.load(calibration)
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            fail(f"{calibration}: not a usable calibration file ({exc})")
+    try:
+        frame = read_grey(image)
+    except ImageReadError as exc:
+        fail(str(exc))
+    if cal is not None and tuple(cal.image_size) != (frame.shape[1], frame.shape[0]):
+        fail(f"calibration is for {cal.image_size[0]}x{cal.image_size[1]} px, the image is {frame.shape[1]}x{frame.shape[0]}")
+    holes = measure_holes(frame, mm_per_px=mm_per_px, calibration=cal)
+    if as_json:
+        print_json({"image": str(image), "holes": [h.to_dict() for h in holes]})
+        return
+    table = Table(title=f"{image.name}: {len(holes)} hole(s)")
+    for col in ("x px", "y px", "diameter px", "diameter mm", "partial", "confidence", "fit rms px", "contrast DN"):
+        table.add_column(col, justify="right")
+    for h in holes:
+        table.add_row(
+            f"{h.x_px:.3f}", f"{h.y_px:.3f}", f"{h.diameter_px:.3f}",
+            "-" if h.diameter_mm is None else f"{h.diameter_mm:.4f}",
+            "yes" if h.partial else "no", f"{h.confidence:.2f}", f"{h.fit_rms_px:.3f}", f"{h.edge_contrast_dn:.0f}",
+        )
+    out_console.print(table)
+
+
+@vision_app.command("calibrate")
+def calibrate_cmd(
+    images: list[Path] = typer.Argument(..., help="chessboard views"),
+    out: Path = typer.Option(..., "--out", help="calibration JSON to write"),
+    pattern: str = typer.Option("9x7", "--pattern", help="inner corners, columns x rows"),
+    square_mm: float = typer.Option(0.5, "--square-mm", help="chessboard square size"),
+    working_distance_mm: Optional[float] = typer.Option(
+        None, "--working-distance-mm", help="distance to the bore wall: sets the mm-per-px scale"
+    ),
+    as_json: bool = typer.Option(False, "--json"),
+) -> None:
+    """Intrinsics and distortion from chessboard IMAGES, saved as JSON."""
+    from station.vision.calibration import calibrate
+    from station.vision.imageio import ImageReadError, read_grey
+
+    size = _pattern(pattern)
+    frames = []
+    for p in images:
+        try:
+            frames.append(read_grey(p))
+        except ImageReadError as exc:
+            fail(str(exc))
+    try:
+        cal = calibrate(frames, size, square_mm, working_distance_mm)
+    except ValueError as exc:
+        fail(str(exc))
+    cal.save(out)
+    if as_json:
+        print_json(cal.to_json())
+    else:
+        k = cal.camera_matrix
+        out_console.print(
+            f"{cal.n_views}/{len(images)} views, RMS {cal.rms_px:.3f} px; fx {k[0, 0]:.1f} fy {k[1, 1]:.1f} "
+            f"cx {k[0, 2]:.1f} cy {k[1, 2]:.1f}; k1 {cal.dist_coeffs[0]:.4f} k2 {cal.dist_coeffs[1]:.4f} -> {out}"
+        )
+
+
+def register(app: typer.Typer) -> None:
+    app.add_typer(vision_app, name="vision")
