@@ -29,8 +29,11 @@ class DetectConfig:
     #: lighting gives holes 30-80 % darker than the wall (renderer's contrast range);
     #: honing grooves averaged over 4x4 px darken by < 10 %.
     min_darkness: float = 0.15
-    #: threshold in robust standard deviations of the frame's darkness (texture + noise)
-    k_sigma: float = 6.0
+    #: threshold in robust standard deviations of the frame's darkness (texture + noise),
+    #: capped so that a strongly textured wall cannot hide a 40 %-contrast hole; the
+    #: fine stage rejects what a lower threshold lets through (no closed, round rim)
+    k_sigma: float = 4.0
+    max_threshold: float = 0.3
     min_fill: float = 0.45  # area / bounding-box area; a disc has pi/4 = 0.785
 
 
@@ -53,18 +56,20 @@ def detect_candidates(image: np.ndarray, cfg: DetectConfig = DetectConfig()) -> 
     f = COARSE_FACTOR
     h, w = image.shape
     hc, wc = h // f * f, w // f * f
-    small = cv2.resize(image[:hc, :wc], (wc // f, hc // f), interpolation=cv2.INTER_AREA).astype(np.float32)
-    # closing wider than the largest hole fills every hole: what remains is the wall
-    k = _odd(cfg.max_diameter_px / f + 3)
-    kernel = cv2.getStructuringElement(cv2.MORPH_RECT, (k, k))
-    background = cv2.morphologyEx(small, cv2.MORPH_CLOSE, kernel, borderType=cv2.BORDER_REPLICATE)
-    background = cv2.blur(background, (k, k), borderType=cv2.BORDER_REPLICATE)
+    small_u8 = cv2.resize(image[:hc, :wc], (wc // f, hc // f), interpolation=cv2.INTER_AREA)
+    small = small_u8.astype(np.float32)
+    # the wall's typical level: a median over a window twice the largest hole, where
+    # a hole covers at most a fifth of the window and so cannot pull the median; unlike
+    # a closing (upper envelope) it follows dark blotches and vignetted corners
+    k = _odd(2 * cfg.max_diameter_px / f)
+    background = cv2.medianBlur(small_u8, k).astype(np.float32)
+    background = cv2.blur(background, (9, 9), borderType=cv2.BORDER_REPLICATE)  # median steps
     darkness = 1.0 - small / np.maximum(background, 1.0)
     # robust spread of texture + noise; every 2nd pixel each way is plenty for a median
     sample = darkness[::2, ::2]
     med = float(np.median(sample))
     spread = 1.4826 * float(np.median(np.abs(sample - med)))  # MAD -> sigma for Gaussian data
-    threshold = med + max(cfg.k_sigma * spread, cfg.min_darkness)
+    threshold = med + min(max(cfg.k_sigma * spread, cfg.min_darkness), cfg.max_threshold)
     mask = (darkness > threshold).astype(np.uint8)
     mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (3, 3)))
     n, labels, stats, centroids = cv2.connectedComponentsWithStats(mask, connectivity=8)

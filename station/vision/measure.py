@@ -37,6 +37,9 @@ class MeasureConfig:
     max_rms_px: float = 1.0
     #: minimum share of the rim that must be measurable (a quarter: 90 deg of arc)
     min_coverage: float = 0.25
+    #: below this a "hole" is a texture crossing: on rendered frames real holes score
+    #: >= 0.3 (low contrast, heavy blur) and texture candidates <= 0.1
+    min_confidence: float = 0.15
 
 
 @dataclass(frozen=True)
@@ -145,6 +148,8 @@ def measure_candidate(
     confidence = float(
         inlier_fraction * min(1.0, 2.0 * coverage) / (1.0 + (rms_px / 0.25) ** 2)
     )
+    if confidence < cfg.min_confidence:
+        return None
     return HoleMeasurement(
         x_px=float(cx),
         y_px=float(cy),
