@@ -35,6 +35,9 @@ class DetectConfig:
     k_sigma: float = 4.0
     max_threshold: float = 0.3
     min_fill: float = 0.45  # area / bounding-box area; a disc has pi/4 = 0.785
+    #: second threshold above the first (relative darkness): holes are >= 0.4 dark,
+    #: grooves averaged over 4x4 px < 0.2, so +0.2 keeps the hole and drops the groove
+    split_step: float = 0.2
 
 
 @dataclass(frozen=True)
@@ -70,6 +73,19 @@ def detect_candidates(image: np.ndarray, cfg: DetectConfig = DetectConfig()) -> 
     med = float(np.median(sample))
     spread = 1.4826 * float(np.median(np.abs(sample - med)))  # MAD -> sigma for Gaussian data
     threshold = med + min(max(cfg.k_sigma * spread, cfg.min_darkness), cfg.max_threshold)
+    out: list[Candidate] = []
+    # a second, higher threshold separates a dark hole from a groove that touches it
+    # (merged, the pair fails the shape tests); what both levels find is kept once
+    for level in (threshold, threshold + cfg.split_step):
+        for cand in _components(darkness, level, cfg):
+            if not any(np.hypot(cand.x_px - o.x_px, cand.y_px - o.y_px) < max(o.radius_px, 8.0) for o in out):
+                out.append(cand)
+    return out
+
+
+def _components(darkness: np.ndarray, threshold: float, cfg: DetectConfig) -> list[Candidate]:
+    """Disc-like connected components of ``darkness > threshold`` (full-resolution px)."""
+    f = COARSE_FACTOR
     mask = (darkness > threshold).astype(np.uint8)
     mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (3, 3)))
     n, labels, stats, centroids = cv2.connectedComponentsWithStats(mask, connectivity=8)

@@ -85,20 +85,27 @@ def robust_circle(
     min_scale_px: float = 0.05,
     iterations: int = 12,
     weights: np.ndarray | None = None,
+    oval: bool = False,
 ) -> CircleFit:
     """Geometric circle fit with Tukey IRLS, from ``init`` or Taubin's fit.
 
     ``weights`` (0..1) are prior weights per point, multiplied into Tukey's.
+    ``oval`` adds a second harmonic to the radius, r(theta) = r + a cos 2theta +
+    b sin 2theta: an ellipse to first order in its ovality, so that a slightly oval
+    hole's extremes are not taken for outliers and ``r`` is its mean radius.
     ``min_scale_px`` floors the robust residual scale so that clean data (residuals of
     a few hundredths of a pixel) do not have good points trimmed as outliers.
     """
     cx, cy, r = init if init is not None else taubin_circle(pts)
+    h2 = np.zeros(2)  # second-harmonic amplitudes (cos, sin)
     prior = np.ones(len(pts)) if weights is None else weights
     w = prior.copy()
     for it in range(iterations):
         dx, dy = pts[:, 0] - cx, pts[:, 1] - cy
         d = np.maximum(np.hypot(dx, dy), 1e-9)
-        res = d - r
+        th = np.arctan2(dy, dx)
+        harm = np.stack([np.cos(2 * th), np.sin(2 * th)], axis=1)
+        res = d - r - (harm @ h2 if oval else 0.0)
         if it < 3:  # the scale settles once the gross outliers are out; then keep it
             used = res[prior > 0]
             scale = max(MAD_TO_SIGMA * float(np.median(np.abs(used - np.median(used)))), min_scale_px)
@@ -106,16 +113,23 @@ def robust_circle(
         w = prior * np.where(np.abs(u) < 1, (1 - u * u) ** 2, 0.0)
         if w.sum() < 3:
             break
-        jac = np.stack([-dx / d, -dy / d, -np.ones_like(d)], axis=1)
+        cols = [-dx / d, -dy / d, -np.ones_like(d)]
+        if oval:
+            cols += [-harm[:, 0], -harm[:, 1]]
+        jac = np.stack(cols, axis=1)
         jw = jac * w[:, None]
         try:
             step = np.linalg.solve(jw.T @ jac, -(jw.T @ res))
         except np.linalg.LinAlgError:
             break
         cx, cy, r = cx + step[0], cy + step[1], r + step[2]
+        if oval:
+            h2 = h2 + step[3:]
         if np.abs(step).max() < 1e-5:
             break
-    res = np.hypot(pts[:, 0] - cx, pts[:, 1] - cy) - r
+    dx, dy = pts[:, 0] - cx, pts[:, 1] - cy
+    th = np.arctan2(dy, dx)
+    res = np.hypot(dx, dy) - r - (h2[0] * np.cos(2 * th) + h2[1] * np.sin(2 * th) if oval else 0.0)
     inl = w > 0
     rms = float(np.sqrt((w * res**2).sum() / max(w.sum(), 1e-9)))
     return CircleFit(float(cx), float(cy), float(r), rms, inl)

@@ -22,7 +22,7 @@ import numpy as np
 
 from station.vision.calibration import CameraCalibration
 from station.vision.detect import Candidate, DetectConfig, detect_candidates
-from station.vision.edges import KERNEL_RADIUS_PX, deblurred_radius, gradient, ray_edges
+from station.vision.edges import KERNEL_RADIUS_PX, deblurred_radius, gradient, profile_width2, psf_variance, ray_edges
 from station.vision.fit import fit_ellipse_direct, ransac_circle, robust_circle, taubin_circle
 
 
@@ -113,7 +113,10 @@ def measure_candidate(
         edges = _fine(image, cx, cy, max(r - cfg.fine_window_px, 1.0), r + cfg.fine_window_px, n_rays)
         if len(edges.points) < cfg.min_valid_rays:
             return None
-        fit = robust_circle(edges.points, (cx, cy, r), weights=_profile_weights(edges.sigma2))
+        # ovality only where the whole rim is seen: on a short arc the second harmonic
+        # trades off against the radius and the centre
+        whole = not edges.cut_by_border
+        fit = robust_circle(edges.points, (cx, cy, r), weights=_profile_weights(edges.sigma2), oval=whole)
         moved = np.hypot(fit.cx - cx, fit.cy - cy)
         cx, cy, r = fit.cx, fit.cy, fit.r
         # rays cast from a centre 0.3 px off are still radial to within 0.3/r rad: the
@@ -124,23 +127,22 @@ def measure_candidate(
     inlier_fraction = fit.inliers.sum() / max(edges.n_valid, 1)
     if coverage < cfg.min_coverage or inlier_fraction < cfg.min_inlier_fraction:
         return None
-    sigma2 = edges.sigma2[fit.inliers]
-    sigma_px = float(np.sqrt(np.nanmedian(sigma2))) if np.isfinite(sigma2).any() else float("nan")
+    sigma_px = float(np.sqrt(profile_width2(edges.profiles[fit.inliers], edges.step_px)))
     # a Gaussian-blurred step of height c has a derivative peak c / (sqrt(2 pi) sigma)
     contrast_dn = float(np.median(edges.peak[fit.inliers]) * np.sqrt(2 * np.pi) * sigma_px)
-    r_true = deblurred_radius(r, sigma_px)
+    r_true = deblurred_radius(r, float(np.sqrt(psf_variance(sigma_px**2, r))))
     pts = edges.points + (r_true - r) * edges.directions
     if calibration is not None:
         pts = calibration.undistort_px(pts)
-        cal = robust_circle(pts[fit.inliers], taubin_circle(pts[fit.inliers]))
+        cal = robust_circle(pts[fit.inliers], taubin_circle(pts[fit.inliers]), oval=whole)
         cx, cy, r_true = cal.cx, cal.cy, cal.r
         rms_px = cal.rms_px  # a distorted rim is no circle: judge the fit where it is one
     else:
-        rms_px = fit.rms_px
+        rms_px = fit.rms_px  # ovality is in the model, so this is roundness
     if rms_px > cfg.max_rms_px:
         return None
     diameter = 2.0 * r_true
-    if not (cfg.detect.min_diameter_px * 0.8 <= diameter <= cfg.detect.max_diameter_px * 1.2):
+    if not (cfg.detect.min_diameter_px <= diameter <= cfg.detect.max_diameter_px):
         return None
     ell = fit_ellipse_direct(pts[fit.inliers]) if not edges.cut_by_border else None
     # heuristic confidence: share of consistent edge points, share of rim seen (full

@@ -1,0 +1,186 @@
+"""Sub-pixel hole measurement on rendered frames with known ground truth.
+
+Accuracy bars (the vision issue's goal, on whole holes >= 20 px): centre error
+<= 0.1 px and diameter error <= 0.15 px at worst, medians <= 0.05 px; no phantom
+holes on textured walls; holes cut by the frame border flagged ``partial``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from sim.camera.render import FrameParams, HoleSpec, random_holes, random_params, render_frame
+from station.vision import measure_holes
+from station.vision.edges import deblurred_radius
+from station.vision.fit import fit_ellipse_direct, ransac_circle, robust_circle, taubin_circle
+from station.vision.scoring import Score, score_frame
+
+
+def _score(frame, holes) -> Score:
+    truths = [(h.x_px, h.y_px, h.diameter_px, h.partial) for h in frame.holes]
+    return score_frame(truths, [(m.x_px, m.y_px, m.diameter_px, m.partial) for m in holes])
+
+
+# conditions where the strict bars hold, each frame with honing texture and vignetting,
+# noisy to clean sensors: large holes (60-100 px) over the whole envelope (blur 0.8-2
+# px, contrast 40-85 %); small holes (20-30 px) at blur <= 1.4 px and contrast >= 55 %.
+# Small holes at 2 px blur or 40 % contrast are the known limit, tested on their own.
+CONDITIONS = [
+    dict(blur_sigma_px=b, contrast=c, gain_e_per_dn=g, sizes=s)
+    for s, blurs, contrasts in (((20.0, 30.0), (0.8, 1.4), (0.55, 0.85)), ((60.0, 100.0), (0.8, 2.0), (0.4, 0.85)))
+    for b in blurs
+    for c in contrasts
+    for g in (20.0, 60.0)
+]
+
+
+def _frame(i: int, blur_sigma_px: float, contrast: float, gain_e_per_dn: float, sizes, lens=None):
+    rng = np.random.default_rng(100 + i)
+    p = random_params(rng, blur_sigma_px=blur_sigma_px, gain_e_per_dn=gain_e_per_dn, lens=lens)
+    p = replace(p, hole_level_dn=p.wall_level_dn * (1.0 - contrast))
+    holes = random_holes(rng, p, n_whole=3, diameter_range_px=sizes)
+    return render_frame(p, holes, seed=i)
+
+
+@pytest.fixture(scope="module")
+def envelope_score() -> Score:
+    total = Score()
+    for i, cond in enumerate(CONDITIONS):
+        f = _frame(i, **cond)
+        total.add(_score(f, measure_holes(f.image)))
+    return total
+
+
+def test_accuracy_across_blur_noise_contrast_size(envelope_score):
+    s = envelope_score.summary()
+    assert s["holes_measured"] == 3 * len(CONDITIONS)  # every hole found
+    assert s["misses"] == 0 and s["phantoms"] == 0
+    assert s["median_centre_err_px"] <= 0.05
+    assert s["median_diameter_err_px"] <= 0.05
+    assert s["worst_centre_err_px"] <= 0.10
+    assert s["worst_diameter_err_px"] <= 0.15
+
+
+def test_small_holes_under_heavy_blur_known_limit():
+    """20-30 px holes at 2 px blur or 40 % contrast: all found, no phantoms, medians ok.
+
+    Known limit (docs/vision.md): honing grooves crossing a short rim (5-10 crossings
+    on 65-95 px of rim) move the worst diameter to ~0.35 px; this pins that it does
+    not get worse.
+    """
+    total = Score()
+    cases = [(2.0, 0.4, 20.0), (2.0, 0.4, 60.0), (2.0, 0.85, 20.0), (2.0, 0.85, 60.0), (0.8, 0.4, 20.0), (0.8, 0.4, 60.0)]
+    for i, (b, c, g) in enumerate(cases):
+        f = _frame(200 + i, blur_sigma_px=b, contrast=c, gain_e_per_dn=g, sizes=(20.0, 30.0))
+        total.add(_score(f, measure_holes(f.image)))
+    s = total.summary()
+    assert s["holes_measured"] == 3 * len(cases) and s["phantoms"] == 0
+    assert s["median_centre_err_px"] <= 0.06 and s["median_diameter_err_px"] <= 0.1
+    assert s["worst_centre_err_px"] <= 0.25 and s["worst_diameter_err_px"] <= 0.45
+
+
+def test_no_systematic_diameter_bias(envelope_score):
+    # the blur-curvature correction must not leave a bias (uncorrected, a 20 px hole at
+    # 2 px blur reads ~0.5 px small)
+    assert abs(envelope_score.summary()["mean_diameter_err_px"]) < 0.02
+
+
+def test_pixel_convention_centre_of_pixel_zero_is_zero():
+    """A clean hole at a known sub-pixel centre is found there: renderer and measurer agree.
+
+    A half-pixel slip between the two conventions would show as a 0.5 px error.
+    """
+    p = FrameParams(width_px=320, height_px=256, groove_depth=0.0, grain=0.0, blotch=0.0, vignetting=0.0,
+                    gain_e_per_dn=1e12, read_noise_dn=0.0, blur_sigma_px=1.0)
+    for x, y in ((100.0, 120.0), (160.25, 90.75), (200.5, 130.5)):
+        f = render_frame(p, [HoleSpec(x, y, 40.0)], seed=0)
+        (m,) = measure_holes(f.image)
+        assert m.x_px == pytest.approx(x, abs=0.02) and m.y_px == pytest.approx(y, abs=0.02)
+        assert m.diameter_px == pytest.approx(40.0, abs=0.03)
+
+
+def test_blur_correction_inverts_the_bessel_peak_shift():
+    from scipy.special import i0e, i1e
+    from scipy.optimize import brentq
+
+    for radius, sigma in ((10.0, 2.3), (25.0, 1.5), (50.0, 1.0)):
+        # where the blurred disc's radial gradient peaks: r = R I1(rR/s^2)/I0(rR/s^2)
+        r_peak = brentq(lambda r: r - radius * i1e(r * radius / sigma**2) / i0e(r * radius / sigma**2), 1, radius)
+        assert r_peak < radius - 0.9 * sigma**2 / (2 * radius)  # the shift is real...
+        assert deblurred_radius(r_peak, sigma) == pytest.approx(radius, abs=1e-6)  # ...and undone
+
+
+def test_textured_frames_without_holes_give_no_phantoms():
+    found = 0
+    for i in range(8):
+        rng = np.random.default_rng(500 + i)
+        # the roughest walls of the envelope, strong vignetting, noisy sensor
+        p = random_params(rng, groove_depth=0.08, grain=0.05, blotch=0.06, vignetting=0.4, gain_e_per_dn=20.0)
+        found += len(measure_holes(render_frame(p, [], seed=i).image))
+    assert found == 0
+
+
+def test_holes_cut_by_the_border_are_flagged_partial_and_fitted_on_valid_rays():
+    s = Score()
+    errs = []
+    for i in range(6):
+        rng = np.random.default_rng(700 + i)
+        p = random_params(rng)
+        f = render_frame(p, random_holes(rng, p, n_whole=1, n_partial=2), seed=i)
+        ms = measure_holes(f.image)
+        s.add(_score(f, ms))
+        for h in (h for h in f.holes if h.partial):
+            near = [m for m in ms if np.hypot(m.x_px - h.x_px, m.y_px - h.y_px) < 0.25 * h.diameter_px]
+            if near:
+                errs.append(abs(near[0].diameter_px - h.diameter_px))
+    sm = s.summary()
+    assert sm["partial_flag_errors"] == 0 and sm["phantoms"] == 0 and sm["misses"] == 0
+    assert sm["partial_found"] >= 10  # of 12 cut holes (a thin sliver may stay unmeasured)
+    # no edge cut by the border enters the fit (a border edge would pull the diameter
+    # by pixels); a 40-85 % arc is noisier than a whole rim: median ~0.15 px
+    assert np.median(errs) < 0.25 and max(errs) < 1.0
+
+
+def test_oval_holes_report_axes():
+    p = FrameParams(width_px=320, height_px=256, vignetting=0.0)
+    f = render_frame(p, [HoleSpec(160.0, 128.0, 60.0, aspect=1.1, angle_deg=30.0)], seed=1)
+    (m,) = measure_holes(f.image)
+    a, b = HoleSpec(0, 0, 60.0, aspect=1.1).semi_axes_px
+    assert m.major_px == pytest.approx(2 * a, abs=0.3) and m.minor_px == pytest.approx(2 * b, abs=0.3)
+    assert m.angle_deg == pytest.approx(30.0, abs=3.0)
+    assert m.diameter_px == pytest.approx(60.0, abs=0.2)  # the circle gives the mean diameter
+
+
+def test_scale_gives_mm():
+    p = FrameParams(width_px=320, height_px=256)
+    f = render_frame(p, [HoleSpec(160.0, 128.0, 70.0)], seed=2)
+    (m,) = measure_holes(f.image, mm_per_px=0.01)
+    assert m.diameter_mm == pytest.approx(0.70, abs=0.002)
+    (m,) = measure_holes(f.image)
+    assert m.diameter_mm is None and "diameter_mm" not in m.to_dict()
+
+
+# ---------------------------------------------------------------- fits
+
+
+def test_robust_circle_ignores_outliers_and_taubin_handles_short_arcs():
+    rng = np.random.default_rng(0)
+    t = rng.uniform(0, np.pi / 2, 200)  # a quarter arc, like a hole cut by a corner
+    pts = np.stack([50 + 20 * np.cos(t), 40 + 20 * np.sin(t)], 1) + rng.normal(0, 0.05, (200, 2))
+    pts[::5] += rng.uniform(1.0, 4.0, (40, 1))  # 20 % outliers pushed outwards
+    inl = ransac_circle(pts, 0.5, rng)
+    fit = robust_circle(pts[inl], taubin_circle(pts[inl]))
+    assert (fit.cx, fit.cy, fit.r) == pytest.approx((50, 40, 20), abs=0.05)
+    full = robust_circle(pts)
+    assert full.r == pytest.approx(20, abs=0.05) and full.inliers.sum() <= 170
+
+
+def test_direct_ellipse_fit_is_exact_on_exact_points():
+    t = np.linspace(0, 2 * np.pi, 50, endpoint=False)
+    th = np.deg2rad(70)
+    x = 10 + 30 * np.cos(t) * np.cos(th) - 20 * np.sin(t) * np.sin(th)
+    y = -5 + 30 * np.cos(t) * np.sin(th) + 20 * np.sin(t) * np.cos(th)
+    assert fit_ellipse_direct(np.stack([x, y], 1)) == pytest.approx((10, -5, 30, 20, 70), abs=1e-6)
