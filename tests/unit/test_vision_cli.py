@@ -1,0 +1,92 @@
+"""``station vision measure`` / ``calibrate``: JSON contract and clear errors."""
+
+from __future__ import annotations
+
+import json
+
+import cv2
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from sim.camera.lens import BrownLens
+from sim.camera.render import FrameParams, HoleSpec, render_frame
+from sim.camera.target import board_views
+from station.cli import app
+
+runner = CliRunner()
+
+
+@pytest.fixture(scope="module")
+def frame_png(tmp_path_factory):
+    p = FrameParams()
+    holes = [HoleSpec(400.25, 300.5, 70.0), HoleSpec(900.0, 700.0, 40.0), HoleSpec(20.0, 500.0, 60.0)]
+    f = render_frame(p, holes, seed=3)
+    path = tmp_path_factory.mktemp("frames") / "frame.png"
+    cv2.imwrite(str(path), f.image)
+    return path, f
+
+
+def test_measure_json_is_one_object_with_the_holes(frame_png):
+    path, f = frame_png
+    result = runner.invoke(app, ["vision", "measure", str(path), "--mm-per-px", "0.01", "--json"])
+    assert result.exit_code == 0, result.output
+    out = json.loads(result.stdout)  # the whole of stdout is one JSON document
+    holes = out["holes"]
+    assert len(holes) == 3
+    for truth in f.holes:
+        (h,) = [h for h in holes if np.hypot(h["x_px"] - truth.x_px, h["y_px"] - truth.y_px) < 1.0]
+        assert h["partial"] is truth.partial
+        assert 0.0 <= h["confidence"] <= 1.0
+        if not truth.partial:
+            assert h["x_px"] == pytest.approx(truth.x_px, abs=0.1)
+            assert h["diameter_px"] == pytest.approx(truth.diameter_px, abs=0.15)
+            assert h["diameter_mm"] == pytest.approx(truth.diameter_px * 0.01, abs=0.0015)
+
+
+def test_measure_without_scale_has_no_mm(frame_png):
+    result = runner.invoke(app, ["vision", "measure", str(frame_png[0]), "--json"])
+    assert result.exit_code == 0
+    assert all("diameter_mm" not in h for h in json.loads(result.stdout)["holes"])
+
+
+def test_measure_table(frame_png):
+    result = runner.invoke(app, ["vision", "measure", str(frame_png[0])])
+    assert result.exit_code == 0 and "3 hole(s)" in result.stdout
+
+
+@pytest.mark.parametrize("content", [b"not an image at all\n", b""])
+def test_bad_file_is_a_clear_error(tmp_path, content):
+    bad = tmp_path / "bad.png"
+    bad.write_bytes(content)
+    result = runner.invoke(app, ["vision", "measure", str(bad), "--json"])
+    assert result.exit_code != 0
+    assert "not an image" in result.stderr
+    assert "Traceback" not in result.output and result.stdout == ""
+
+
+def test_missing_file_is_a_clear_error(tmp_path):
+    result = runner.invoke(app, ["vision", "measure", str(tmp_path / "nope.png")])
+    assert result.exit_code != 0 and "no such file" in result.stderr
+
+
+def test_calibrate_writes_a_calibration_that_measure_uses(tmp_path, frame_png):
+    lens = BrownLens(k1=-0.1)
+    paths = []
+    for i, v in enumerate(board_views(lens, n_views=5, seed=2)):
+        paths.append(tmp_path / f"board{i}.png")
+        cv2.imwrite(str(paths[-1]), v.image)
+    out = tmp_path / "cal.json"
+    result = runner.invoke(app, ["vision", "calibrate", *map(str, paths), "--out", str(out),
+                                 "--working-distance-mm", "11", "--json"])
+    assert result.exit_code == 0, result.output
+    cal = json.loads(out.read_text())
+    assert cal["camera_matrix"][0][0] == pytest.approx(1400.0, rel=0.01)
+    assert cal["mm_per_px"] == pytest.approx(11.0 / 1400.0, rel=0.01)
+    result = runner.invoke(app, ["vision", "measure", str(frame_png[0]), "--calibration", str(out), "--json"])
+    assert result.exit_code == 0 and all("diameter_mm" in h for h in json.loads(result.stdout)["holes"])
+    # a frame too small for the calibration is refused, not silently mis-measured
+    small = tmp_path / "small.png"
+    cv2.imwrite(str(small), np.full((100, 100), 128, np.uint8))
+    result = runner.invoke(app, ["vision", "measure", str(small), "--calibration", str(out)])
+    assert result.exit_code != 0 and "calibration is for" in result.stderr
