@@ -80,6 +80,7 @@ def ours(image: np.ndarray) -> list[tuple]:
 
 
 METHODS = {"ours": ours, "hough_gradient_alt": hough_alt, "contours_fit_ellipse": contour_ellipse}
+SHORT = {"ours": "ours", "hough_gradient_alt": "Hough ALT", "contours_fit_ellipse": "fitEllipse"}
 
 
 def run(frames: int = 40, seed: int = 1000) -> dict:
@@ -139,15 +140,15 @@ def register(bench_app: typer.Typer) -> None:
             return
         t = Table(title=f"vision: {r['frames']} frames, {r['whole_holes']} whole + {r['partial_holes']} cut holes, "
                         f"{r['empty_frames']} empty frames (one core)")
-        cols = ("method", "centre med px", "centre worst px", "diam med px", "diam worst px", "phantoms", "misses",
-                "partial flag errs", "ms/frame")
+        cols = ("method", "c med", "c worst", "d med", "d worst", "phantom", "miss", "flag err", "ms")
         for c in cols:
             t.add_column(c, justify="right")
         for name, m in r["methods"].items():
-            t.add_row(name, _fmt(m["median_centre_err_px"]), _fmt(m["worst_centre_err_px"]),
+            t.add_row(SHORT[name], _fmt(m["median_centre_err_px"]), _fmt(m["worst_centre_err_px"]),
                       _fmt(m["median_diameter_err_px"]), _fmt(m["worst_diameter_err_px"]), _fmt(m["phantoms"]),
                       _fmt(m["misses"]), _fmt(m["partial_flag_errors"]), _fmt(m["median_ms_per_frame"], 1))
         out_console.print(t)
+        out_console.print("c = centre error, d = diameter error (px, whole holes); ms = median per frame")
         out_console.print(
             f"ours vs the better baseline: centre {r['centre_accuracy_ratio_vs_better_baseline']:.1f}x, "
             f"diameter {r['diameter_accuracy_ratio_vs_better_baseline']:.1f}x more accurate (goal 5x)"

@@ -54,7 +54,7 @@ def measure(
         print_json({"image": str(image), "holes": [h.to_dict() for h in holes]})
         return
     table = Table(title=f"{image.name}: {len(holes)} hole(s)")
-    for col in ("x px", "y px", "diameter px", "diameter mm", "partial", "confidence", "fit rms px", "contrast DN"):
+    for col in ("x px", "y px", "d px", "d mm", "partial", "conf", "rms px", "edge DN"):
         table.add_column(col, justify="right")
     for h in holes:
         table.add_row(
