@@ -10,9 +10,13 @@ import numpy as np
 import typer
 from rich.console import Console
 
+#: width when the output is not a terminal (a log, a pipe, CI): tables are not squeezed
+#: to the 80 columns rich assumes, which would cut figures off
+_PIPE_WIDTH = 132
+
 #: human-readable output goes to stderr when stdout carries JSON
-err_console = Console(stderr=True, soft_wrap=True)
-out_console = Console()
+err_console = Console(stderr=True, soft_wrap=True, width=None if sys.stderr.isatty() else _PIPE_WIDTH)
+out_console = Console(width=None if sys.stdout.isatty() else _PIPE_WIDTH)
 
 
 def fail(message: str, code: int = 2) -> NoReturn:

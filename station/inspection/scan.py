@@ -71,14 +71,21 @@ class ScanSettings:
     #: search offsets in fields of view (0.6: neighbouring frames overlap by 40 %)
     search_step_fov: float = 0.6
     search_rings: int = 2
-    #: a detection below this confidence is not taken for a hole
-    min_confidence: float = 0.5
+    #: a detection below this confidence is not taken for a hole (the vision stage
+    #: scores real holes >= 0.3 even at low contrast and heavy blur: docs/vision.md)
+    min_confidence: float = 0.3
     #: re-centre when the hole is further than this from the frame centre (px)
     recentre_px: float = 5.0
     #: standard uncertainty the model leaves after compensation (um): Type B, from
     #: the ISO 230-2 residual of the compensated axis; the default station's twin is
     #: its own model, so it is the grating's resolution (0.05 um) rounded up
     model_u_um: float = 0.1
+    #: standard uncertainty of one hole centre and diameter from the vision stage (px):
+    #: the median errors of `station bench vision` on frames like the station's
+    #: (0.05 px centre, 0.07 px diameter), taken as the Type B part the frames'
+    #: scatter cannot show (a bias common to every frame of one hole)
+    vision_centre_u_px: float = 0.05
+    vision_diameter_u_px: float = 0.07
 
 
 @dataclass
@@ -206,7 +213,8 @@ def measure_hole(model: StationModel, hole: HoleTarget, geo: CameraGeometry, set
 def combine(result: HoleResult, geo: CameraGeometry, settings: ScanSettings) -> None:
     """Mean over frames and expanded uncertainty (k = 2) per GUM: Type A from the
     scatter of the frames (standard error of the mean), Type B from the scale
-    calibration (relative, times the hole's size or offset) and the model."""
+    calibration (relative, times the hole's size or offset), the model's residual
+    and the vision stage's bias."""
     ax = np.array([f.axial_mm for f in result.frames])
     dia = np.array([f.diameter_mm for f in result.frames])
     n = len(ax)
@@ -214,8 +222,10 @@ def combine(result: HoleResult, geo: CameraGeometry, settings: ScanSettings) -> 
     s_dia = dia.std(ddof=1) / math.sqrt(n) if n > 1 else 0.0
     cy = geo.centre_px[1]
     offset_mm = abs(np.mean([(cy - f.y_px) * geo.mm_per_px for f in result.frames]))
-    u_ax = math.sqrt(s_ax**2 + (geo.scale_u_rel * offset_mm) ** 2 + (settings.model_u_um * 1e-3) ** 2)
-    u_dia = math.sqrt(s_dia**2 + (geo.scale_u_rel * float(dia.mean())) ** 2)
+    u_vis_c = settings.vision_centre_u_px * geo.mm_per_px
+    u_vis_d = settings.vision_diameter_u_px * geo.mm_per_px
+    u_ax = math.sqrt(s_ax**2 + (geo.scale_u_rel * offset_mm) ** 2 + (settings.model_u_um * 1e-3) ** 2 + u_vis_c**2)
+    u_dia = math.sqrt(s_dia**2 + (geo.scale_u_rel * float(dia.mean())) ** 2 + u_vis_d**2)
     result.position_mm = float(ax.mean())
     result.position_u_mm = 2.0 * u_ax
     result.diameter_mm = float(dia.mean())
