@@ -312,7 +312,6 @@ class Engine:
         await self._stop_axes()
         code = getattr(exc, "code", None)
         estop = code == 0x12
-        where = getattr(exc, "device", "") or "station"
-        reason = f"{type(exc).__name__} on {where}: {exc}"
+        reason = f"{type(exc).__name__}: {exc}"  # the driver's message names the device
         self._emit("fault", reason, error=type(exc).__name__, code=code)
         self._set(State.ESTOPPED if estop else State.FAULTED, reason)
