@@ -86,6 +86,13 @@ class ScanSettings:
     #: scatter cannot show (a bias common to every frame of one hole)
     vision_centre_u_px: float = 0.05
     vision_diameter_u_px: float = 0.07
+    #: False runs the station as the paper's "before compensation": commands and the
+    #: carriage prediction from the ideal model, the grating's reading taken as where
+    #: the detection point is (what the grating cannot see stays in the result)
+    compensated: bool = True
+    #: False ignores the grating: the detection point is where the (compensated or
+    #: ideal) model says the command put it. For studies of what the grating adds.
+    use_grating: bool = True
 
 
 @dataclass
@@ -197,7 +204,7 @@ def measure_hole(model: StationModel, hole: HoleTarget, geo: CameraGeometry, set
             yield m.Note(f"{hole.name}: frame {k + 1} shows no whole hole; skipped")
             continue
         grating = None if reading is None else float(reading.position_mm)
-        drift = 0.0 if grating is None else grating - carriage_pred
+        drift = 0.0 if grating is None or not settings.use_grating else grating - carriage_pred
         axial = target[0] + drift + (cy - h.y_px) * s
         angle = target[1] + math.degrees((h.x_px - cx) * s * rad_per_mm)
         result.frames.append(FrameObservation(axial, angle, h.diameter_px * s, h.x_px, h.y_px, h.diameter_px,
@@ -236,6 +243,8 @@ def combine(result: HoleResult, geo: CameraGeometry, settings: ScanSettings) -> 
 def bore_scan(model: StationModel, holes: list[HoleTarget], geo: CameraGeometry, settings: ScanSettings | None = None):
     """The whole scan: every hole in order of axial position (one pass up the bore)."""
     settings = settings or ScanSettings()
+    if not settings.compensated:
+        model = model.without_errors()
     ordered = sorted(holes, key=lambda h: h.axial_mm)
     results = []
     for i, hole in enumerate(ordered):

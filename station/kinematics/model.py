@@ -452,7 +452,26 @@ def _curve_from(data: Any, kind: str, where: str) -> ErrorCurve:
     return ErrorCurve(kind, tuple(target_f), tuple(dev_f), tuple(effects))
 
 
+def _merge(base: dict, over: dict) -> dict:
+    """``over`` laid over ``base``, table by table (values and arrays replace)."""
+    out = dict(base)
+    for k, v in over.items():
+        out[k] = _merge(out[k], v) if isinstance(v, dict) and isinstance(out.get(k), dict) else v
+    return out
+
+
+def _default_model_data() -> dict:
+    return tomllib.loads(resources.files("station").joinpath("data/default_station.toml").read_text())
+
+
 def model_from_dict(data: dict, source: str = "<dict>", topology: Topology | None = None) -> StationModel:
+    """A model from its TOML data. ``extends = "default"`` starts from the built-in
+    default station and changes only what the file names (a scenario that differs
+    from the default in one installation error says just that)."""
+    if "extends" in data:
+        if data["extends"] != "default":
+            raise ModelConfigError(f"{source}: extends must be \"default\", not {data['extends']!r}")
+        data = _merge(_default_model_data(), {k: v for k, v in data.items() if k != "extends"})
     topo = topology or load_topology()
     geo = data.get("geometry", {})
     D = geo.get("endoscope_offset_mm", [0.0, 0.0, 0.0])
