@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: run test install clean bench lint
+.PHONY: run test install clean bench demo paper
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
@@ -14,15 +14,25 @@ $(STAMP): pyproject.toml
 
 install: $(STAMP)
 
-# The station's main job on simulated hardware (the most complete thing that runs today).
+# The station's main job on simulated hardware: one inspection of the standard part
+# (twins on 127.0.0.1, real drivers, vision, compensation, results in var/station.db).
 run: $(STAMP)
+	$(BIN)/station inspect --part ZDZG-22.2-12.3851 --serial SN-$$(date +%Y%m%d-%H%M%S)
+
+# Commissioning: an ISO 230-2 run of Z, compensation table, discovery (out/demo/).
+demo: $(STAMP)
 	$(BIN)/station demo --out out/demo
+
+# The seed paper's experiment (Table 4) on a twin of its station.
+paper: $(STAMP)
+	$(BIN)/station paper
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q
 
 bench: $(STAMP)
 	$(BIN)/station bench kinematics
+	$(BIN)/station bench inspect
 
 clean:
 	rm -rf $(VENV) build *.egg-info .pytest_cache

@@ -1,0 +1,137 @@
+"""``station bench inspect``: accuracy and cost of full inspections on the default twin.
+
+* accuracy against the twin's ground truth, over repeated inspections, in three
+  modes: compensated (the station as built), uncompensated but reading the grating
+  (the paper's "before compensation"), and neither (the motor's word only);
+* CPU and wall time of one inspection with the twin's motion time scaled to almost
+  zero, the number of frames, and the software's own time per frame (wall time less
+  the camera twin's rendering, which a real camera does in hardware).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import statistics
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import typer
+
+from station.cli.common import err_console, out_console, print_json
+
+PART = "ZDZG-22.2-12.3851"
+#: motion runs this many times faster than real time: moves take microseconds
+FAST = 1e5
+
+
+async def _runs(settings, n: int, data: Path, time_scale: float, progress=None):
+    from sim.camera import render as render_mod
+    from station.inspection.session import open_session
+    from station.parts import load_part
+
+    spec = load_part(PART)
+    render_s = [0.0]
+    original = render_mod.render_frame
+
+    def timed_render(*a, **k):
+        t0 = time.perf_counter()
+        try:
+            return original(*a, **k)
+        finally:
+            render_s[0] += time.perf_counter() - t0
+
+    import sim.camera.twin as twin_mod
+
+    twin_mod.render_frame = timed_render
+    outs, costs = [], []
+    try:
+        async with open_session(time_scale=time_scale, data_dir=data, settings=settings) as s:
+            frames = [0]
+            s.engine.subscribe(lambda ev: None)
+            for i in range(n):
+                render_s[0] = 0.0
+                seq0 = s.station.camera._sequence
+                w0, c0 = time.perf_counter(), time.process_time()
+                out = await s.inspect(spec, f"BENCH-{i:03d}")
+                wall, cpu = time.perf_counter() - w0, time.process_time() - c0
+                frames[0] = s.station.camera._sequence - seq0
+                outs.append(out)
+                costs.append((wall, cpu, render_s[0], frames[0]))
+                if progress:
+                    progress()
+    finally:
+        twin_mod.render_frame = original
+    return outs, costs
+
+
+def _errors(outs):
+    err = {"position": [], "diameter": []}
+    for o in outs:
+        for c in o.characteristics:
+            kind = c.id.split(".")[1]
+            err[kind].append(abs(c.measured - c.true_value) * 1e3)
+    return {k: {"median_um": statistics.median(v), "max_um": max(v), "n": len(v)} for k, v in err.items()}
+
+
+def run(repeats: int = 10, progress=None) -> dict:
+    from station.inspection.scan import ScanSettings
+
+    modes = {
+        "compensated": ScanSettings(settle_s=0.0),
+        "uncompensated_with_grating": ScanSettings(settle_s=0.0, compensated=False),
+        "uncompensated_motor_only": ScanSettings(settle_s=0.0, compensated=False, use_grating=False),
+    }
+    out: dict = {"part": PART, "repeats": repeats, "time_scale": FAST, "accuracy": {}}
+    with tempfile.TemporaryDirectory() as tmp:
+        for name, settings in modes.items():
+            outs, costs = asyncio.run(_runs(settings, repeats, Path(tmp) / name, FAST, progress))
+            out["accuracy"][name] = _errors(outs)
+            if name == "compensated":
+                walls = [c[0] for c in costs]
+                cpus = [c[1] for c in costs]
+                renders = [c[2] for c in costs]
+                frames = [c[3] for c in costs]
+                out["cost"] = {
+                    "wall_s_median": statistics.median(walls),
+                    "cpu_s_median": statistics.median(cpus),
+                    "frames_per_inspection": statistics.median(frames),
+                    "render_s_median": statistics.median(renders),
+                    "software_s_per_frame_median": statistics.median(
+                        [(w - r) / f for w, r, f in zip(walls, renders, frames)]),
+                }
+    acc = out["accuracy"]
+    out["goal_um"] = 3.0
+    out["meets_goal"] = all(acc["compensated"][k]["max_um"] <= 3.0 for k in ("position", "diameter"))
+    return out
+
+
+def register(bench_app: typer.Typer) -> None:
+    @bench_app.command("inspect")
+    def inspect_bench(
+        repeats: int = typer.Option(10, help="inspections per mode"),
+        json: bool = typer.Option(False, "--json"),
+    ) -> None:
+        """Accuracy against the twin's truth (with and without compensation) and cost per inspection."""
+        from rich.progress import Progress
+
+        with Progress(console=err_console, transient=True) as prog:
+            task = prog.add_task("inspections", total=3 * repeats)
+            res = run(repeats, progress=lambda: prog.advance(task))
+        if json:
+            print_json(res)
+            return
+        from rich.table import Table
+
+        t = Table(title=f"Inspection accuracy against the twin's truth ({repeats} inspections per mode)")
+        for col in ("mode", "position median um", "position max um", "diameter median um", "diameter max um"):
+            t.add_column(col, justify="right")
+        for mode, a in res["accuracy"].items():
+            t.add_row(mode, f"{a['position']['median_um']:.2f}", f"{a['position']['max_um']:.2f}",
+                      f"{a['diameter']['median_um']:.2f}", f"{a['diameter']['max_um']:.2f}")
+        out_console.print(t)
+        c = res["cost"]
+        out_console.print(f"one inspection: {c['wall_s_median']:.2f} s wall, {c['cpu_s_median']:.2f} s CPU, "
+                          f"{c['frames_per_inspection']:.0f} frames; camera twin rendering {c['render_s_median']:.2f} s; "
+                          f"software {c['software_s_per_frame_median'] * 1e3:.1f} ms per frame")
