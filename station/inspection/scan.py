@@ -107,6 +107,8 @@ class FrameObservation:
     grating_mm: float | None
     z_cmd_mm: float
     c_cmd_deg: float
+    #: host time of the grating's reading (time.monotonic), None without a grating
+    time_s: float | None = None
 
 
 @dataclass
@@ -208,7 +210,8 @@ def measure_hole(model: StationModel, hole: HoleTarget, geo: CameraGeometry, set
         axial = target[0] + drift + (cy - h.y_px) * s
         angle = target[1] + math.degrees((h.x_px - cx) * s * rad_per_mm)
         result.frames.append(FrameObservation(axial, angle, h.diameter_px * s, h.x_px, h.y_px, h.diameter_px,
-                                              float(getattr(h, "confidence", 1.0)), grating, z_cmd, c_cmd))
+                                              float(getattr(h, "confidence", 1.0)), grating, z_cmd, c_cmd,
+                                              None if reading is None else float(reading.timestamp)))
         if result.crop is None:
             result.crop = _crop(frame.image, h.x_px, h.y_px, h.diameter_px)
     if not result.frames:

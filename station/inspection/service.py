@@ -21,6 +21,7 @@ from typing import Any, Callable
 
 from station import __version__
 from station.inspection.scan import CameraGeometry, HoleResult, HoleTarget, ScanSettings, bore_scan
+from station.inspection.scanlog import write_scan_log
 from station.kinematics.model import StationModel
 from station.parts.spec import PartSpec
 from station.sequencer.engine import Engine, EngineEvent, PlanEnded, State
@@ -119,6 +120,11 @@ class InspectionService:
                             for c in outcome.characteristics]
             await asyncio.to_thread(self.store.finish, iid, "complete", outcome.result, outcome.reason or None,
                                     measurements=measurements)
+            # after the commit: the log is for discovery, the result must not wait on it
+            try:
+                await asyncio.to_thread(write_scan_log, self.store.data_dir, iid, results)
+            except OSError as exc:
+                self.store.log_event("alarm", f"scan log not written: {exc}", iid)
             return outcome
         finally:
             self.engine._listeners.remove(log)
