@@ -201,15 +201,20 @@ def parse_recording(text: str, source: str = "<text>") -> Recording:
     )
 
 
-def read_recording(path: str | Path) -> Recording:
-    """Read a recording file; an unreadable or malformed file raises :class:`RecordingError`."""
+def read_text_file(path: str | Path, error: type[LocatedInputError] = LocatedInputError) -> str:
+    """A text file's content; a missing, unreadable or non-UTF-8 file raises ``error``
+    naming the file (the common first step of every text format the station reads)."""
     p = Path(path)
     try:
-        text = p.read_text(encoding="utf-8")
+        return p.read_text(encoding="utf-8")
     except FileNotFoundError:
-        raise RecordingError(str(p), None, None, "no such file") from None
+        raise error(str(p), None, None, "no such file") from None
     except UnicodeDecodeError as exc:
-        raise RecordingError(str(p), None, None, f"not UTF-8 text ({exc.reason} at byte {exc.start})") from None
+        raise error(str(p), None, None, f"not UTF-8 text ({exc.reason} at byte {exc.start})") from None
     except OSError as exc:
-        raise RecordingError(str(p), None, None, f"cannot read: {exc.strerror}") from None
-    return parse_recording(text, str(p))
+        raise error(str(p), None, None, f"cannot read: {exc.strerror}") from None
+
+
+def read_recording(path: str | Path) -> Recording:
+    """Read a recording file; an unreadable or malformed file raises :class:`RecordingError`."""
+    return parse_recording(read_text_file(path, RecordingError), str(path))

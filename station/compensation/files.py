@@ -34,7 +34,7 @@ from typing import Any
 
 import numpy as np
 
-from station.recording import LocatedInputError
+from station.recording import LocatedInputError, read_text_file
 from station.compensation.check import Problem
 from station.compensation.segments import QUANTITIES, Segment, SegmentModel
 from station.compensation.table import ERROR_UNIT, POSITION_UNIT, CompensationTable
@@ -458,14 +458,7 @@ def detect_format(path: Path, text: str) -> str:
 def read_compensation(path: str | Path, fmt: str | None = None, kind: str = "linear") -> CompensationTable | SegmentModel:
     """Read any supported compensation file (``fmt`` overrides detection)."""
     p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise FormatError(str(p), None, None, "no such file") from None
-    except UnicodeDecodeError as exc:
-        raise FormatError(str(p), None, None, f"not UTF-8 text ({exc.reason} at byte {exc.start})") from None
-    except OSError as exc:
-        raise FormatError(str(p), None, None, f"cannot read: {exc.strerror}") from None
+    text = read_text_file(p, FormatError)
     fmt = fmt or detect_format(p, text)
     source = str(p)
     if fmt == "csv":
