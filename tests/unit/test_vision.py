@@ -103,14 +103,24 @@ def test_pixel_convention_centre_of_pixel_zero_is_zero():
 
 
 def test_blur_correction_inverts_the_bessel_peak_shift():
-    from scipy.special import i0e, i1e
-    from scipy.optimize import brentq
+    """The inversion matches a blurred disc computed independently of its derivation.
+
+    A disc of radius R blurred by an isotropic Gaussian of variance s^2 covers
+    P(|X| < R), X ~ N((r, 0), s^2 I), at distance r from its centre: a non-central
+    chi-square cdf.  Where its radial slope is steepest is found numerically.
+    """
+    from scipy.optimize import minimize_scalar
+    from scipy.stats import ncx2
+
+    def slope(r, radius, sigma, h=1e-4):
+        u = lambda q: ncx2.cdf(radius**2 / sigma**2, 2, q**2 / sigma**2)
+        return (u(r + h) - u(r - h)) / (2 * h)  # negative: bright outside -> dark inside
 
     for radius, sigma in ((10.0, 2.3), (25.0, 1.5), (50.0, 1.0)):
-        # where the blurred disc's radial gradient peaks: r = R I1(rR/s^2)/I0(rR/s^2)
-        r_peak = brentq(lambda r: r - radius * i1e(r * radius / sigma**2) / i0e(r * radius / sigma**2), 1, radius)
+        r_peak = minimize_scalar(lambda r: slope(r, radius, sigma), bounds=(radius - 2 * sigma, radius),
+                                 method="bounded", options={"xatol": 1e-7}).x
         assert r_peak < radius - 0.9 * sigma**2 / (2 * radius)  # the shift is real...
-        assert deblurred_radius(r_peak, sigma) == pytest.approx(radius, abs=1e-6)  # ...and undone
+        assert deblurred_radius(r_peak, sigma) == pytest.approx(radius, abs=2e-4)  # ...and undone
 
 
 def test_textured_frames_without_holes_give_no_phantoms():
