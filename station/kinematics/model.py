@@ -286,8 +286,14 @@ class StationModel:
         y = -sc * r[0] + cc * r[1] - r[1]
         return np.stack([x, y, np.broadcast_to(z, x.shape).astype(float)], axis=-1)
 
-    def errors(self, z_mm, c_deg, *, direction_z=None, direction_c=None, time_s=None, temperature_c=None) -> PoseErrors:
-        """Exact E (Eq. 12) and its reading (Eq. 13) at N poses, vectorised and chunked."""
+    def errors(self, z_mm, c_deg, *, direction_z=None, direction_c=None, time_s=None, temperature_c=None,
+               motions_si: dict[str, np.ndarray] | None = None) -> PoseErrors:
+        """Exact E (Eq. 12) and its reading (Eq. 13) at N poses, vectorised and chunked.
+
+        The error motions are evaluated from their curves at the poses, unless
+        ``motions_si`` gives them already ((N, 6) per joint body, mm and rad): a
+        caller that evaluates the same poses under several hypotheses, or a
+        benchmark of E alone, passes them in."""
         z = np.atleast_1d(np.asarray(z_mm, dtype=float))
         c = np.atleast_1d(np.asarray(c_deg, dtype=float))
         z, c = np.broadcast_arrays(z, c)
@@ -304,8 +310,11 @@ class StationModel:
         for lo in range(0, n, CHUNK):
             hi = min(n, lo + CHUNK)
             zz, cc = z[lo:hi], c[lo:hi]
-            sub = [None if v is None else v[lo:hi] for v in ctx]
-            m = self.motion_values_si(zz, cc, *sub)
+            if motions_si is None:
+                sub = [None if v is None else v[lo:hi] for v in ctx]
+                m = self.motion_values_si(zz, cc, *sub)
+            else:
+                m = {k: v[lo:hi] for k, v in motions_si.items()}
             crad = np.radians(cc)
             actual = self._chain_product(work_slots, zz, crad, m, False).inverse() @ self._chain_product(
                 tool_slots, zz, crad, m, False
