@@ -15,6 +15,7 @@ import tomllib
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
+from typing import Sequence
 
 from pydantic import ValidationError
 
@@ -179,16 +180,34 @@ def _read_builtin(part_number: str) -> PartSpec:
     return spec
 
 
-def load_part(part_number_or_path: str | Path) -> PartSpec:
-    """A built-in spec by part number, or a spec file by path.
+def _in_search_path(part_number: str, search_path) -> Path | None:
+    """The first ``<dir>/<part number>.toml`` of the search path that exists."""
+    for d in search_path:
+        f = Path(d) / f"{part_number}.toml"
+        if f.is_file():
+            return f
+    return None
+
+
+def load_part(part_number_or_path: str | Path, search_path: Sequence[str | Path] = ()) -> PartSpec:
+    """A spec by part number (from ``search_path``'s folders first, in order, then the
+    built-ins), or a spec file by path.
 
     A :class:`~pathlib.Path`, or a string that ends in ``.toml`` or contains a path
     separator, is read as a file; anything else is a part number. An unknown part
-    number raises :class:`PartSpecError` naming the known ones.
+    number raises :class:`PartSpecError` naming the known ones. The search path lets
+    a station keep its own specs (the REST API stores them in ``<data>/parts``).
     """
     arg = part_number_or_path
     if isinstance(arg, Path) or arg.endswith(".toml") or "/" in arg or "\\" in arg:
         return read_part_file(arg)
+    if is_part_number(arg) and (found := _in_search_path(arg, search_path)) is not None:
+        spec = read_part_file(found)
+        if spec.part_number != arg:
+            # the file name is the look-up key: a mismatch would load the wrong part
+            raise PartSpecError([Problem(str(found), None, "part_number",
+                                         f"{spec.part_number!r} differs from the file name")])
+        return spec
     known = builtin_part_numbers()
     if not is_part_number(arg) or arg not in known:
         raise PartSpecError([Problem(
@@ -199,7 +218,12 @@ def load_part(part_number_or_path: str | Path) -> PartSpec:
     return _read_builtin(arg)
 
 
-def list_parts() -> list[PartSpec]:
-    """Every built-in part spec, sorted by part number (raises if one is broken:
-    a shipped spec that does not load is a packaging bug, not something to skip)."""
-    return [_read_builtin(pn) for pn in builtin_part_numbers()]
+def list_parts(search_path: Sequence[str | Path] = ()) -> list[PartSpec]:
+    """Every built-in part spec and every ``*.toml`` spec of ``search_path``, sorted by
+    part number; a search-path spec hides a built-in of the same number (raises if
+    one is broken: a spec that does not load is a bug to fix, not something to skip)."""
+    numbers = set(builtin_part_numbers())
+    for d in search_path:
+        if Path(d).is_dir():
+            numbers.update(f.stem for f in Path(d).glob("*.toml") if is_part_number(f.stem))
+    return [load_part(pn, search_path) for pn in sorted(numbers)]

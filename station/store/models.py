@@ -198,3 +198,32 @@ class Event(Base):
     message: Mapped[str] = mapped_column(Text)
 
     __table_args__ = (Index(None, "inspection_id"), Index(None, "at"))
+
+
+#: API token roles (docs/api.md): mes starts job orders, operator commands the
+#: station, engineer changes parts, models and calibrations, admin does everything
+TOKEN_ROLES = ("mes", "operator", "engineer", "admin")
+#: the public part of a token, by which its row is found without trying every hash
+TOKEN_PREFIX_LEN = 16
+
+
+class ApiToken(Base):
+    """A REST API token: only its salted hash is kept, so a copy of the database
+    does not let anyone call the API. The token's public prefix finds the row."""
+
+    __tablename__ = "api_token"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
+    name: Mapped[str] = mapped_column(String(NAME_LEN))
+    role: Mapped[str] = mapped_column(String(16))
+    prefix: Mapped[str] = mapped_column(String(TOKEN_PREFIX_LEN))
+    salt: Mapped[str] = mapped_column(String(64))  # hex
+    token_hash: Mapped[str] = mapped_column(String(128))  # hex
+    created_at: Mapped[datetime] = mapped_column(UTCDateTime())
+    #: set when the token is revoked; a revoked token is refused, its row kept for the audit
+    revoked_at: Mapped[datetime | None] = mapped_column(UTCDateTime())
+
+    __table_args__ = (
+        UniqueConstraint("prefix"),
+        CheckConstraint(_in("role", TOKEN_ROLES), name="role"),
+    )

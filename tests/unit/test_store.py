@@ -299,7 +299,7 @@ def test_migrated_schema_equals_the_models(tmp_path):
     engine = make_engine(url)
     try:
         with engine.connect() as conn:
-            assert current_revision(conn) == head_revision() == "0001"
+            assert current_revision(conn) == head_revision() == "0002"
             ctx = MigrationContext.configure(conn, opts={"compare_type": True, "compare_server_default": True})
             assert compare_metadata(ctx, Base.metadata) == []
             assert set(inspect(conn).get_table_names()) == set(Base.metadata.tables) | {"alembic_version"}

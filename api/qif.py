@@ -1,0 +1,211 @@
+"""An inspection record as a QIF 3.0 results document (namespace ``http://qifstandards.org/xsd/qif3``).
+
+Why QIF: the plant's quality systems read measurement results as QIF, the ANSI/ISO
+standard that carries a characteristic's definition (tolerance), nominal, item and
+measurement together, so a result keeps its meaning outside the station.
+
+What goes where (element order follows QIFDocument.xsd, which is an ``xs:sequence``
+everywhere, so order matters to a validator):
+
+* ``StandardsDefinitions``: ISO 14405-1 (linear sizes), the standard the
+  characteristics are toleranced by; ``Characteristics/FormalStandardId`` points at it.
+* ``SoftwareDefinitions``: this software and its version, referenced from the
+  results' traceability.
+* ``FileUnits``: millimetres (the store's unit; QIF names the SI unit ``meter`` and
+  converts with the factor 0.001).
+* ``Product/PartSet/Part``: the part number.
+* ``Characteristics``: per characteristic a definition (the tolerance as absolute
+  limits, ``DefinedAsLimit`` true, exactly as stored with the result), a nominal
+  (target value) and an item. A hole's diameter is a ``Diameter...`` characteristic;
+  its axial position (distance of the hole's centre from the datum face along the
+  bore axis) is a ``LinearCoordinate...`` characteristic in direction ``ZAXIS``.
+* ``Results/MeasurementResultsSet/MeasurementResults``: one measurement per item
+  with status PASS/FAIL and the measured value; its ``combinedUncertainty`` is the
+  standard uncertainty u = U/2 (the store keeps the expanded U, k = 2) and
+  ``meanError`` 0, because the GUM estimate is a result corrected for the known
+  systematic effects (the schema asks for both attributes or neither). An
+  unmeasured characteristic (hole not found) is FAIL without a value. Then the
+  inspection status: PASS/FAIL when complete, SYSERROR when faulted, NOT_MEASURED
+  when aborted or interrupted.
+* ``Results/ActualComponentSets``: the inspected part's serial number.
+
+Ids: QIF ids are positive integers unique in the document (``QIFReferenceFull``
+references point at them); ``idMax`` must be at least the largest id used.
+"""
+
+from __future__ import annotations
+
+import uuid
+import xml.etree.ElementTree as ET
+from datetime import datetime
+from typing import Any
+
+QIF_NS = "http://qifstandards.org/xsd/qif3"
+QIF_VERSION = "3.0.0"
+#: a fixed namespace so a document's QPId is the same every time it is generated
+#: for one inspection (a MES that fetches it twice sees one document, not two)
+_QPID_NAMESPACE = uuid.UUID("6f1d3a52-1c55-4c8e-9a43-0b8f3f5e2d71")
+#: inspection states with a verdict; others map to the QIF status beside them
+_STATUS_OF_STATE = {"faulted": "SYSERROR", "aborted": "NOT_MEASURED", "interrupted": "NOT_MEASURED"}
+
+
+class _Ids:
+    """Hands out document ids 1, 2, 3 ... and remembers the largest (``idMax``)."""
+
+    def __init__(self) -> None:
+        self.last = 0
+
+    def next(self) -> str:
+        self.last += 1
+        return str(self.last)
+
+
+def _sub(parent: ET.Element, tag: str, text: Any = None, **attrs: str) -> ET.Element:
+    el = ET.SubElement(parent, f"{{{QIF_NS}}}{tag}", {k: str(v) for k, v in attrs.items()})
+    if text is not None:
+        el.text = str(text)
+    return el
+
+
+def _decimal(v: float) -> str:
+    """A float as an xs:decimal literal (no exponent, which xs:decimal does not allow)."""
+    text = f"{v:.9f}".rstrip("0")
+    return text + "0" if text.endswith(".") else text
+
+
+def _kind(characteristic_id: str) -> str:
+    """``hole_1.diameter`` -> ``diameter``; the part spec names them ``<hole>.<kind>``."""
+    return characteristic_id.rsplit(".", 1)[-1]
+
+
+def _qif_datetime(t: datetime | None) -> str | None:
+    return None if t is None else t.isoformat()
+
+
+def inspection_status(record: Any) -> str:
+    """The QIF InspectionStatusEnum of an inspection record."""
+    if record.state == "complete":
+        return "PASS" if record.result == "pass" else "FAIL"
+    return _STATUS_OF_STATE.get(record.state, "UNKNOWN")
+
+
+def qif_document(record: Any, *, software_version: str = "") -> ET.Element:
+    """The QIF results document of a finished inspection record
+    (:class:`station.store.InspectionRecord`), as an element tree."""
+    ET.register_namespace("", QIF_NS)
+    ids = _Ids()
+    root = ET.Element(f"{{{QIF_NS}}}QIFDocument", {"versionQIF": QIF_VERSION})
+    _sub(root, "QPId", uuid.uuid5(_QPID_NAMESPACE, f"results/{record.id}"))
+
+    standards = _sub(root, "StandardsDefinitions", n=1)
+    std_id = ids.next()
+    std = _sub(standards, "Standard", id=std_id)
+    _sub(_sub(std, "Organization"), "StandardsOrganizationEnum", "ISO")
+    _sub(std, "Designator", "14405-1")
+    _sub(std, "Year", "2016")
+    _sub(std, "Title", "GPS - Dimensional tolerancing - Part 1: Linear sizes")
+
+    software_id = None
+    if software_version:
+        software_id = ids.next()
+        sw = _sub(_sub(root, "SoftwareDefinitions", n=1), "Software", id=software_id)
+        _sub(sw, "VendorName", "bore inspection station (open source)")
+        _sub(sw, "ApplicationName", "station")
+        _sub(sw, "Version", software_version)
+
+    units = _sub(_sub(root, "FileUnits"), "PrimaryUnits")
+    lin = _sub(units, "LinearUnit")
+    _sub(lin, "SIUnitName", "meter")  # the schema fixes the SI name; mm is meter x 0.001
+    _sub(lin, "UnitName", "mm")
+    _sub(_sub(lin, "UnitConversion"), "Factor", "0.001")
+
+    product = _sub(root, "Product")
+    part_id = ids.next()
+    part = _sub(_sub(product, "PartSet", n=1), "Part", id=part_id)
+    header = _sub(part, "Header")
+    _sub(header, "Name", record.part_number)
+    _sub(part, "ModelNumber", record.part_number)
+    _sub(_sub(product, "RootPart"), "Id", part_id)
+
+    chars = list(record.characteristics)
+    items: list[tuple[Any, str]] = []  # (characteristic record, item id)
+    if chars:
+        block = _sub(root, "Characteristics")
+        _sub(block, "FormalStandardId", std_id)
+        defs = _sub(block, "CharacteristicDefinitions", n=len(chars))
+        noms = _sub(block, "CharacteristicNominals", n=len(chars))
+        its = _sub(block, "CharacteristicItems", n=len(chars))
+        for c in chars:
+            prefix = "Diameter" if _kind(c.characteristic_id) == "diameter" else "LinearCoordinate"
+            def_id, nom_id, item_id = ids.next(), ids.next(), ids.next()
+            d = _sub(defs, f"{prefix}CharacteristicDefinition", id=def_id)
+            _sub(d, "Name", c.characteristic_id)
+            tol = _sub(d, "Tolerance")
+            _sub(tol, "MaxValue", _decimal(c.upper_limit))
+            _sub(tol, "MinValue", _decimal(c.lower_limit))
+            _sub(tol, "DefinedAsLimit", "true")
+
+            n = _sub(noms, f"{prefix}CharacteristicNominal", id=nom_id)
+            _sub(n, "CharacteristicDefinitionId", def_id)
+            _sub(n, "Name", c.characteristic_id)
+            _sub(n, "TargetValue", _decimal(c.nominal))
+            if prefix == "LinearCoordinate":
+                # the axial position is measured along the bore axis, the station's Z
+                _sub(n, "Direction", "ZAXIS")
+
+            it = _sub(its, f"{prefix}CharacteristicItem", id=item_id)
+            _sub(it, "Name", c.characteristic_id)
+            _sub(it, "CharacteristicNominalId", nom_id)
+            items.append((c, item_id))
+
+    results = _sub(root, "Results")
+    mrs = _sub(_sub(results, "MeasurementResultsSet", n=1), "MeasurementResults", id=ids.next())
+    trace = _sub(mrs, "InspectionTraceability")
+    if record.order_id:
+        _sub(trace, "OrderNumber", record.order_id)
+    _sub(trace, "ReportNumber", record.id)
+    if record.started_at is not None:
+        _sub(trace, "InspectionStart", _qif_datetime(record.started_at))
+    if record.finished_at is not None:
+        _sub(trace, "InspectionEnd", _qif_datetime(record.finished_at))
+    if software_id is not None:
+        used = _sub(_sub(trace, "InspectionSoftwareItems"), "InspectionProgramExecutionSoftware", n=1)
+        _sub(used, "Id", software_id)
+    try:
+        _sub(mrs, "ThisResultsInstanceQPId", uuid.UUID(record.id))
+    except ValueError:
+        pass  # not a UUID: QPId allows only UUIDs, and the id is in ReportNumber already
+    if items:
+        measurements = _sub(_sub(mrs, "MeasuredCharacteristics"), "CharacteristicMeasurements", n=len(items))
+        for c, item_id in items:
+            prefix = "Diameter" if _kind(c.characteristic_id) == "diameter" else "LinearCoordinate"
+            m = _sub(measurements, f"{prefix}CharacteristicMeasurement", id=ids.next())
+            _sub(_sub(m, "Status"), "CharacteristicStatusEnum", "PASS" if c.passed else "FAIL")
+            _sub(m, "CharacteristicItemId", item_id)
+            if prefix == "LinearCoordinate":
+                _sub(_sub(m, "TypeOfCoordinates"), "CoordinateEnum", "CYLINDRICAL_3D")
+            if c.measured is not None:
+                attrs = {}
+                if c.uncertainty_k2 is not None:
+                    attrs = {"combinedUncertainty": _decimal(c.uncertainty_k2 / 2.0), "meanError": "0"}
+                _sub(m, "Value", _decimal(c.measured), **attrs)
+    _sub(_sub(mrs, "InspectionStatus"), "InspectionStatusEnum", inspection_status(record))
+    component_id = ids.next()
+    ids_el = _sub(mrs, "ActualComponentIds", n=1)
+    _sub(ids_el, "Id", component_id)
+
+    comp_sets = _sub(results, "ActualComponentSets", n=1)
+    comp = _sub(_sub(comp_sets, "ActualComponentSet", n=1), "ActualComponent", id=component_id)
+    if record.serial:
+        _sub(comp, "SerialNumber", record.serial)
+    _sub(_sub(comp, "Status"), "InspectionStatusEnum", inspection_status(record))
+
+    root.set("idMax", str(ids.last))
+    return root
+
+
+def qif_bytes(record: Any, *, software_version: str = "") -> bytes:
+    """The document serialised as UTF-8 XML with a declaration."""
+    tree = ET.ElementTree(qif_document(record, software_version=software_version))
+    ET.indent(tree)
+    return ET.tostring(tree.getroot(), encoding="utf-8", xml_declaration=True)

@@ -1,0 +1,143 @@
+"""Compensation models and camera calibrations: upload (validated), list, activate.
+
+An upload is checked with the station's own readers (``model_from_dict``,
+``CameraCalibration.from_json``) before it is kept, so a version that exists can be
+activated. Activation applies to the running station at once (not during a job:
+409), and every upload and activation goes to the audit log with who did it.
+"""
+
+from __future__ import annotations
+
+import json
+import tomllib
+
+from fastapi import APIRouter, Depends, File, Form, HTTPException, Request, UploadFile, status
+
+from api import auth
+from api.routes.common import blocking, read_upload, runtime
+from api.runtime import StationRuntime
+from api.versions import VersionStore
+
+router = APIRouter(prefix="/api/v1", tags=["models and calibrations"])
+
+
+def model_store(rt: StationRuntime) -> VersionStore:
+    return VersionStore(rt.settings.data_path / "models", "toml")
+
+
+def calibration_store(rt: StationRuntime) -> VersionStore:
+    return VersionStore(rt.settings.data_path / "calibrations", "json")
+
+
+def parse_model(text: str, source: str):
+    from station.kinematics.model import model_from_dict
+
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ValueError(f"{source}: not valid TOML: {exc}") from None
+    try:
+        return model_from_dict(data, source)
+    except (KeyError, TypeError, IndexError) as exc:  # a wrong shape deep in the file
+        raise ValueError(f"{source}: not a station model: {type(exc).__name__}: {exc}") from None
+
+
+def parse_calibration(text: str, source: str):
+    from station.vision.calibration import CameraCalibration
+
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"{source}: not valid JSON: {exc}") from None
+    try:
+        if not isinstance(data, dict):
+            raise ValueError("the calibration must be a JSON object")
+        cal = CameraCalibration.from_json(data)
+    except (KeyError, TypeError) as exc:
+        raise ValueError(f"{source}: not a camera calibration: missing or wrong {exc}") from None
+    except ValueError as exc:
+        raise ValueError(f"{source}: not a camera calibration: {exc}") from None
+    if cal.mm_per_px is not None and not (isinstance(cal.mm_per_px, (int, float)) and cal.mm_per_px > 0):
+        raise ValueError(f"{source}: mm_per_px must be a positive number")
+    return cal
+
+
+def apply_model(rt: StationRuntime, text: str, source: str) -> None:
+    """The compensation model the next inspection uses."""
+    rt.station.model = parse_model(text, source)
+
+
+def apply_calibration(rt: StationRuntime, text: str, source: str) -> None:
+    """The scale at the bore wall the vision stage measures with (when the file has one)."""
+    from station.inspection.session import vision_measure
+
+    cal = parse_calibration(text, source)
+    if cal.mm_per_px is not None:
+        rt.station.mm_per_px = float(cal.mm_per_px)
+        rt.engine.devices.measure = vision_measure(float(cal.mm_per_px))
+
+
+KINDS = {
+    "models": (model_store, parse_model, apply_model, "compensation model"),
+    "calibrations": (calibration_store, parse_calibration, apply_calibration, "camera calibration"),
+}
+
+
+def _listing(store: VersionStore) -> dict:
+    index = store.index()
+    return {"active": index["active"],
+            "items": [{**v, "active": v["version"] == index["active"]} for v in index["versions"]]}
+
+
+def _register(kind: str) -> None:
+    store_of, parse, apply, what = KINDS[kind]
+
+    @router.get(f"/{kind}", name=f"list_{kind}")
+    async def list_versions(request: Request, who: auth.Principal = Depends(auth.reader)) -> dict:
+        return await blocking(_listing, store_of(runtime(request)))
+
+    @router.post(f"/{kind}", name=f"upload_{kind}", status_code=status.HTTP_201_CREATED,
+                 responses={413: {"description": "file too large"}, 422: {"description": "not a valid file"}})
+    async def upload(request: Request, file: UploadFile = File(..., description=f"the {what} file"),
+                     name: str = Form("", max_length=64, description="a short name for the version"),
+                     who: auth.Principal = Depends(auth.engineer)) -> dict:
+        rt = runtime(request)
+        text = await read_upload(file, rt.settings.max_upload_bytes, what)
+        source = file.filename or what
+        try:
+            await blocking(parse, text, source)
+        except ValueError as exc:
+            raise HTTPException(status.HTTP_422_UNPROCESSABLE_CONTENT, str(exc)) from None
+        entry = await blocking(store_of(rt).add, text, who=who.name, name=name, filename=source)
+        await blocking(rt.audit, who.who, f"uploaded {what} version {entry['version']} ({source}, "
+                                          f"sha256 {entry['sha256'][:12]})")
+        return entry
+
+    @router.post(f"/{kind}/{{version}}/activate", name=f"activate_{kind}",
+                 responses={404: {"description": "no such version"}, 409: {"description": "a job is running"}})
+    async def activate(version: int, request: Request, who: auth.Principal = Depends(auth.engineer)) -> dict:
+        rt = runtime(request)
+        store = store_of(rt)
+        entry = await blocking(store.entry, version)
+        if entry is None:
+            raise HTTPException(status.HTTP_404_NOT_FOUND, f"no {what} version {version}")
+        if rt.busy:
+            raise HTTPException(status.HTTP_409_CONFLICT, f"cannot change the {what} while a job runs")
+        text = await blocking(store.text, version)
+        apply(rt, text, f"{kind}/{version}")
+        await blocking(store.activate, version)
+        await blocking(rt.audit, who.who, f"activated {what} version {version}")
+        return {**entry, "active": True}
+
+
+for _kind in KINDS:
+    _register(_kind)
+
+
+def apply_active(rt: StationRuntime) -> None:
+    """At start: the station uses the versions last activated, not the config's defaults."""
+    for kind, (store_of, _parse, apply, _what) in KINDS.items():
+        store = store_of(rt)
+        active = store.index()["active"]
+        if active is not None:
+            apply(rt, store.text(active), f"{kind}/{active}")

@@ -1,0 +1,38 @@
+"""Helpers shared by the routers: the runtime of the request, blocking calls off the
+event loop with a deadline, size-limited uploads."""
+
+from __future__ import annotations
+
+import asyncio
+from typing import Any, Callable
+
+from fastapi import HTTPException, Request, UploadFile, status
+
+from api.runtime import StationRuntime
+
+#: a store call (SQLite with its 5 s busy timeout) or a short computation: give up after this
+STORE_TIMEOUT_S = 15.0
+
+
+def runtime(request: Request) -> StationRuntime:
+    return request.app.state.runtime
+
+
+async def blocking(fn: Callable[..., Any], *args: Any, timeout: float = STORE_TIMEOUT_S, **kwargs: Any) -> Any:
+    """Run a blocking call in a worker thread; 504 when it takes longer than ``timeout``."""
+    try:
+        return await asyncio.wait_for(asyncio.to_thread(fn, *args, **kwargs), timeout=timeout)
+    except asyncio.TimeoutError:
+        raise HTTPException(status.HTTP_504_GATEWAY_TIMEOUT, f"gave up after {timeout:g} s") from None
+
+
+async def read_upload(upload: UploadFile, limit: int, what: str) -> str:
+    """The upload's text (UTF-8), at most ``limit`` bytes: 413 above it, 422 when not text."""
+    data = await upload.read(limit + 1)
+    if len(data) > limit:
+        raise HTTPException(status.HTTP_413_REQUEST_ENTITY_TOO_LARGE,
+                            f"{what} is larger than {limit} bytes")
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise HTTPException(status.HTTP_422_UNPROCESSABLE_CONTENT, f"{what} is not UTF-8 text: {exc.reason}") from None

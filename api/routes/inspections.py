@@ -1,0 +1,134 @@
+"""Job orders in, job responses out (ISA-95's words): start an inspection, read results.
+
+``POST /job-orders`` starts an inspection and answers 202 with the job response as it
+is then (state ``running``); with an ``Idempotency-Key`` header a retried POST answers
+200 with the same inspection and starts nothing. ``GET /inspections/{id}`` is the job
+response: state, verdict and every characteristic with its limits and uncertainty;
+``/qif`` the same as a QIF 3.0 results document.
+"""
+
+from __future__ import annotations
+
+from datetime import datetime
+from typing import Annotated, Literal
+
+from fastapi import APIRouter, Depends, Header, HTTPException, Query, Request, Response, status
+from pydantic import BaseModel, ConfigDict, Field
+
+from api import auth
+from api.qif import qif_bytes
+from api.routes.common import blocking, runtime
+from api.runtime import Busy
+from station import __version__
+from station.parts import PartSpecError, load_part
+from station.parts.spec import PART_NUMBER_PATTERN
+from station.store import InspectionNotFound
+
+router = APIRouter(prefix="/api/v1", tags=["job orders and inspections"])
+
+#: the idempotency key column's length (station.store.models.KEY_LEN)
+KEY_MAX = 128
+
+
+class JobOrder(BaseModel):
+    """What the MES asks for: inspect this part."""
+
+    model_config = ConfigDict(extra="forbid")
+    part_number: str = Field(pattern=PART_NUMBER_PATTERN, description="a part spec's part number")
+    serial: str = Field(min_length=1, max_length=64, pattern=r"\S", description="the part's serial number")
+    order_id: str | None = Field(default=None, min_length=1, max_length=64, pattern=r"\S",
+                                 description="the production order (ISA-95 job order id)")
+
+
+def characteristic_json(c) -> dict:
+    return {"id": c.characteristic_id, "unit": c.unit, "nominal": c.nominal, "lower_limit": c.lower_limit,
+            "upper_limit": c.upper_limit, "measured": c.measured, "uncertainty_k2": c.uncertainty_k2,
+            "pass": c.passed}
+
+
+def job_response(rec) -> dict:
+    """An inspection record as the API shows it (the twin's truth stays out: simulation
+    bookkeeping, not a measurement)."""
+    out = {
+        "id": rec.id, "part_number": rec.part_number, "serial": rec.serial, "order_id": rec.order_id,
+        "state": rec.state, "result": rec.result, "reason": rec.reason,
+        "started_at": rec.started_at.isoformat(), "finished_at": rec.finished_at and rec.finished_at.isoformat(),
+        "traceability": dict(rec.traceability),
+        "links": {"self": f"/api/v1/inspections/{rec.id}", "qif": f"/api/v1/inspections/{rec.id}/qif"},
+    }
+    if hasattr(rec, "characteristics"):
+        out["characteristics"] = [characteristic_json(c) for c in rec.characteristics]
+        out["images"] = [{"subject": i.subject, "sha256": i.sha256} for i in rec.images]
+    return out
+
+
+async def _get_record(request: Request, inspection_id: str):
+    try:
+        return await blocking(runtime(request).store.get, inspection_id)
+    except InspectionNotFound:
+        raise HTTPException(status.HTTP_404_NOT_FOUND, f"no inspection {inspection_id!r}") from None
+
+
+@router.post("/job-orders", status_code=status.HTTP_202_ACCEPTED,
+             responses={200: {"description": "a retried order (same Idempotency-Key): the existing job"},
+                        409: {"description": "the station is busy with another job"},
+                        422: {"description": "invalid order or unknown part number"}})
+async def create_job_order(order: JobOrder, request: Request, response: Response,
+                           idempotency_key: Annotated[str | None, Header(min_length=1, max_length=KEY_MAX)] = None,
+                           who: auth.Principal = Depends(auth.mes)) -> dict:
+    rt = runtime(request)
+    try:
+        spec = await blocking(load_part, order.part_number, [rt.settings.parts_dir])
+    except PartSpecError as exc:
+        raise HTTPException(status.HTTP_422_UNPROCESSABLE_CONTENT, f"part {order.part_number}: {exc}") from None
+    try:
+        iid, created = await rt.start_inspection(spec, order.serial, order.order_id, idempotency_key)
+    except Busy as exc:
+        raise HTTPException(status.HTTP_409_CONFLICT, str(exc)) from None
+    rec = await _get_record(request, iid)
+    if not created:
+        response.status_code = status.HTTP_200_OK
+    response.headers["Location"] = f"/api/v1/inspections/{iid}"
+    return job_response(rec)
+
+
+@router.get("/inspections/{inspection_id}")
+async def get_inspection(inspection_id: str, request: Request, who: auth.Principal = Depends(auth.reader)) -> dict:
+    return job_response(await _get_record(request, inspection_id))
+
+
+@router.get("/inspections/{inspection_id}/qif", response_class=Response,
+            responses={200: {"content": {"application/xml": {}}, "description": "QIF 3.0 results document"},
+                       409: {"description": "the inspection is still running"}})
+async def get_inspection_qif(inspection_id: str, request: Request,
+                             who: auth.Principal = Depends(auth.reader)) -> Response:
+    rec = await _get_record(request, inspection_id)
+    if rec.state == "running":
+        raise HTTPException(status.HTTP_409_CONFLICT, f"inspection {inspection_id} is still running: no results yet")
+    body = qif_bytes(rec, software_version=__version__)
+    return Response(body, media_type="application/xml",
+                    headers={"Content-Disposition": f'inline; filename="{inspection_id}.qif"'})
+
+
+@router.get("/inspections")
+async def list_inspections(
+    request: Request,
+    since: Annotated[datetime | None, Query(description="started at or after (ISO 8601 with offset)")] = None,
+    until: Annotated[datetime | None, Query(description="started before (ISO 8601 with offset)")] = None,
+    part_number: Annotated[str | None, Query(max_length=64)] = None,
+    serial: Annotated[str | None, Query(max_length=64)] = None,
+    result: Literal["pass", "fail"] | None = None,
+    state: Literal["running", "complete", "aborted", "faulted", "interrupted"] | None = None,
+    limit: Annotated[int, Query(ge=1, le=1000)] = 50,
+    offset: Annotated[int, Query(ge=0, le=10**9)] = 0,
+    who: auth.Principal = Depends(auth.reader),
+) -> dict:
+    for name, t in (("since", since), ("until", until)):
+        if t is not None and t.utcoffset() is None:
+            raise HTTPException(status.HTTP_422_UNPROCESSABLE_CONTENT,
+                                f"{name} needs a time zone (e.g. 2024-05-01T08:00:00Z)")
+    store = runtime(request).store
+    filters = dict(since=since, until=until, part_number=part_number, serial=serial, result=result, state=state)
+    total = await blocking(store.count_inspections, **filters)
+    items = await blocking(store.list_inspections, **filters, limit=limit, offset=offset)
+    return {"total": total, "limit": limit, "offset": offset, "items": [job_response(r) for r in items]}

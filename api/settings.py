@@ -1,0 +1,43 @@
+"""What the API process is started with (``station serve`` fills it from its options)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+#: largest upload (model TOML, calibration JSON, recording CSV, part spec): these are
+#: small text files; a bigger body is a mistake or an attack, refused with 413
+MAX_UPLOAD_BYTES = 1024 * 1024
+
+
+@dataclass
+class Settings:
+    #: station config TOML (None: the embedded default, a simulated station)
+    config: str | Path | None = None
+    #: twin scenario (simulation only)
+    scenario: str | Path | None = None
+    #: data folder: database, image crops, part specs, models, calibrations
+    data_dir: str | Path = "var"
+    #: database URL (None: SQLite in the data folder)
+    db_url: str | None = None
+    #: simulation: moves run this much faster than real time
+    time_scale: float | None = None
+    max_upload_bytes: int = MAX_UPLOAD_BYTES
+    #: how often the camera stream grabs a frame while no inspection runs
+    idle_camera_hz: float = 2.0
+    #: SSE keep-alive comment interval (proxies close silent connections)
+    sse_keepalive_s: float = 15.0
+    #: longest a station command (reset, a driver read) may take before the API gives up
+    command_timeout_s: float = 10.0
+    #: tests and studies only: a sim.world.World whose part replaces the scenario's
+    world: Any = None
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def data_path(self) -> Path:
+        return Path(self.data_dir)
+
+    @property
+    def parts_dir(self) -> Path:
+        return self.data_path / "parts"

@@ -1,0 +1,42 @@
+"""``station serve``: the MES REST API (and later the operator panel) on uvicorn.
+
+The server owns the station: it opens one session at start (the twins too, in
+simulation) and closes it at shutdown (Ctrl-C, SIGTERM).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+from station.cli.common import fail
+
+
+def register(app: typer.Typer) -> None:
+    @app.command("serve")
+    def serve(
+        host: str = typer.Option("127.0.0.1", "--host", help="address to listen on (0.0.0.0: every interface)"),
+        port: int = typer.Option(8000, "--port", help="TCP port"),
+        config: Optional[Path] = typer.Option(None, "--config", help="station config TOML (default: simulated)"),
+        scenario: Optional[Path] = typer.Option(None, "--scenario", help="twin scenario TOML (simulation only)"),
+        data: Path = typer.Option(Path("var"), "--data", help="data folder: database, images, parts, models"),
+        time_scale: Optional[float] = typer.Option(None, "--time-scale", help="simulation: moves run this much faster"),
+        db: Optional[str] = typer.Option(None, "--db", help="database URL (default: SQLite in the data folder)"),
+    ) -> None:
+        """Run the REST API (docs/api.md). Create a token first: station token create --role mes."""
+        import uvicorn
+
+        from api.app import create_app
+        from api.settings import Settings
+
+        if time_scale is not None and not time_scale > 0:
+            fail("--time-scale must be positive")
+        settings = Settings(config=config, scenario=scenario, data_dir=data, db_url=db, time_scale=time_scale)
+        try:
+            # open SSE/MJPEG streams end when the runtime closes; this bounds the wait for them
+            uvicorn.run(create_app(settings), host=host, port=port, timeout_graceful_shutdown=5,
+                        log_level="info")
+        except OSError as exc:
+            fail(f"cannot listen on {host}:{port}: {exc.strerror or exc}")

@@ -1,0 +1,108 @@
+"""Job orders on the simulated station: start, poll to the end, idempotency, busy,
+filters and paging."""
+
+from __future__ import annotations
+
+import uuid
+from datetime import datetime, timedelta, timezone
+
+import pytest
+
+from tests.api.conftest import PART, wait_done, wait_idle
+
+
+def order(serial: str, **kw) -> dict:
+    return {"part_number": PART, "serial": serial, "order_id": kw.pop("order_id", "PO-1"), **kw}
+
+
+def test_job_order_runs_to_a_passing_result(api):
+    with api.client("mes") as c:
+        r = c.post("/api/v1/job-orders", json=order("SN-API-1"), headers={"Idempotency-Key": str(uuid.uuid4())})
+        assert r.status_code == 202, r.text
+        job = r.json()
+        assert job["state"] == "running" and job["part_number"] == PART and job["serial"] == "SN-API-1"
+        assert r.headers["location"] == f"/api/v1/inspections/{job['id']}"
+        done = wait_done(c, job["id"])
+    assert done["state"] == "complete" and done["result"] == "pass", done["reason"]
+    chars = {ch["id"]: ch for ch in done["characteristics"]}
+    assert set(chars) == {"hole_1.diameter", "hole_1.position", "hole_2.diameter", "hole_2.position"}
+    for ch in chars.values():
+        assert ch["pass"] is True
+        assert ch["lower_limit"] <= ch["measured"] <= ch["upper_limit"]
+        assert ch["uncertainty_k2"] > 0 and ch["unit"] == "mm"
+        assert "true_value" not in ch  # simulation bookkeeping stays out of the job response
+    assert chars["hole_1.position"]["nominal"] == 71.03
+
+
+def test_retried_order_returns_the_same_job_and_starts_nothing(api):
+    key = f"retry-{uuid.uuid4()}"
+    with api.client("mes") as c:
+        before = c.get("/api/v1/inspections", params={"serial": "SN-IDEM"}).json()["total"]
+        first = c.post("/api/v1/job-orders", json=order("SN-IDEM"), headers={"Idempotency-Key": key})
+        assert first.status_code == 202, first.text
+        again = c.post("/api/v1/job-orders", json=order("SN-IDEM"), headers={"Idempotency-Key": key})
+        assert again.status_code == 200, again.text
+        assert again.json()["id"] == first.json()["id"]
+        wait_done(c, first.json()["id"])
+        after_done = c.post("/api/v1/job-orders", json=order("SN-IDEM"), headers={"Idempotency-Key": key})
+        assert after_done.status_code == 200 and after_done.json()["id"] == first.json()["id"]
+        assert after_done.json()["state"] == "complete"
+        assert c.get("/api/v1/inspections", params={"serial": "SN-IDEM"}).json()["total"] == before + 1
+
+
+def test_second_order_while_busy_is_409(api):
+    with api.client("mes") as c:
+        wait_idle(c)
+        first = c.post("/api/v1/job-orders", json=order("SN-BUSY-1"))
+        assert first.status_code == 202
+        second = c.post("/api/v1/job-orders", json=order("SN-BUSY-2"))
+        assert second.status_code == 409 and "running" in second.json()["detail"]
+        wait_done(c, first.json()["id"])
+        assert c.get("/api/v1/inspections", params={"serial": "SN-BUSY-2"}).json()["total"] == 0
+
+
+@pytest.mark.parametrize("body, fragment", [
+    ({"part_number": "NO-SUCH-PART", "serial": "S"}, "NO-SUCH-PART"),
+    ({"part_number": PART}, "serial"),
+    ({"part_number": PART, "serial": "S", "colour": "red"}, "colour"),
+    ({"part_number": "../etc/passwd", "serial": "S"}, "part_number"),
+])
+def test_invalid_orders_are_422_and_say_why(api, body, fragment):
+    with api.client("mes") as c:
+        r = c.post("/api/v1/job-orders", json=body)
+    assert r.status_code == 422
+    assert fragment in r.text
+
+
+def test_unknown_inspection_is_404(api):
+    with api.client("mes") as c:
+        assert c.get(f"/api/v1/inspections/{uuid.uuid4()}").status_code == 404
+
+
+def test_filters_and_paging(api):
+    with api.client("admin") as c:
+        wait_idle(c)
+        ids = []
+        for i in range(2):
+            r = c.post("/api/v1/job-orders", json=order(f"SN-PAGE-{i}", order_id="PO-PAGE"))
+            assert r.status_code == 202, r.text
+            ids.append(wait_done(c, r.json()["id"])["id"])
+        everything = c.get("/api/v1/inspections", params={"limit": 1000}).json()
+        assert everything["total"] >= 2 and len(everything["items"]) == everything["total"]
+        page1 = c.get("/api/v1/inspections", params={"limit": 1, "offset": 0}).json()
+        page2 = c.get("/api/v1/inspections", params={"limit": 1, "offset": 1}).json()
+        assert page1["total"] == page2["total"] == everything["total"]
+        assert page1["items"][0]["id"] == everything["items"][0]["id"]  # newest first
+        assert page2["items"][0]["id"] == everything["items"][1]["id"]
+        one = c.get("/api/v1/inspections", params={"serial": "SN-PAGE-1"}).json()
+        assert one["total"] == 1 and one["items"][0]["id"] == ids[1]
+        assert c.get("/api/v1/inspections", params={"part_number": "OTHER"}).json()["total"] == 0
+        passed = c.get("/api/v1/inspections", params={"result": "pass", "limit": 1000}).json()
+        assert all(i["result"] == "pass" for i in passed["items"]) and passed["total"] >= 2
+        assert c.get("/api/v1/inspections", params={"state": "running"}).json()["total"] == 0
+        future = (datetime.now(timezone.utc) + timedelta(hours=1)).isoformat()
+        assert c.get("/api/v1/inspections", params={"since": future}).json()["total"] == 0
+        assert c.get("/api/v1/inspections", params={"until": future}).json()["total"] == everything["total"]
+        assert c.get("/api/v1/inspections", params={"since": "2024-01-01T00:00:00"}).status_code == 422  # no zone
+        assert c.get("/api/v1/inspections", params={"result": "maybe"}).status_code == 422
+        assert c.get("/api/v1/inspections", params={"limit": 0}).status_code == 422
