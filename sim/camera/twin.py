@@ -27,6 +27,7 @@ import numpy as np
 
 from drivers.interfaces import CommunicationLost, DeviceTimeout, Frame
 from drivers.interfaces import Camera
+from sim.camera.lens import BrownLens
 from sim.camera.render import FrameParams, HoleSpec, render_frame
 from sim.faults import CAMERA_FAULTS, FaultKind, FaultSwitch
 from sim.world import World
@@ -50,7 +51,13 @@ class CameraOptics:
     #: 10 um per pixel: a 0.7 mm hole is 70 px across, inside the 20-100 px the vision
     #: stage is specified for, and the 1280 x 1024 frame sees 12.8 x 10.2 mm of wall
     mm_per_px: float = 0.010
-    params: FrameParams = field(default_factory=FrameParams)
+    params: FrameParams = field(default_factory=lambda: FrameParams(lens=ENDOSCOPE_LENS))
+
+
+#: a side-view endoscope's lens: moderate barrel distortion (-2.7 % at the frame's
+#: corner), as wide-angle borescope optics have; the station measures each hole after
+#: re-centring it on the optical axis, where the distortion vanishes
+ENDOSCOPE_LENS = BrownLens(fx_px=1400.0, fy_px=1400.0, cx_px=639.5, cy_px=511.5, k1=-0.08, k2=0.01)
 
 
 class CameraTwin(Camera):
@@ -98,7 +105,9 @@ class CameraTwin(Camera):
 
     async def grab(self) -> Frame:
         if not self._connected:
-            raise CommunicationLost("camera is not connected", self.name)
+            # the next call reconnects (the drivers' contract, docs/drivers.md): a camera
+            # whose link came back delivers again without a restart of the station
+            await self.connect()
         if self.faults.is_active(FaultKind.DROP_CONNECTION):
             self._connected = False
             raise CommunicationLost("camera stopped delivering frames (link lost)", self.name)
