@@ -30,7 +30,7 @@ async def read_upload(upload: UploadFile, limit: int, what: str) -> str:
     """The upload's text (UTF-8), at most ``limit`` bytes: 413 above it, 422 when not text."""
     data = await upload.read(limit + 1)
     if len(data) > limit:
-        raise HTTPException(status.HTTP_413_REQUEST_ENTITY_TOO_LARGE,
+        raise HTTPException(status.HTTP_413_CONTENT_TOO_LARGE,
                             f"{what} is larger than {limit} bytes")
     try:
         return data.decode("utf-8")
