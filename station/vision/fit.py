@@ -125,7 +125,7 @@ def robust_circle(
         cx, cy, r = cx + step[0], cy + step[1], r + step[2]
         if oval:
             h2 = h2 + step[3:]
-        if np.abs(step).max() < 1e-5:
+        if np.abs(step).max() < 1e-4:  # 1e-4 px: two orders below the accuracy sought
             break
     dx, dy = pts[:, 0] - cx, pts[:, 1] - cy
     th = np.arctan2(dy, dx)

@@ -64,15 +64,29 @@ class HoleMeasurement:
         return {k: v for k, v in d.items() if v is not None}
 
 
-def _profile_weights(sigma2: np.ndarray) -> np.ndarray:
-    """0/1 weights dropping rays whose edge width is far from the rim's typical width.
+def _profile_weights(sigma2: np.ndarray, profiles: np.ndarray, peak: np.ndarray) -> np.ndarray:
+    """Prior weights (0..1) of the rays from the quality of their edge profiles.
 
-    A blurred rim has one width all round; a ray whose profile is twice as wide or
-    half as narrow has merged with a groove or grain, and its peak is displaced.
+    A blurred rim has one edge profile all round.  A ray whose profile is twice as wide
+    or half as narrow has merged with a groove or grain: weight 0.  Otherwise the
+    weight falls with the RMS deviation of the ray's profile (scaled to its peak) from
+    the rim's median profile, relative to that deviation's median over the rim:
+    w = 1 / (1 + (dev / median dev)^2), i.e. inverse-variance weighting if a ray's
+    edge error grows in proportion to how much texture or noise distorts its profile.
     """
     med = np.nanmedian(sigma2)
     ratio = sigma2 / med
-    return ((ratio > 0.5) & (ratio < 2.0)).astype(float)
+    keep = (ratio > 0.5) & (ratio < 2.0)
+    prof = profiles / np.maximum(peak, 1e-9)[:, None]
+    # the rays' windows are aligned on their discrete peaks (+/- half a step): fit the
+    # template and its derivative (a sub-sample shift, to first order) and keep what
+    # neither explains
+    tmpl = np.median(prof, axis=0)
+    basis = np.stack([tmpl, np.gradient(tmpl)], axis=1)
+    coef, *_ = np.linalg.lstsq(basis, prof.T, rcond=None)
+    dev = np.sqrt(((prof - (basis @ coef).T) ** 2).mean(axis=1))
+    scale = max(float(np.median(dev)), 1e-6)
+    return np.where(keep, 1.0 / (1.0 + (dev / scale) ** 2), 0.0)
 
 
 def _fine(image: np.ndarray, cx: float, cy: float, r_min: float, r_max: float, n_rays: int, step_px: float = 0.5):
@@ -103,7 +117,9 @@ def measure_candidate(
     inl = ransac_circle(wide.points, 1.0, rng)
     if inl.sum() < 6:
         return None
-    first = robust_circle(wide.points[inl], taubin_circle(wide.points[inl]), min_scale_px=0.2)
+    # only a start for the narrow search (which recasts its rays beyond 0.3 px): a few
+    # IRLS steps suffice
+    first = robust_circle(wide.points[inl], taubin_circle(wide.points[inl]), min_scale_px=0.2, iterations=5)
     cx, cy, r = first.cx, first.cy, first.r
     # pass 2 (twice: a cut hole's first centre may be off by a pixel): narrow window
     for attempt in range(2):
@@ -116,7 +132,7 @@ def measure_candidate(
         # ovality only where the whole rim is seen: on a short arc the second harmonic
         # trades off against the radius and the centre
         whole = not edges.cut_by_border
-        fit = robust_circle(edges.points, (cx, cy, r), weights=_profile_weights(edges.sigma2), oval=whole)
+        fit = robust_circle(edges.points, (cx, cy, r), weights=_profile_weights(edges.sigma2, edges.profiles, edges.peak), oval=whole)
         moved = np.hypot(fit.cx - cx, fit.cy - cy)
         cx, cy, r = fit.cx, fit.cy, fit.r
         # rays cast from a centre 0.3 px off are still radial to within 0.3/r rad: the
