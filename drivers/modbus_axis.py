@@ -22,6 +22,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import time
 from typing import Awaitable, Callable
 
 from pymodbus.client import AsyncModbusSerialClient, AsyncModbusTcpClient
@@ -46,6 +47,14 @@ log = logging.getLogger(__name__)
 #: how often wait_in_position polls the status word; 20 ms is well below a move's
 #: duration and keeps the bus load at 50 requests/s per axis
 DEFAULT_POLL_S = 0.02
+#: how often a request in flight checks its link (closed by the peer, corrupt reply)
+LINK_WATCH_S = 0.005
+#: bytes came back but no valid reply was made of them this long after: corrupt
+CORRUPT_REPLY_GRACE_S = 0.05
+
+
+class _CorruptReply(Exception):
+    """Bytes arrived for the request in flight, but pymodbus made no reply of them."""
 
 
 class ModbusServoAxis(_ServoAxis):
@@ -73,6 +82,7 @@ class ModbusServoAxis(_ServoAxis):
             raise ValueError("heartbeat_period_s must be at most half the watchdog timeout")
         self._client_factory = client_factory
         self._client: AsyncModbusTcpClient | AsyncModbusSerialClient | None = None
+        self._rx_since_send: float | None = None
         self.name = name
         self.device_id = int(device_id)
         self.unit_per_count = float(unit_per_count)
@@ -98,21 +108,25 @@ class ModbusServoAxis(_ServoAxis):
     def tcp(cls, host: str, port: int, **kw) -> "ModbusServoAxis":
         timeout_s = kw.get("timeout_s", 0.5)
 
-        def factory():
+        def factory(trace_packet=None):
             # retries=0: the driver, not pymodbus, decides about repeating a request
-            return AsyncModbusTcpClient(host, port=port, timeout=timeout_s, retries=0, reconnect_delay=0)
+            return AsyncModbusTcpClient(host, port=port, timeout=timeout_s, retries=0, reconnect_delay=0,
+                                        trace_packet=trace_packet)
 
+        factory.accepts_trace = True
         return cls(factory, **kw)
 
     @classmethod
     def rtu(cls, serial_port: str, baudrate: int = 115200, **kw) -> "ModbusServoAxis":
         timeout_s = kw.get("timeout_s", 0.5)
 
-        def factory():
+        def factory(trace_packet=None):
             return AsyncModbusSerialClient(
-                serial_port, baudrate=baudrate, timeout=timeout_s, retries=0, reconnect_delay=0
+                serial_port, baudrate=baudrate, timeout=timeout_s, retries=0, reconnect_delay=0,
+                trace_packet=trace_packet,
             )
 
+        factory.accepts_trace = True
         return cls(factory, **kw)
 
     # ------------------------------------------------------------------ scaling
@@ -129,7 +143,11 @@ class ModbusServoAxis(_ServoAxis):
         if self._client is not None and self._client.connected:
             return self._client
         self._drop_client()
-        client = self._client_factory()
+        if getattr(self._client_factory, "accepts_trace", False):
+            client = self._client_factory(trace_packet=self._trace_packet)
+        else:
+            client = self._client_factory()
+        self._rx_since_send = None
         try:
             ok = await asyncio.wait_for(client.connect(), self.timeout_s)
         except (asyncio.TimeoutError, OSError, ModbusException) as exc:
@@ -140,6 +158,39 @@ class ModbusServoAxis(_ServoAxis):
             raise CommunicationLost("cannot connect (refused or port missing)", self.name)
         self._client = client
         return client
+
+    def _trace_packet(self, sending: bool, data: bytes) -> bytes:
+        """pymodbus' hook on every frame sent and every chunk received: notes when bytes
+        came back for the request in flight (a reply pymodbus then discards as corrupt
+        leaves it waiting for its timeout; the watch in :meth:`_await_reply` does not)."""
+        if sending:
+            self._rx_since_send = None
+        elif data and self._rx_since_send is None:
+            self._rx_since_send = time.monotonic()
+        return data
+
+    async def _await_reply(self, client, call: Callable[[object], Awaitable]):
+        """The request, watched: a link the peer closed, or bytes that arrived but made no
+        reply (garbage, a bad checksum) end it at once, instead of after the full timeout
+        -- during which the request would hold the link and starve the heartbeat until the
+        drive's watchdog trips."""
+        task = asyncio.ensure_future(call(client))
+        grace = max(CORRUPT_REPLY_GRACE_S, 0.1 * self.timeout_s)
+        try:
+            while True:
+                done, _ = await asyncio.wait({task}, timeout=LINK_WATCH_S)
+                if done:
+                    return task.result()
+                if not client.connected:
+                    raise ConnectionException("connection closed by the drive")
+                rx = self._rx_since_send
+                if rx is not None and time.monotonic() - rx > grace:
+                    raise _CorruptReply("a reply arrived but was not a valid frame (garbage or bad checksum)")
+        finally:
+            if not task.done():
+                task.cancel()
+                with contextlib.suppress(asyncio.CancelledError, Exception):
+                    await task
 
     def _drop_client(self) -> None:
         if self._client is not None:
@@ -152,7 +203,10 @@ class ModbusServoAxis(_ServoAxis):
         client = await self._ensure_connected()
         try:
             # a small margin over pymodbus' own timeout, so its error (more precise) wins
-            response = await asyncio.wait_for(call(client), self.timeout_s * 1.5)
+            response = await asyncio.wait_for(self._await_reply(client, call), self.timeout_s * 1.5)
+        except _CorruptReply as exc:
+            self._drop_client()
+            raise ProtocolError(f"{what}: {exc}", self.name) from None
         except asyncio.TimeoutError:
             self._drop_client()
             raise DeviceTimeout(f"{what}: no reply within {self.timeout_s} s", self.name) from None
