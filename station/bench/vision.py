@@ -83,11 +83,11 @@ METHODS = {"ours": ours, "hough_gradient_alt": hough_alt, "contours_fit_ellipse"
 SHORT = {"ours": "ours", "hough_gradient_alt": "Hough ALT", "contours_fit_ellipse": "fitEllipse"}
 
 
-def run(frames: int = 40, seed: int = 1000) -> dict:
+def run(frames: int = 40, seed: int = 1000, envelope: str = "station") -> dict:
     from sim.camera.render import random_frame  # the CLI side may import sim
 
     cv2.setNumThreads(1)
-    rendered = [random_frame(seed + i) for i in range(frames)]
+    rendered = [random_frame(seed + i, envelope=envelope) for i in range(frames)]
     results = {}
     for name, fn in METHODS.items():
         fn(rendered[0].image)  # warm-up (imports, allocations)
@@ -108,6 +108,7 @@ def run(frames: int = 40, seed: int = 1000) -> dict:
     return {
         "frames": frames,
         "seed": seed,
+        "envelope": envelope,
         "frame_size_px": [rendered[0].image.shape[1], rendered[0].image.shape[0]],
         "whole_holes": whole,
         "partial_holes": cut,
@@ -129,12 +130,13 @@ def register(bench_app: typer.Typer) -> None:
     def vision(
         frames: int = typer.Option(40, "--frames", min=1, help="rendered 1280x1024 frames"),
         seed: int = typer.Option(1000, "--seed"),
+        envelope: str = typer.Option("station", "--envelope", help="station (default) or wide (stress test)"),
         as_json: bool = typer.Option(False, "--json", help="one JSON object on stdout"),
     ) -> None:
         """Hole measurement: ours vs HoughCircles(ALT) vs contours+fitEllipse."""
         from rich.table import Table
 
-        r = run(frames, seed)
+        r = run(frames, seed, envelope)
         if as_json:
             print_json(r)
             return
