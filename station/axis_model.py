@@ -38,7 +38,8 @@ class AxisModel:
     def predict(self, recording: Recording) -> np.ndarray:
         """The deviation this model expects at every row of ``recording`` (no noise)."""
         return self.curve.evaluate(
-            recording.target, recording.direction, recording.time_s, recording.temperature_c
+            recording.target, recording.direction, recording.time_s, recording.temperature_c,
+            recording.numeric_channels() or None,
         )
 
     def with_effects(self, *effects) -> "AxisModel":

@@ -56,19 +56,26 @@ class EvalContext:
     direction: np.ndarray | None = None
     time_s: np.ndarray | None = None
     temperature_c: np.ndarray | None = None
+    #: further measured channels by column name (e.g. ``angle_arcsec``: the pitch or
+    #: yaw the laser's angular optics recorded at each point), for effects that need them
+    channels: Mapping[str, np.ndarray] | None = None
 
     @property
     def k(self) -> float:
         return k_for_kind(self.kind)
 
+    def channel(self, name: str) -> np.ndarray | None:
+        return None if self.channels is None else self.channels.get(name)
+
     @classmethod
-    def make(cls, x, kind="linear", direction=None, time_s=None, temperature_c=None) -> "EvalContext":
+    def make(cls, x, kind="linear", direction=None, time_s=None, temperature_c=None, channels=None) -> "EvalContext":
         def arr(v):
             if v is None:
                 return None
             return np.broadcast_to(np.asarray(v, dtype=float), np.shape(x)).astype(float)
 
-        return cls(np.asarray(x, dtype=float), kind, arr(direction), arr(time_s), arr(temperature_c))
+        ch = None if not channels else {k: arr(v) for k, v in channels.items()}
+        return cls(np.asarray(x, dtype=float), kind, arr(direction), arr(time_s), arr(temperature_c), ch)
 
 
 class Effect:
@@ -252,10 +259,37 @@ class LocalDefect(Effect):
         return self.amplitude * np.exp(-0.5 * ((ctx.x - self.centre) / w) ** 2)
 
 
+#: the recording column an Abbe error reads: the angular error (pitch or yaw) that
+#: the laser's angular optics recorded at each point, arcsec
+ABBE_CHANNEL = "angle_arcsec"
+
+
+@dataclass(frozen=True)
+class AbbeError(Effect):
+    """``arm_mm * angle``: the angular error at each point times the Abbe offset."""
+
+    arm_mm: float = 0.0
+    name: ClassVar[str] = "abbe"
+    kinds: ClassVar[tuple[str, ...]] = ("linear",)
+    needs: ClassVar[tuple[str, ...]] = (ABBE_CHANNEL,)
+    explanation: ClassVar[str] = (
+        "the Abbe error: the point measured is offset from the line the scale (or the laser "
+        "beam) measures along, so every pitch or yaw of the carriage tilts the offset and "
+        "shifts the point by offset x angle; found from the angle recorded at each point"
+    )
+
+    def evaluate(self, ctx):
+        angle = ctx.channel(ABBE_CHANNEL)
+        if angle is None:
+            return np.zeros_like(ctx.x)
+        # arcsec -> rad (pi / 648000), mm -> deviation unit (k: um per mm)
+        return self.arm_mm * angle * (np.pi / 648000.0) * ctx.k
+
+
 #: the contract's vocabulary by name, plus the effects the station adds to it
 VOCABULARY: dict[str, type[Effect]] = {
     cls.name: cls
-    for cls in (Offset, Scale, Backlash, Periodic, ThermalExpansion, ThermalDrift, Eccentricity, LocalDefect)
+    for cls in (Offset, Scale, Backlash, Periodic, ThermalExpansion, ThermalDrift, Eccentricity, LocalDefect, AbbeError)
 }
 
 
@@ -343,8 +377,8 @@ class ErrorCurve:
             return np.interp(np.mod(x, 360.0), t, d, period=360.0) if len(t) > 1 else np.full_like(x, d[0])
         return np.interp(x, t, d)
 
-    def evaluate(self, x, direction=None, time_s=None, temperature_c=None) -> np.ndarray:
-        ctx = EvalContext.make(x, self.kind, direction, time_s, temperature_c)
+    def evaluate(self, x, direction=None, time_s=None, temperature_c=None, channels=None) -> np.ndarray:
+        ctx = EvalContext.make(x, self.kind, direction, time_s, temperature_c, channels)
         return self.evaluate_ctx(ctx)
 
     def evaluate_ctx(self, ctx: EvalContext) -> np.ndarray:

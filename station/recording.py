@@ -65,6 +65,18 @@ class Recording:
     def __len__(self) -> int:
         return int(self.target.size)
 
+    def numeric_channels(self) -> dict[str, np.ndarray]:
+        """The extra columns whose every value is a finite number (e.g. ``angle_arcsec``)."""
+        out = {}
+        for name, values in self.extra.items():
+            try:
+                arr = np.array([float(v) for v in values])
+            except ValueError:
+                continue
+            if arr.size and np.all(np.isfinite(arr)):
+                out[name] = arr
+        return out
+
     @property
     def runs(self) -> np.ndarray:
         return np.unique(self.run)

@@ -45,6 +45,8 @@ class Prepared:
     prev: np.ndarray            # index of the previous row of the same run, -1 at a run start
     outliers: list[dict] = field(default_factory=list)
     not_analysed: list[dict] = field(default_factory=list)
+    #: further numeric columns of the recording (e.g. angle_arcsec), usable rows only
+    channels: dict[str, np.ndarray] = field(default_factory=dict)
 
     @property
     def n(self) -> int:
@@ -57,6 +59,7 @@ class Prepared:
             self.x[sel], self.kind, self.direction[sel],
             None if self.time_s is None else self.time_s[sel],
             None if self.temperature_c is None else self.temperature_c[sel],
+            {k: v[sel] for k, v in self.channels.items()} or None,
         )
 
     def subset(self, mask: np.ndarray) -> "Prepared":
@@ -67,6 +70,7 @@ class Prepared:
             None if self.temperature_c is None else self.temperature_c[idx],
             self.residual[idx], self.line[idx], self.group[idx],
             previous_in_run(self.run[idx]), [], [],
+            {k: v[idx] for k, v in self.channels.items()},
         )
 
 
@@ -195,5 +199,6 @@ def prepare(model: AxisModel, rec: Recording) -> Prepared:
         prev=previous_in_run(rec.run[keep]),
         outliers=outliers,
         not_analysed=not_analysed,
+        channels={k: v[keep] for k, v in rec.numeric_channels().items()},
     )
     return prep

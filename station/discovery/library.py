@@ -16,7 +16,8 @@ from typing import Callable, ClassVar
 import numpy as np
 
 from station.effects import (
-    Backlash, Eccentricity, Effect, EvalContext, LocalDefect, Offset, Periodic, Scale, ThermalDrift, ThermalExpansion,
+    ABBE_CHANNEL, AbbeError, Backlash, Eccentricity, Effect, EvalContext, LocalDefect, Offset, Periodic, Scale,
+    ThermalDrift, ThermalExpansion,
 )
 from station.discovery.data import Prepared
 
@@ -203,7 +204,23 @@ def candidates(prep: Prepared, exclude: set[str] = frozenset()) -> list[Candidat
                              bounds={"width": (0.5 * widths[0], 2.0 * widths[-1]),
                                      "centre": (float(prep.x.min()), float(prep.x.max()))},
                              physical=_phys_local))
+    angle = prep.channels.get(ABBE_CHANNEL)
+    if prep.kind == "linear" and angle is not None and np.ptp(angle) > 0:
+        # linear in the arm: one parameter, no scan
+        out.append(Candidate("abbe", ("arm_mm",), lambda p: [AbbeError(0.0)], "arm_mm",
+                             physical=_phys_abbe))
     return [c for c in out if c.name not in exclude]
+
+
+#: an Abbe offset longer than this is not an offset on this station but a sign that the
+#: angle column is not the angle of this axis (the whole machine is under a metre)
+MAX_ABBE_ARM_MM = 1000.0
+
+
+def _phys_abbe(e: AbbeError, prep: Prepared) -> str | None:
+    if abs(e.arm_mm) > MAX_ABBE_ARM_MM:
+        return f"an Abbe offset of {e.arm_mm:.0f} mm is longer than the machine"
+    return None
 
 
 #: the measurement that separates two effects that this recording cannot tell apart
@@ -228,6 +245,12 @@ SEPARATING_MEASUREMENT = {
         "a run in reversed target order: a scale error follows position, drift follows time",
     frozenset({"offset", "scale"}):
         "targets nearer the travel's zero",
+    frozenset({"abbe", "scale"}):
+        "a second run with the reflector at another height: the Abbe error scales with the "
+        "offset, a scale error does not",
+    frozenset({"abbe", "periodic"}):
+        "a second run with the reflector at another height: the Abbe error scales with the "
+        "offset, a periodic error of the scale does not",
 }
 
 
