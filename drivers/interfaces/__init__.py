@@ -45,6 +45,12 @@ class ProtocolError(DriverError):
     """A reply arrived but is not valid: bad checksum, bad framing, a Modbus exception response."""
 
 
+class BadFrame(ProtocolError):
+    """The camera delivered a frame that carries no image of the scene: black (no
+    signal) or frozen (the previous image again under a new number). Retried like a
+    garbled reply; persistent, it is a camera fault."""
+
+
 class DriveFault(DriverError):
     """The drive reports a fault; ``code`` is the drive's fault code (see docs/register-map.md)."""
 

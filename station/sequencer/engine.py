@@ -36,6 +36,7 @@ from drivers.interfaces import (
     RotaryAxis,
 )
 from station.sequencer import messages as m
+from station.sequencer.frames import FrameCheck
 
 
 class State(str, enum.Enum):
@@ -118,6 +119,8 @@ class Engine:
         self._pause_requested = False
         self._task: asyncio.Task | None = None
         self.retries_used = 0
+        #: black and frozen frames are camera faults, not images to measure
+        self.frame_check = FrameCheck()
 
     # ------------------------------------------------------------------ events
     def subscribe(self, fn: Callable[[EngineEvent], None]) -> None:
@@ -234,6 +237,14 @@ class Engine:
                 plan.close()
                 await self._fault(exc)
                 raise PlanEnded("faulted", self.reason) from exc
+            except asyncio.CancelledError:
+                raise
+            except Exception as exc:  # noqa: BLE001 - a bug in a plan or the vision stage
+                # must not leave the machine "running" with nobody driving it: stop the
+                # axes and fault, so that reset and home bring the station back
+                plan.close()
+                await self._fault(exc)
+                raise PlanEnded("faulted", self.reason) from exc
 
     async def _execute(self, msg: m.Msg) -> Any:
         d = self.devices
@@ -275,12 +286,31 @@ class Engine:
         if isinstance(msg, m.Capture):
             if d.camera is None:
                 raise EngineStateError("the plan captures a frame, but the station has no camera")
-            return await self._with_retries(d.camera.grab, "grab frame")
+            return await self._with_retries(self._grab_checked, "grab frame")
         if isinstance(msg, m.Measure):
             if d.measure is None:
                 raise EngineStateError("the plan measures, but the station has no vision stage")
             return await asyncio.to_thread(d.measure, msg.image)
         raise TypeError(f"unknown message {msg!r}")
+
+    async def _grab_checked(self):
+        frame = await self.devices.camera.grab()
+        self.frame_check.check(frame, getattr(self.devices.camera, "name", "camera"))
+        return frame
+
+    async def axes_problem(self) -> str | None:
+        """Why the axes cannot run a plan as they are (a fault that arrived while the
+        engine was ready, a drive disabled or no longer referenced), or None."""
+        for ax in (self.devices.z, self.devices.c):
+            st = await self._with_retries(ax.status, f"status {getattr(ax, 'name', 'axis')}")
+            name = getattr(ax, "name", "axis")
+            if st.fault or st.estop or st.following_error:
+                return f"{name} reports fault 0x{st.fault_code:04X}"
+            if not st.enabled:
+                return f"{name} is not enabled"
+            if not st.homed:
+                return f"{name} is not referenced"
+        return None
 
     async def _with_retries(self, call: Callable[[], Awaitable[Any]], what: str) -> Any:
         attempt = 0
@@ -308,7 +338,7 @@ class Engine:
             except Exception:  # noqa: BLE001 - stopping must try every axis
                 pass
 
-    async def _fault(self, exc: DriverError) -> None:
+    async def _fault(self, exc: Exception) -> None:
         await self._stop_axes()
         code = getattr(exc, "code", None)
         estop = code == 0x12
