@@ -24,7 +24,9 @@ from station.inspection.scan import CameraGeometry, HoleResult, HoleTarget, Scan
 from station.inspection.scanlog import write_scan_log
 from station.kinematics.model import StationModel
 from station.parts.spec import PartSpec
+from drivers.interfaces import DriverError
 from station.sequencer.engine import Engine, EngineEvent, PlanEnded, State
+from station.store.errors import StoreError
 from station.store.records import Measurement
 
 
@@ -65,6 +67,11 @@ class InspectionOutcome:
                 "result": self.result, "reason": self.reason, "characteristics": chars}
 
 
+#: per store (by id): inspections whose record could not be finished (store failure),
+#: with the reason to finish them with once the store takes writes again
+_UNFINISHED: dict[int, dict[str, str]] = {}
+
+
 def hole_targets(part: PartSpec) -> list[HoleTarget]:
     return [HoleTarget(h.id, h.position.nominal, h.angle_deg, h.diameter.nominal) for h in part.holes]
 
@@ -83,7 +90,18 @@ class InspectionService:
         self.truth = truth
 
     async def ensure_ready(self) -> None:
-        """Home when needed; after a fault or a released e-stop, reset first."""
+        """Home when needed; after a fault or a released e-stop, reset first. A ready
+        engine's axes are asked first: a drive that faulted (or lost its reference)
+        while nothing ran is reset and homed again, instead of failing the next move."""
+        if self.engine.state == State.READY:
+            try:
+                problem = await self.engine.axes_problem()
+            except DriverError as exc:
+                await self.engine._fault(exc)
+                raise PlanEnded("faulted", self.engine.reason) from exc
+            if problem:
+                self.engine._emit("note", f"{problem}: reset and home before the inspection")
+                await self.engine.reset()
         if self.engine.state in (State.FAULTED, State.ESTOPPED):
             await self.engine.reset()
         if self.engine.state == State.IDLE:
@@ -98,6 +116,7 @@ class InspectionService:
             "part_spec": part.part_number,
             **self.traceability,
         }
+        await self._close_unfinished()
         iid = await asyncio.to_thread(self.store.begin_inspection, part.part_number, serial=serial, order_id=order_id,
                                       traceability=trace, idempotency_key=idempotency_key)
         log = lambda ev: self._log(iid, ev)  # noqa: E731
@@ -112,14 +131,17 @@ class InspectionService:
                 await asyncio.to_thread(self.store.finish, iid, state, None, ended.reason)
                 return InspectionOutcome(iid, part.part_number, serial, state, None, ended.reason)
             outcome = self._judge(iid, part, serial, results)
-            for r in results:
-                if r.crop is not None and r.crop.size:
-                    await asyncio.to_thread(self.store.add_image, iid, r.name, f"{r.name}", r.crop)
             measurements = [Measurement(c.id, c.nominal, c.lower_limit, c.upper_limit, c.measured, c.passed,
                                         uncertainty_k2=c.uncertainty_k2, true_value=c.true_value)
                             for c in outcome.characteristics]
-            await asyncio.to_thread(self.store.finish, iid, "complete", outcome.result, outcome.reason or None,
-                                    measurements=measurements)
+            try:
+                for r in results:
+                    if r.crop is not None and r.crop.size:
+                        await asyncio.to_thread(self.store.add_image, iid, r.name, f"{r.name}", r.crop)
+                await asyncio.to_thread(self.store.finish, iid, "complete", outcome.result, outcome.reason or None,
+                                        measurements=measurements)
+            except StoreError as exc:
+                return await self._not_stored(iid, part, serial, exc)
             # after the commit: the log is for discovery, the result must not wait on it
             try:
                 await asyncio.to_thread(write_scan_log, self.store.data_dir, iid, results)
@@ -128,6 +150,36 @@ class InspectionService:
             return outcome
         finally:
             self.engine._listeners.remove(log)
+
+    async def _not_stored(self, iid: str, part: PartSpec, serial: str, exc: StoreError) -> InspectionOutcome:
+        """The result could not be committed: nothing of it is reported as a result. The
+        record is finished ``faulted`` with the reason and an alarm when the store takes
+        that much; when it takes nothing, it stays ``running`` and the next inspection
+        (or the next start: recovery) closes it."""
+        reason = f"result not stored: {type(exc).__name__}: {exc}"
+        self._alarm(iid, reason)
+        try:
+            await asyncio.to_thread(self.store.finish, iid, "faulted", None, reason)
+        except StoreError:
+            _UNFINISHED.setdefault(id(self.store), {})[iid] = reason
+        return InspectionOutcome(iid, part.part_number, serial, "faulted", None, reason)
+
+    def _alarm(self, iid: str | None, text: str) -> None:
+        try:
+            self.store.log_event("alarm", text, iid)
+        except Exception:  # noqa: BLE001 - the store is what failed; the outcome carries the reason
+            pass
+
+    async def _close_unfinished(self) -> None:
+        """Records an earlier inspection could not finish because the store failed."""
+        pending = _UNFINISHED.get(id(self.store)) or {}
+        for iid, reason in sorted(pending.items()):
+            try:
+                await asyncio.to_thread(self.store.finish, iid, "faulted", None, reason)
+                self._alarm(iid, "closed as faulted once the results store was back")
+            except StoreError:
+                continue
+            pending.pop(iid, None)
 
     def _judge(self, iid: str, part: PartSpec, serial: str, results: list[HoleResult]) -> InspectionOutcome:
         by_hole = {r.name: r for r in results}
