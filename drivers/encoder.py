@@ -4,7 +4,9 @@ Protocol: ``drivers.interfaces.encoder_protocol`` (docs/encoder-protocol.md), an
 query/response with an XOR checksum.  A serial line delivers noise, half frames and
 stale bytes, so the reader:
 
-* discards stale input before each query (``reset_input_buffer``);
+* discards stale input before each query (``reset_input_buffer``); after a timeout,
+  waits until the line has been quiet (the late answer to the timed-out query must not
+  be taken for the next one: the protocol has no sequence number);
 * collects bytes until CR LF or a deadline; in a line with noise before a frame it
   finds the frame by its start letter (resync); a line that holds no valid frame is a
   :class:`ProtocolError` (checksum or layout), no line at all a :class:`DeviceTimeout`;
@@ -109,6 +111,12 @@ class SerialGratingEncoder(PositionEncoder):
         self._owns_transport = transport is None
         self._lock = threading.Lock()
         self.identity: str | None = None
+        #: a query timed out: its answer may still be on its way, and the protocol has no
+        #: sequence number to tell it from the next query's. Before the next query the
+        #: line must be quiet for ``quiet_s`` (the whole wait bounded by ``late_reply_s``).
+        self._dirty = False
+        self.quiet_s = 2.0 * self.timeout_s
+        self.late_reply_s = 5.0 * self.timeout_s
 
     # ------------------------------------------------------------------ link
 
@@ -172,13 +180,34 @@ class SerialGratingEncoder(PositionEncoder):
                 what = f"partial reply {buf[-ep.MAX_REPLY_BYTES:]!r}" if buf else "no reply"
                 raise DeviceTimeout(f"{what} within {self.timeout_s} s", self.name)
 
+    def _wait_quiet(self, t: SerialTransport) -> None:
+        """Discard late answers to timed-out queries until the line has been quiet for
+        ``quiet_s`` (at most ``late_reply_s``): a late answer taken for the next query's
+        would be a reading attributed to the wrong moment."""
+        now = time.monotonic()
+        end, quiet_until = now + self.late_reply_s, now + self.quiet_s
+        while now < quiet_until and now < end:
+            if t.read(1):
+                waiting = getattr(t, "in_waiting", 0)
+                if waiting:
+                    t.read(min(waiting, 4096))
+                quiet_until = time.monotonic() + self.quiet_s
+            now = time.monotonic()
+        self._dirty = False
+
     def _query_once(self, query: bytes, kind: str) -> tuple[ep.Reply, float]:
         t = self._open_sync()
         try:
+            if self._dirty:
+                self._wait_quiet(t)
             t.reset_input_buffer()
             t_sent = time.monotonic()
             t.write(query)
-            line = self._read_line(t, t_sent + self.timeout_s)
+            try:
+                line = self._read_line(t, t_sent + self.timeout_s)
+            except DeviceTimeout:
+                self._dirty = True
+                raise
             t_received = time.monotonic()
         except (serial.SerialException, OSError) as exc:
             self._drop_sync()
