@@ -192,10 +192,16 @@ class ModbusServoAxis(_ServoAxis):
                 with contextlib.suppress(asyncio.CancelledError, Exception):
                     await task
 
-    def _drop_client(self) -> None:
-        if self._client is not None:
-            with contextlib.suppress(Exception):
-                self._client.close()
+    def _drop_client(self, client=None) -> None:
+        """Close ``client`` (default: the current one). A request that failed on an old
+        client (the heartbeat's, timing out late) must not close the fresh client
+        another request has opened since."""
+        target = self._client if client is None else client
+        if target is None:
+            return
+        with contextlib.suppress(Exception):
+            target.close()
+        if self._client is target:
             self._client = None
 
     async def _request(self, what: str, call: Callable[[object], Awaitable]):
@@ -205,30 +211,30 @@ class ModbusServoAxis(_ServoAxis):
             # a small margin over pymodbus' own timeout, so its error (more precise) wins
             response = await asyncio.wait_for(self._await_reply(client, call), self.timeout_s * 1.5)
         except _CorruptReply as exc:
-            self._drop_client()
+            self._drop_client(client)
             raise ProtocolError(f"{what}: {exc}", self.name) from None
         except asyncio.TimeoutError:
-            self._drop_client()
+            self._drop_client(client)
             raise DeviceTimeout(f"{what}: no reply within {self.timeout_s} s", self.name) from None
         except ConnectionException as exc:
-            self._drop_client()
+            self._drop_client(client)
             raise CommunicationLost(f"{what}: {exc}", self.name) from None
         except ModbusIOException as exc:
             lost = not client.connected
-            self._drop_client()
+            self._drop_client(client)
             if lost:
                 raise CommunicationLost(f"{what}: connection lost ({exc})", self.name) from None
             if "No response" in str(exc):
                 raise DeviceTimeout(f"{what}: no reply within {self.timeout_s} s", self.name) from None
             raise ProtocolError(f"{what}: {exc}", self.name) from None
         except ModbusException as exc:
-            self._drop_client()
+            self._drop_client(client)
             raise ProtocolError(f"{what}: {exc}", self.name) from None
         except OSError as exc:
-            self._drop_client()
+            self._drop_client(client)
             raise CommunicationLost(f"{what}: {exc}", self.name) from None
         if response is None:
-            self._drop_client()
+            self._drop_client(client)
             raise CommunicationLost(f"{what}: connection closed", self.name)
         if response.isError():
             raise ProtocolError(
