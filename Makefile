@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: run test install clean bench demo paper
+.PHONY: run inspect test install chromium clean bench demo paper
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
@@ -27,7 +27,18 @@ demo: $(STAMP)
 paper: $(STAMP)
 	$(BIN)/station paper
 
-test: $(STAMP)
+# The browser tests drive Debian's Chromium (Playwright's own download is not used).
+# Missing, it is installed here; when that fails the browser tests fail (never skip).
+CHROMIUM := /usr/bin/chromium
+chromium:
+	@if [ ! -x $(CHROMIUM) ]; then \
+	  echo "installing Debian's chromium for the browser tests (tests/browser)"; \
+	  SUDO=; [ "$$(id -u)" = 0 ] || SUDO="sudo -n"; \
+	  { $$SUDO apt-get update -q && DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -q chromium; } \
+	    || echo "WARNING: could not install chromium: the browser tests will fail"; \
+	fi
+
+test: $(STAMP) chromium
 	$(BIN)/python -m pytest -q
 
 bench: $(STAMP)

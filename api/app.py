@@ -11,11 +11,13 @@ from __future__ import annotations
 
 import contextlib
 import logging
+from pathlib import Path
 
 from fastapi import FastAPI, Request
-from fastapi.responses import JSONResponse
+from fastapi.responses import JSONResponse, RedirectResponse
+from fastapi.staticfiles import StaticFiles
 
-from api.routes import assets, inspections, live, ops, parts, reports, station
+from api.routes import assets, inspections, live, ops, parts, reports, session, station
 from api.runtime import StationRuntime
 from api.settings import Settings
 from station import __version__
@@ -62,6 +64,31 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         code = 503 if isinstance(exc, StoreUnavailable) else 500
         return JSONResponse({"detail": str(exc)}, status_code=code)
 
-    for module in (inspections, station, parts, assets, reports, live, ops):
+    @app.middleware("http")
+    async def panel_headers(request: Request, call_next):
+        """The panel's pages may not be framed (clickjacking of its buttons) and run
+        only their own scripts; API responses are never sniffed as another type."""
+        response = await call_next(request)
+        response.headers.setdefault("X-Content-Type-Options", "nosniff")
+        if request.url.path.startswith("/panel"):
+            response.headers["Content-Security-Policy"] = PANEL_CSP
+            response.headers["X-Frame-Options"] = "DENY"
+            response.headers["Referrer-Policy"] = "same-origin"
+            response.headers["Cache-Control"] = "no-cache"
+        return response
+
+    for module in (inspections, station, parts, assets, reports, live, ops, session):
         app.include_router(module.router)
+
+    @app.get("/", include_in_schema=False)
+    async def root() -> RedirectResponse:
+        return RedirectResponse("/panel/", status_code=303)
+
+    app.mount("/panel", StaticFiles(directory=PANEL_DIR, html=True), name="panel")
     return app
+
+
+#: the operator panel: static HTML, CSS and JS modules (no build step)
+PANEL_DIR = Path(__file__).with_name("panel")
+PANEL_CSP = ("default-src 'self'; img-src 'self' data: blob:; style-src 'self'; script-src 'self'; "
+             "connect-src 'self'; frame-ancestors 'none'; base-uri 'none'; form-action 'self'")

@@ -4,18 +4,27 @@ Roles (a token has one): ``mes`` starts job orders, ``operator`` commands the st
 ``engineer`` changes part specs, models and calibrations and runs reports, ``admin``
 may do everything. Any valid token may read.
 
-Today a token comes as ``Authorization: Bearer <token>``. The operator panel will log
-in with a browser cookie later: :func:`authenticate` is the one place to add it (look
-up a session cookie when there is no header), and every route keeps its dependency.
+A caller proves who it is in one of two ways, both checked by :func:`authenticate`
+(the one dependency every route uses):
+
+* ``Authorization: Bearer <token>`` (the MES, scripts): the header wins when present;
+* the operator panel's session cookie (:mod:`api.sessions`, made by ``POST
+  /api/v1/session`` with a token): a request that changes something (any method but
+  GET, HEAD, OPTIONS) must also carry the session's CSRF token in ``X-CSRF-Token``,
+  or it is refused with 403. A browser sends the cookie by itself; it cannot be made
+  to send the header by another site (SameSite=Strict is the second line).
 """
 
 from __future__ import annotations
 
 import asyncio
+import time
 from dataclasses import dataclass
 
 from fastapi import Depends, HTTPException, Request, status
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
+
+from api.sessions import CSRF_HEADER, RECHECK_S, SESSION_COOKIE, token_is_active
 
 ROLES = ("mes", "operator", "engineer", "admin")
 
@@ -40,10 +49,44 @@ def _unauthorized(message: str) -> HTTPException:
     return HTTPException(status.HTTP_401_UNAUTHORIZED, message, headers={"WWW-Authenticate": "Bearer"})
 
 
+#: methods that change nothing: no CSRF token needed with a session cookie
+SAFE_METHODS = frozenset({"GET", "HEAD", "OPTIONS"})
+
+
+async def verify_token(request: Request, token: str) -> Principal | None:
+    """The principal of a valid API token, or None."""
+    tokens = request.app.state.runtime.tokens
+    record = await asyncio.wait_for(asyncio.to_thread(tokens.verify, token), timeout=10.0)
+    return None if record is None else Principal(record.name, record.role, record.id)
+
+
+async def _from_session(request: Request, session_id: str) -> Principal:
+    rt = request.app.state.runtime
+    sess = rt.sessions.get(session_id)
+    if sess is None:
+        raise _unauthorized("the panel session has ended (expired, logged out or the server restarted): "
+                            "log in again")
+    now = time.monotonic()
+    if now - sess.checked > RECHECK_S:  # a revoked token ends its sessions within RECHECK_S
+        active = await asyncio.wait_for(asyncio.to_thread(token_is_active, rt.store, sess.principal.token_id),
+                                        timeout=10.0)
+        if not active:
+            rt.sessions.drop_token(sess.principal.token_id)
+            raise _unauthorized("the token this session was opened with has been revoked")
+        sess.checked = now
+    if request.method not in SAFE_METHODS and not sess.csrf_ok(request.headers.get(CSRF_HEADER)):
+        raise HTTPException(status.HTTP_403_FORBIDDEN,
+                            f"a request with the panel's session cookie must carry its CSRF token in {CSRF_HEADER}")
+    return sess.principal
+
+
 async def authenticate(request: Request,
                        credentials: HTTPAuthorizationCredentials | None = Depends(_bearer)) -> Principal:
-    """Any valid token; 401 without one."""
+    """Any valid token, or a panel session (with its CSRF token for writes); 401 without."""
     if credentials is None or not credentials.credentials:
+        session_id = request.cookies.get(SESSION_COOKIE)
+        if session_id and "authorization" not in request.headers:
+            return await _from_session(request, session_id)
         raise _unauthorized("an API token is required: send 'Authorization: Bearer <token>'")
     tokens = request.app.state.runtime.tokens
     # the hash check and the database read block: off the event loop, bounded
@@ -70,5 +113,7 @@ def require(*roles: str):
 #: shorthands used by the routes
 reader = authenticate
 mes = require("mes")
+#: job orders: the MES, and the operator at the panel's Start button
+job_orders = require("mes", "operator")
 operator = require("operator")
 engineer = require("engineer")

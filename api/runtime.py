@@ -23,6 +23,7 @@ from typing import Any
 
 from api.events import EventHub
 from api.metrics import Metrics
+from api.sessions import SessionStore
 from api.settings import Settings
 from station.inspection.session import Session, open_session
 from station.parts.spec import PartSpec
@@ -114,6 +115,8 @@ class StationRuntime:
         self.settings = settings
         self.hub = EventHub()
         self.metrics = Metrics()
+        #: the operator panel's browser sessions (api/sessions.py)
+        self.sessions = SessionStore()
         self.session: Session | None = None
         self.store = None
         self.tokens: TokenRepository | None = None

@@ -141,3 +141,56 @@ def apply_active(rt: StationRuntime) -> None:
         active = store.index()["active"]
         if active is not None:
             apply(rt, store.text(active), f"{kind}/{active}")
+
+
+# ---------------------------------------------------------------------- the active model's curves
+#: sample points per curve for the panel's plots
+CURVE_POINTS = 121
+
+
+def _sample(curve, x, unit: str) -> dict:
+    import numpy as np
+
+    if curve.is_zero:
+        return {"unit": unit, "zero": True, "values": [0.0] * len(x)}
+    up = np.asarray(curve.evaluate(x, np.ones_like(x)), dtype=float)
+    down = np.asarray(curve.evaluate(x, -np.ones_like(x)), dtype=float)
+    out = {"unit": unit, "zero": False, "values": [round(float(v), 4) for v in up]}
+    if not np.allclose(up, down):  # a direction-dependent effect (backlash): both approaches
+        out["values_down"] = [round(float(v), 4) for v in down]
+    return out
+
+
+def curves_of(model, points: int = CURVE_POINTS) -> dict:
+    """Every error motion of Z and C sampled over its travel, and each non-zero
+    curve's baseline table (the compensation table: the correction is minus the
+    deviation)."""
+    import numpy as np
+
+    from station.kinematics.parameters import COMPONENT_UNITS, motion_names
+
+    axes, tables = {}, {}
+    for axis, unit, lo_hi in (("Z", "mm", model.z_travel_mm), ("C", "deg", (0.0, 360.0))):
+        x = np.linspace(float(lo_hi[0]), float(lo_hi[1]), points)
+        motions = model.motions_of(axis)
+        curves = {}
+        for name, curve, cunit in zip(motion_names(axis), motions.curves(), COMPONENT_UNITS):
+            curves[name] = _sample(curve, x, cunit)
+            if curve.target:
+                tables[name] = {"axis": axis, "position_unit": unit, "unit": cunit,
+                                "target": list(curve.target), "deviation": list(curve.deviation),
+                                "correction": [-d for d in curve.deviation],
+                                "effects": [type(e).__name__ for e in curve.effects]}
+        axes[axis] = {"unit": unit, "positions": [round(float(v), 4) for v in x], "curves": curves}
+    return {"model": model.name, "axes": axes, "compensation_tables": tables}
+
+
+@router.get("/models/active/curves", tags=["models and calibrations"])
+async def active_model_curves(request: Request, who: auth.Principal = Depends(auth.reader)) -> dict:
+    """The error motions of the model the station compensates with now (ISO 230-1
+    names: EXZ..ECZ of Z over its travel, EXC..ECC of C over a turn; um and arcsec),
+    for the panel's plots, and the baseline tables with their corrections."""
+    rt = runtime(request)
+    out = await blocking(curves_of, rt.station.model)
+    out["version"] = (await blocking(model_store(rt).index))["active"]
+    return out

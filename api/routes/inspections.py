@@ -75,7 +75,7 @@ async def _get_record(request: Request, inspection_id: str):
                         422: {"description": "invalid order or unknown part number"}})
 async def create_job_order(order: JobOrder, request: Request, response: Response,
                            idempotency_key: Annotated[str | None, Header(min_length=1, max_length=KEY_MAX)] = None,
-                           who: auth.Principal = Depends(auth.mes)) -> dict:
+                           who: auth.Principal = Depends(auth.job_orders)) -> dict:
     rt = runtime(request)
     try:
         spec = await blocking(load_part, order.part_number, [rt.settings.parts_dir])

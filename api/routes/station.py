@@ -32,16 +32,19 @@ async def _read(coro, timeout: float) -> tuple[object, str | None]:
 
 @router.get("/axes")
 async def get_axes(request: Request, who: auth.Principal = Depends(auth.reader)) -> dict:
-    """Z and C as their drives report them, and the grating's reading of Z. A device
-    that does not answer in time shows ``error`` instead of failing the request."""
+    """Z and C as their drives report them (``setpoint``: the last target commanded,
+    null after a stop), and the grating's reading of Z. A device that does not answer
+    in time shows ``error`` instead of failing the request."""
     rt = runtime(request)
     st = rt.station
     timeout = rt.settings.command_timeout_s / 2
     out: dict = {}
     for name, ax, unit in (("Z", st.z, "mm"), ("C", st.c, "deg")):
         s, err = await _read(ax.status(), timeout)
-        out[name] = {"unit": unit, "error": err} if s is None else {
-            "unit": unit, "position": s.position, "velocity": s.velocity, "state": s.state.value,
+        # the drive's last commanded target (None after a stop): the driver keeps it
+        setpoint = getattr(ax, "_last_target", None)
+        out[name] = {"unit": unit, "error": err, "setpoint": setpoint} if s is None else {
+            "unit": unit, "setpoint": setpoint, "position": s.position, "velocity": s.velocity, "state": s.state.value,
             "enabled": s.enabled, "homed": s.homed, "moving": s.moving, "in_position": s.in_position,
             "fault": s.fault, "fault_code": s.fault_code, "estop": s.estop, "error": None}
     if st.encoder is not None:

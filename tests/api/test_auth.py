@@ -18,7 +18,7 @@ PUBLIC = "public"  # no token needed
 
 #: (method, path as requested, route path, who may)
 TABLE = [
-    ("POST", "/api/v1/job-orders", "/api/v1/job-orders", {"mes"}),
+    ("POST", "/api/v1/job-orders", "/api/v1/job-orders", {"mes", "operator"}),
     ("GET", "/api/v1/inspections", "/api/v1/inspections", ANY),
     ("GET", f"/api/v1/inspections/{uuid.uuid4()}", "/api/v1/inspections/{inspection_id}", ANY),
     ("GET", f"/api/v1/inspections/{uuid.uuid4()}/qif", "/api/v1/inspections/{inspection_id}/qif", ANY),
@@ -38,6 +38,12 @@ TABLE = [
     ("POST", "/api/v1/calibrations/999999/activate", "/api/v1/calibrations/{version}/activate", {"engineer"}),
     ("POST", "/api/v1/reports/iso230", "/api/v1/reports/iso230", {"engineer"}),
     ("POST", "/api/v1/reports/discovery", "/api/v1/reports/discovery", {"engineer"}),
+    ("GET", "/api/v1/reports/discovery", "/api/v1/reports/discovery", ANY),
+    ("GET", f"/api/v1/reports/discovery/{uuid.uuid4()}", "/api/v1/reports/discovery/{report_id}", ANY),
+    ("GET", "/api/v1/models/active/curves", "/api/v1/models/active/curves", ANY),
+    ("POST", "/api/v1/session", "/api/v1/session", PUBLIC),
+    ("GET", "/api/v1/session", "/api/v1/session", ANY),
+    ("DELETE", "/api/v1/session", "/api/v1/session", ANY),
     ("GET", "/api/v1/events", "/api/v1/events", ANY),
     ("GET", "/api/v1/camera.mjpg", "/api/v1/camera.mjpg", ANY),
     ("GET", "/metrics", "/metrics", ANY),
@@ -47,7 +53,8 @@ TABLE = [
 
 #: bodies that pass the role check but are refused (nothing happens)
 BODIES = {"/api/v1/job-orders": {"json": {"part_number": "NO-SUCH-PART", "serial": "S"}},
-          "/api/v1/parts/AUTH-1": {"json": {"part_number": "AUTH-1"}}}
+          "/api/v1/parts/AUTH-1": {"json": {"part_number": "AUTH-1"}},
+          "/api/v1/session": {"json": {}}}
 
 
 def test_the_table_covers_every_route(api):

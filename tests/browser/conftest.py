@@ -1,0 +1,148 @@
+"""Browser tests of the operator panel: Playwright for Python driving Debian's
+Chromium (/usr/bin/chromium; `make test` installs it with apt-get when missing).
+
+The station runs as `station serve` in a subprocess on 127.0.0.1 (a free port), on
+simulated hardware 50x faster than real time, with a temporary data folder; tokens
+are made beforehand with the store API, as `station token create` does.
+
+A missing Chromium FAILS these tests (it does not skip them): a skipped browser test
+would hide a machine that cannot run them.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import socket
+import subprocess
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import httpx
+import pytest
+from playwright.sync_api import expect
+
+CHROMIUM = "/usr/bin/chromium"
+#: the machine's closed network refuses Chromium's background connections: none are made
+CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+                 "--disable-background-networking", "--disable-component-update", "--disable-sync"]
+TIME_SCALE = 50
+ROLES = ("operator", "engineer", "mes")
+#: screenshots for people to look at (gitignored)
+ARTIFACTS = Path(__file__).resolve().parents[2] / "test-artifacts" / "browser"
+#: longest an inspection may take here before the test counts it as hung (not a timing assertion)
+INSPECTION_TIMEOUT_MS = 180_000
+
+
+@dataclass
+class Station:
+    url: str
+    data_dir: Path
+    tokens: dict[str, str]
+
+    def client(self, role: str) -> httpx.Client:
+        return httpx.Client(base_url=self.url, headers={"Authorization": f"Bearer {self.tokens[role]}"},
+                            timeout=30.0)
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _station_command() -> list[str]:
+    exe = Path(sys.executable).with_name("station")
+    return [str(exe)] if exe.exists() else [sys.executable, "-m", "station.cli"]
+
+
+@pytest.fixture(scope="session")
+def station(tmp_path_factory) -> Station:
+    from station.store import Store
+    from station.store.tokens import TokenRepository
+
+    data = tmp_path_factory.mktemp("panel-data")
+    with Store(data_dir=data) as store:
+        repo = TokenRepository(store)
+        tokens = {role: repo.create(role, name=f"Test {role.title()}")[1] for role in ROLES}
+    port = _free_port()
+    log = open(data / "server.log", "w")
+    proc = subprocess.Popen(_station_command() + ["serve", "--host", "127.0.0.1", "--port", str(port), "--data",
+                                                  str(data), "--time-scale", str(TIME_SCALE)],
+                            stdout=log, stderr=subprocess.STDOUT, cwd=data)
+    url = f"http://127.0.0.1:{port}"
+    try:
+        deadline = time.monotonic() + 90
+        while True:
+            if proc.poll() is not None:
+                raise RuntimeError(f"station serve exited ({proc.returncode}): "
+                                   + (data / "server.log").read_text()[-2000:])
+            try:
+                if httpx.get(f"{url}/readyz", timeout=2).status_code == 200:
+                    break
+            except httpx.HTTPError:
+                pass
+            if time.monotonic() > deadline:
+                raise RuntimeError("station serve did not become ready: "
+                                   + (data / "server.log").read_text()[-2000:])
+            time.sleep(0.2)
+        yield Station(url, data, tokens)
+    finally:
+        proc.terminate()
+        try:
+            proc.wait(timeout=20)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait(timeout=10)
+        log.close()
+
+
+@pytest.fixture(scope="session")
+def browser():
+    if not os.path.exists(CHROMIUM):
+        pytest.fail(f"{CHROMIUM} is missing: install Debian's chromium (apt-get install -y chromium; "
+                    "`make test` does this)", pytrace=False)
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as p:
+        b = p.chromium.launch(executable_path=CHROMIUM, headless=True, args=CHROMIUM_ARGS)
+        try:
+            yield b
+        finally:
+            b.close()
+
+
+@pytest.fixture
+def page(browser, station):
+    context = browser.new_context(base_url=station.url, viewport={"width": 1600, "height": 1000})
+    pg = context.new_page()
+    pg.set_default_timeout(30_000)
+    problems: list[str] = []
+    pg.on("pageerror", lambda exc: problems.append(f"page error: {exc}"))
+    # the login page asks whether a session exists: its 401 is the expected answer
+    pg.on("console", lambda msg: problems.append(f"console {msg.type}: {msg.text}")
+          if msg.type == "error" and "status of 401" not in msg.text else None)
+    pg.problems = problems
+    try:
+        yield pg
+    finally:
+        context.close()
+
+
+def login(page, token: str) -> None:
+    page.goto("/panel/login.html", wait_until="domcontentloaded")
+    page.fill("#token", token)
+    page.click("#login-button")
+    page.wait_for_selector("#view-operation:not(.hidden)")
+    expect(page.locator("#user-name")).to_have_text(re.compile(r"\w"))
+
+
+def screenshot(page, name: str) -> Path:
+    ARTIFACTS.mkdir(parents=True, exist_ok=True)
+    path = ARTIFACTS / f"{name}.png"
+    page.screenshot(path=str(path), full_page=True)
+    print(f"screenshot: {path}")
+    return path
+
