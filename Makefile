@@ -14,9 +14,30 @@ $(STAMP): pyproject.toml
 
 install: $(STAMP)
 
-# The station's main job on simulated hardware: one inspection of the standard part
-# (twins on 127.0.0.1, real drivers, vision, compensation, results in var/station.db).
+# The station on simulated hardware, as it runs on the shop floor: the REST API and
+# the operator panel at http://127.0.0.1:8000 (twins on 127.0.0.1, real drivers,
+# vision, compensation, SQLite in var/). The first start makes an operator token and
+# prints it once (the marker file keeps no secret); Ctrl-C stops the station.
+DATA ?= var
+PORT ?= 8000
 run: $(STAMP)
+	@mkdir -p $(DATA)
+	@if [ ! -e $(DATA)/.operator-token-made ]; then \
+	  token=$$($(BIN)/station token create --role operator --name "operator (make run)" --data $(DATA) 2>/dev/null) \
+	    || { echo "could not create a token in $(DATA)"; exit 2; }; \
+	  date -u +%FT%TZ > $(DATA)/.operator-token-made; \
+	  echo; echo "  Operator panel: http://127.0.0.1:$(PORT)/  -- log in with this token (shown once, keep it):"; \
+	  echo; echo "      $$token"; echo; \
+	else \
+	  echo; echo "  Operator panel: http://127.0.0.1:$(PORT)/  -- log in with the operator token printed at the first"; \
+	  echo "  'make run', or make another: $(BIN)/station token create --role operator --name NAME --data $(DATA)"; echo; \
+	fi
+	@echo "  Engineer features (part specs, models, discovery): --role engineer. API docs: http://127.0.0.1:$(PORT)/docs"; echo
+	$(BIN)/station serve --host 127.0.0.1 --port $(PORT) --data $(DATA)
+
+# One inspection of the standard part from the command line (no server; results in
+# var/station.db, printed beside the twin's ground truth). Exit 0 pass, 1 fail, 2 error.
+inspect: $(STAMP)
 	$(BIN)/station inspect --part ZDZG-22.2-12.3851 --serial SN-$$(date +%Y%m%d-%H%M%S)
 
 # Commissioning: an ISO 230-2 run of Z, compensation table, discovery (out/demo/).

@@ -18,12 +18,14 @@ A caller proves who it is in one of two ways, both checked by :func:`authenticat
 from __future__ import annotations
 
 import asyncio
+import hashlib
 import time
 from dataclasses import dataclass
 
 from fastapi import Depends, HTTPException, Request, status
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 
+from api.routes.common import in_api_thread
 from api.sessions import CSRF_HEADER, RECHECK_S, SESSION_COOKIE, token_is_active
 
 ROLES = ("mes", "operator", "engineer", "admin")
@@ -53,11 +55,36 @@ def _unauthorized(message: str) -> HTTPException:
 SAFE_METHODS = frozenset({"GET", "HEAD", "OPTIONS"})
 
 
+#: most tokens whose slow hash check is remembered (a handful in practice)
+VERIFIED_MAX = 1000
+
+
 async def verify_token(request: Request, token: str) -> Principal | None:
-    """The principal of a valid API token, or None."""
-    tokens = request.app.state.runtime.tokens
-    record = await asyncio.wait_for(asyncio.to_thread(tokens.verify, token), timeout=10.0)
-    return None if record is None else Principal(record.name, record.role, record.id)
+    """The principal of a valid API token, or None.
+
+    The salted PBKDF2 check runs once per token and process; after it, the token's
+    SHA-256 finds the record (256 random bits: a fast hash is enough to look it up,
+    the stored hash stays slow), and only its revocation is read from the database,
+    on every request, so ``station token revoke`` still takes effect at once.
+    Concurrent requests with the same token share that read (api/singleflight.py).
+    """
+    rt = request.app.state.runtime
+    key = hashlib.sha256(token.encode()).hexdigest()
+    known = rt.verified_tokens.get(key)
+    if known is None:
+        record = await asyncio.wait_for(in_api_thread(rt.tokens.verify, token), timeout=10.0)
+        if record is None:
+            return None
+        if len(rt.verified_tokens) >= VERIFIED_MAX:
+            rt.verified_tokens.clear()
+        rt.verified_tokens[key] = record
+        return Principal(record.name, record.role, record.id)
+    active = await rt.reads.run(("token", known.id), lambda: asyncio.wait_for(
+        in_api_thread(token_is_active, rt.store, known.id), timeout=10.0))
+    if not active:
+        rt.verified_tokens.pop(key, None)
+        return None
+    return Principal(known.name, known.role, known.id)
 
 
 async def _from_session(request: Request, session_id: str) -> Principal:
@@ -68,7 +95,7 @@ async def _from_session(request: Request, session_id: str) -> Principal:
                             "log in again")
     now = time.monotonic()
     if now - sess.checked > RECHECK_S:  # a revoked token ends its sessions within RECHECK_S
-        active = await asyncio.wait_for(asyncio.to_thread(token_is_active, rt.store, sess.principal.token_id),
+        active = await asyncio.wait_for(in_api_thread(token_is_active, rt.store, sess.principal.token_id),
                                         timeout=10.0)
         if not active:
             rt.sessions.drop_token(sess.principal.token_id)
@@ -88,12 +115,11 @@ async def authenticate(request: Request,
         if session_id and "authorization" not in request.headers:
             return await _from_session(request, session_id)
         raise _unauthorized("an API token is required: send 'Authorization: Bearer <token>'")
-    tokens = request.app.state.runtime.tokens
     # the hash check and the database read block: off the event loop, bounded
-    record = await asyncio.wait_for(asyncio.to_thread(tokens.verify, credentials.credentials), timeout=10.0)
-    if record is None:
+    who = await verify_token(request, credentials.credentials)
+    if who is None:
         raise _unauthorized("the API token is not valid (unknown, mistyped or revoked)")
-    return Principal(record.name, record.role, record.id)
+    return who
 
 
 def require(*roles: str):

@@ -24,6 +24,7 @@ from typing import Any
 from api.events import EventHub
 from api.metrics import Metrics
 from api.sessions import SessionStore
+from api.singleflight import SingleFlight
 from api.settings import Settings
 from station.inspection.session import Session, open_session
 from station.parts.spec import PartSpec
@@ -117,6 +118,10 @@ class StationRuntime:
         self.metrics = Metrics()
         #: the operator panel's browser sessions (api/sessions.py)
         self.sessions = SessionStore()
+        #: identical concurrent reads share one (polling clients)
+        self.reads = SingleFlight()
+        #: tokens whose hash was checked: sha256(token) -> record (api/auth.py)
+        self.verified_tokens: dict[str, object] = {}
         self.session: Session | None = None
         self.store = None
         self.tokens: TokenRepository | None = None

@@ -4,6 +4,9 @@ event loop with a deadline, size-limited uploads."""
 from __future__ import annotations
 
 import asyncio
+import contextvars
+import functools
+from concurrent.futures import ThreadPoolExecutor
 from typing import Any, Callable
 
 from fastapi import HTTPException, Request, UploadFile, status
@@ -18,10 +21,25 @@ def runtime(request: Request) -> StationRuntime:
     return request.app.state.runtime
 
 
+#: the API's own worker threads: requests queue here, never in the default executor
+#: that the inspection itself uses for its store writes (a burst of reads must not
+#: hold up the running inspection's commits)
+#: Two: more threads contend for the GIL with the event loop that also carries the
+#: drives' heartbeats (station bench api).
+API_THREADS = ThreadPoolExecutor(max_workers=2, thread_name_prefix="api")
+
+
+async def in_api_thread(fn: Callable[..., Any], *args: Any, **kwargs: Any) -> Any:
+    """``asyncio.to_thread`` on the API's own threads."""
+    ctx = contextvars.copy_context()
+    call = functools.partial(ctx.run, fn, *args, **kwargs)
+    return await asyncio.get_running_loop().run_in_executor(API_THREADS, call)
+
+
 async def blocking(fn: Callable[..., Any], *args: Any, timeout: float = STORE_TIMEOUT_S, **kwargs: Any) -> Any:
     """Run a blocking call in a worker thread; 504 when it takes longer than ``timeout``."""
     try:
-        return await asyncio.wait_for(asyncio.to_thread(fn, *args, **kwargs), timeout=timeout)
+        return await asyncio.wait_for(in_api_thread(fn, *args, **kwargs), timeout=timeout)
     except asyncio.TimeoutError:
         raise HTTPException(status.HTTP_504_GATEWAY_TIMEOUT, f"gave up after {timeout:g} s") from None
 

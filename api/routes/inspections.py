@@ -63,8 +63,10 @@ def job_response(rec) -> dict:
 
 
 async def _get_record(request: Request, inspection_id: str):
+    rt = runtime(request)
     try:
-        return await blocking(runtime(request).store.get, inspection_id)
+        # clients polling the same inspection share one read (api/singleflight.py)
+        return await rt.reads.run(("inspection", inspection_id), lambda: blocking(rt.store.get, inspection_id))
     except InspectionNotFound:
         raise HTTPException(status.HTTP_404_NOT_FOUND, f"no inspection {inspection_id!r}") from None
 
