@@ -73,23 +73,26 @@ def contour_ellipse(image: np.ndarray) -> list[tuple]:
     return out
 
 
-def ours(image: np.ndarray) -> list[tuple]:
-    from station.vision.measure import measure_holes
+def ours(image: np.ndarray, photometric: bool = False) -> list[tuple]:
+    from station.vision.measure import MeasureConfig, measure_holes
+    from station.vision.photometric import PhotometricConfig
 
-    return [(m.x_px, m.y_px, m.diameter_px, m.partial) for m in measure_holes(image)]
+    cfg = MeasureConfig(photometric=PhotometricConfig()) if photometric else MeasureConfig()
+    return [(m.x_px, m.y_px, m.diameter_px, m.partial) for m in measure_holes(image, cfg=cfg)]
 
 
 METHODS = {"ours": ours, "hough_gradient_alt": hough_alt, "contours_fit_ellipse": contour_ellipse}
 SHORT = {"ours": "ours", "hough_gradient_alt": "Hough ALT", "contours_fit_ellipse": "fitEllipse"}
 
 
-def run(frames: int = 40, seed: int = 1000, envelope: str = "station") -> dict:
+def run(frames: int = 40, seed: int = 1000, envelope: str = "station", photometric: bool = False) -> dict:
     from sim.camera.render import random_frame  # the CLI side may import sim
 
     cv2.setNumThreads(1)
     rendered = [random_frame(seed + i, envelope=envelope) for i in range(frames)]
     results = {}
-    for name, fn in METHODS.items():
+    methods = {**METHODS, "ours": (lambda im: ours(im, photometric=True)) if photometric else ours}
+    for name, fn in methods.items():
         fn(rendered[0].image)  # warm-up (imports, allocations)
         total, times = Score(), []
         for f in rendered:
@@ -109,6 +112,7 @@ def run(frames: int = 40, seed: int = 1000, envelope: str = "station") -> dict:
         "frames": frames,
         "seed": seed,
         "envelope": envelope,
+        "photometric": photometric,
         "frame_size_px": [rendered[0].image.shape[1], rendered[0].image.shape[0]],
         "whole_holes": whole,
         "partial_holes": cut,
@@ -131,12 +135,13 @@ def register(bench_app: typer.Typer) -> None:
         frames: int = typer.Option(40, "--frames", min=1, help="rendered 1280x1024 frames"),
         seed: int = typer.Option(1000, "--seed"),
         envelope: str = typer.Option("station", "--envelope", help="station (default) or wide (stress test)"),
+        photometric: bool = typer.Option(False, "--photometric", help="ours with the photometric diameter refinement"),
         as_json: bool = typer.Option(False, "--json", help="one JSON object on stdout"),
     ) -> None:
         """Hole measurement: ours vs HoughCircles(ALT) vs contours+fitEllipse."""
         from rich.table import Table
 
-        r = run(frames, seed, envelope)
+        r = run(frames, seed, envelope, photometric)
         if as_json:
             print_json(r)
             return

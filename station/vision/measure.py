@@ -23,7 +23,9 @@ import numpy as np
 from station.vision.calibration import CameraCalibration
 from station.vision.detect import Candidate, DetectConfig, detect_candidates
 from station.vision.edges import KERNEL_RADIUS_PX, deblurred_radius, gradient, profile_width2, psf_variance, ray_edges
+from station.vision.edges import SMOOTH_SIGMA_PX
 from station.vision.fit import fit_ellipse_direct, ransac_circle, robust_circle, taubin_circle
+from station.vision.photometric import PhotometricConfig, refine_hole
 
 
 @dataclass(frozen=True)
@@ -40,6 +42,12 @@ class MeasureConfig:
     #: below this a "hole" is a texture crossing: on rendered frames real holes score
     #: >= 0.3 (low contrast, heavy blur) and texture candidates <= 0.1
     min_confidence: float = 0.15
+    #: refine whole holes' diameter by a blurred-disc intensity fit with a honing-groove
+    #: model (``photometric.py``); off by default: it costs ~1.5 ms per hole, which
+    #: takes the frame past the 10 ms budget (docs/vision.md)
+    photometric: PhotometricConfig | None = None
+    #: rays per px of rim on holes clear of the border when the photometric fit is on
+    ray_density_photometric: float = 0.5
 
 
 @dataclass(frozen=True)
@@ -125,7 +133,15 @@ def measure_candidate(
     for attempt in range(2):
         if not (2.0 < r < cfg.detect.max_diameter_px):
             return None
-        n_rays = int(np.clip(round(2 * np.pi * r), 64, 360))  # about one ray per px of rim
+        # about one ray per px of rim; half as many where the photometric fit will give
+        # the geometry and the rays only judge the rim (roundness, inliers, edge width)
+        density = 1.0
+        if cfg.photometric is not None:
+            reach = r + cfg.fine_window_px + KERNEL_RADIUS_PX + 2
+            h, w = image.shape
+            if reach <= cx <= w - 1 - reach and reach <= cy <= h - 1 - reach:
+                density = cfg.ray_density_photometric
+        n_rays = int(np.clip(round(2 * np.pi * r * density), 64, 360))
         edges = _fine(image, cx, cy, max(r - cfg.fine_window_px, 1.0), r + cfg.fine_window_px, n_rays)
         if len(edges.points) < cfg.min_valid_rays:
             return None
@@ -146,7 +162,17 @@ def measure_candidate(
     sigma_px = float(np.sqrt(profile_width2(edges.profiles[fit.inliers], edges.step_px)))
     # a Gaussian-blurred step of height c has a derivative peak c / (sqrt(2 pi) sigma)
     contrast_dn = float(np.median(edges.peak[fit.inliers]) * np.sqrt(2 * np.pi) * sigma_px)
-    r_true = deblurred_radius(r, float(np.sqrt(psf_variance(sigma_px**2, r))))
+    psf2 = psf_variance(sigma_px**2, r)
+    r_true = deblurred_radius(r, float(np.sqrt(psf2)))
+    if whole and cfg.photometric is not None and np.isfinite(psf2):
+        # the image's own blur: the rays' width less our smoothing and bilinear sampling
+        blur = float(np.sqrt(max(psf2 - SMOOTH_SIGMA_PX**2 - 1.0 / 6.0, 0.09)))
+        ph = refine_hole(image, cx, cy, r_true, blur, cfg.photometric)
+        if ph is not None:
+            # the radius from the intensities (it uses the textureless hole side and
+            # the groove model); the centre stays the rays' (their worst case is
+            # smaller: on tuning frames 0.11 px against 0.13 px, medians alike)
+            r_true = ph.r
     pts = edges.points + (r_true - r) * edges.directions
     if calibration is not None:
         pts = calibration.undistort_px(pts)

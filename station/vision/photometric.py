@@ -1,0 +1,267 @@
+"""Photometric refinement of a whole hole: a blurred-disc model fitted to the pixels.
+
+Why: the ray edges (``edges.py``) each see the wall texture right next to the rim, and
+their errors (~0.1 px per ray) are correlated over 1-2 px of rim, so a rim of 60-300
+px averages only 30-150 independent errors.  Fitting one intensity model of the whole
+hole to every pixel of an annulus around its rim uses all the pixels at once, with a
+robust loss that lets the pixels of a honing groove crossing the annulus lose their
+weight, and the hole's featureless inside pins the dark level.
+
+Model, at distance rho from the centre (cx, cy) and angle theta:
+
+    I = W(theta, rho) (1 - u) + H(theta) u,   u = P(|X| < R(theta)), X ~ N((rho, 0), s^2 I)
+
+u is a disc of radius R blurred by an isotropic Gaussian of variance s^2 (camera blur
+plus the pixel's area, 1/12 px^2 in every direction); |X| is Rice-distributed, and
+for rho R / s^2 >> 1 (always here: R >= 10 px, s <= 2.1 px)
+u ~ Phi((R - sqrt(rho^2 + s^2)) / s), whose radius bias is below 0.001 px for a 20 px
+hole at the heaviest blur (checked against the exact non-central chi-square cdf,
+``test_photometric_disc_model_matches_the_exact_blurred_disc``).  R(theta) = R0 +
+a cos 2theta + b sin 2theta (an oval hole, to first order); W is the wall: a Fourier
+series in theta (per-sector level, vignetting, blotches) plus a radial slope of first
+order in theta; H the far side of the hole, a level with a first-order tilt.  The
+angles are measured from the starting centre and stay fixed, so the wall and hole
+bases are fixed functions of the pixel position and only rho depends on the centre.
+
+Fit: Gauss-Newton with the analytic Jacobian, Huber weights (IRLS) on the residuals
+against a robust (MAD) scale, a handful of iterations from the ray fit's circle.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.special import ndtr
+
+#: 1 / sqrt(2 pi)
+_INV_SQRT_2PI = 0.3989422804014327
+#: MAD -> standard deviation for Gaussian data
+_MAD_TO_SIGMA = 1.4826
+
+
+@dataclass(frozen=True)
+class PhotometricConfig:
+    #: annulus half-width around the rim: k_sigma * s + pad_px on each side
+    k_sigma: float = 2.5
+    pad_px: float = 1.0
+    #: Fourier order of the wall level in angle
+    wall_order: int = 4
+    #: Huber threshold in robust standard deviations of the residuals
+    huber_k: float = 1.345
+    iterations: int = 6
+    #: fit the blur (else keep the one measured on the rays)
+    fit_blur: bool = True
+    oval: bool = True
+    #: radial slope of the wall: Fourier order (-1: none)
+    wall_slope_order: int = -1
+    #: Fourier order of the hole's level (0: constant)
+    hole_order: int = 0
+    #: honing cross-hatch: groove directions (deg from the x axis, y down); None: no
+    #: groove model
+    groove_angles_deg: tuple[float, ...] | None = (30.0, -30.0)
+    #: wall ring (px beyond the annulus' transition zone) the groove profiles come from
+    groove_margin_px: float = 12.0
+    groove_bin_px: float = 0.5
+    #: weight of the pixels from the expected texture share (1 - u)^2 of their variance
+    texture_weighting: bool = False
+
+
+@dataclass(frozen=True)
+class PhotometricFit:
+    cx: float
+    cy: float
+    r: float  # mean radius R0 (px)
+    blur_px: float  # s: camera blur with the pixel's area
+    contrast_dn: float  # median wall level - hole level over the annulus
+    rms_dn: float  # robust residual scale
+    n_pixels: int
+    iterations: int
+
+
+def disc_fraction(rho: np.ndarray, radius: float | np.ndarray, s: float) -> np.ndarray:
+    """Share of a disc of ``radius`` blurred by a Gaussian of std ``s`` at distance ``rho``."""
+    return ndtr((radius - np.sqrt(rho * rho + s * s)) / s)
+
+
+#: rows per block in the normal equations: OpenBLAS multi-threads a product of
+#: m * n * k >= 65536 * 4 multiply-adds (its GEMM_MULTITHREAD_THRESHOLD); below that it
+#: stays on the calling core, which is what the one-core budget assumes
+_BLAS_SINGLE_THREAD_MACS = 65536 * 4
+
+
+def _normal(a: np.ndarray, wa: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """wa^T a and wa^T b, summed over row blocks small enough for one core."""
+    k = a.shape[1]
+    block = max(_BLAS_SINGLE_THREAD_MACS // (k * k) - 1, 64)
+    m, v = np.zeros((k, k)), np.zeros(k)
+    for i in range(0, len(a), block):
+        wt = wa[i : i + block].T
+        m += wt @ a[i : i + block]
+        v += wt @ b[i : i + block]
+    return m, v
+
+
+def _groove_field(
+    dx: np.ndarray, dy: np.ndarray, v: np.ndarray, wall: np.ndarray, targets: np.ndarray, cfg: PhotometricConfig
+) -> np.ndarray:
+    """The honing grooves' intensity (DN, about the smooth wall) at the ``targets`` pixels.
+
+    A groove is straight and keeps its profile along its length, so each family is a
+    1-D profile P_k across its direction; the wall pixels (``wall``) around the hole
+    give P_1 and P_2 by backfitting bin means (0.5 px bins, shrunk towards 0 where
+    few pixels fall) after a quadratic smooth level is removed.  The rim's own pixels
+    never enter: the profiles there are read from the same lines further out.
+    """
+    xw, yw = dx[wall], dy[wall]
+    scale = max(float(np.abs(xw).max()), float(np.abs(yw).max()), 1.0)
+    a = np.stack([np.ones_like(xw), xw / scale, yw / scale, (xw / scale) ** 2, xw * yw / scale**2, (yw / scale) ** 2], 1)
+    m, rhs = _normal(a, a, v[wall])
+    coef = np.linalg.solve(m + 1e-9 * np.eye(6), rhs)
+    y = v[wall] - a @ coef
+    step = cfg.groove_bin_px
+    u_max = 1.5 * scale
+    nb = int(2 * u_max / step) + 2
+    idx_w, u_t = [], []
+    for ang in cfg.groove_angles_deg:
+        ph = np.deg2rad(ang)
+        sn, cs = np.sin(ph), np.cos(ph)
+        idx_w.append(np.clip(((-sn * xw + cs * yw + u_max) / step).astype(np.intp), 0, nb - 1))
+        u_t.append((-sn * dx[targets] + cs * dy[targets] + u_max) / step - 0.5)
+    counts = [np.bincount(i, minlength=nb) + 2.0 for i in idx_w]
+    prof = [np.zeros(nb) for _ in idx_w]
+    for _ in range(3 if len(idx_w) > 1 else 1):
+        for k, i in enumerate(idx_w):
+            other = sum(prof[j][idx_w[j]] for j in range(len(idx_w)) if j != k)
+            prof[k] = np.bincount(i, weights=y - other, minlength=nb) / counts[k]
+    centres = np.arange(nb, dtype=np.float64)
+    return sum(np.interp(u, centres, p) for u, p in zip(u_t, prof))
+
+
+def refine_hole(
+    image: np.ndarray,
+    cx: float,
+    cy: float,
+    r: float,
+    blur_px: float,
+    cfg: PhotometricConfig = PhotometricConfig(),
+) -> PhotometricFit | None:
+    """Fit the blurred-disc model around a whole hole's rim; None when it fails."""
+    h, w = image.shape
+    s = float(np.clip(blur_px, 0.4, 4.0))
+    half = cfg.k_sigma * s + cfg.pad_px
+    r_in, r_out = max(r - half, 0.0), r + half
+    r_clear = r + 2.5 * s + 1.0  # beyond it the wall is free of the rim's blur
+    grooves = bool(cfg.groove_angles_deg)
+    r_roi = max(r_out, r_clear + cfg.groove_margin_px) if grooves else r_out
+    x0, x1 = max(int(np.floor(cx - r_roi)), 0), min(int(np.ceil(cx + r_roi)) + 1, w)
+    y0, y1 = max(int(np.floor(cy - r_roi)), 0), min(int(np.ceil(cy + r_roi)) + 1, h)
+    if x1 - x0 < 3 or y1 - y0 < 3:
+        return None
+    xx = np.arange(x0, x1, dtype=np.float64) - cx
+    yy = np.arange(y0, y1, dtype=np.float64) - cy
+    dxa = np.broadcast_to(xx[None, :], (y1 - y0, x1 - x0)).ravel()
+    dya = np.broadcast_to(yy[:, None], (y1 - y0, x1 - x0)).ravel()
+    d2 = dxa * dxa + dya * dya
+    va = image[y0:y1, x0:x1].ravel().astype(np.float64)
+    sel = (d2 >= r_in * r_in) & (d2 <= r_out * r_out)
+    groove = 0.0
+    if grooves:
+        wall_px = (d2 > r_clear * r_clear) & (d2 <= r_roi * r_roi)
+        if wall_px.sum() < 50:
+            return None
+        groove = _groove_field(dxa, dya, va, wall_px, sel, cfg)
+    dx, dy, v = dxa[sel], dya[sel], va[sel]
+    n = v.size
+    rho0 = np.sqrt(d2[sel])
+    c1, s1 = dx / np.maximum(rho0, 1e-9), dy / np.maximum(rho0, 1e-9)
+    # Fourier basis in the (fixed) starting angle, by the angle-addition recurrence
+    K = cfg.wall_order
+    cos_k, sin_k = [np.ones(n)], [np.zeros(n)]
+    for _ in range(max(K, 2)):
+        ck, sk = cos_k[-1], sin_k[-1]
+        cos_k.append(ck * c1 - sk * s1)
+        sin_k.append(sk * c1 + ck * s1)
+    wall_cols = [cos_k[0]] + [b for k in range(1, K + 1) for b in (cos_k[k], sin_k[k])]
+    t_rad = (rho0 - r) / half  # radial coordinate over the annulus, -1..1
+    if cfg.wall_slope_order >= 0:
+        wall_cols += [t_rad] + [t_rad * b for k in range(1, cfg.wall_slope_order + 1) for b in (cos_k[k], sin_k[k])]
+    hole_cols = [cos_k[0]] + [b for k in range(1, cfg.hole_order + 1) for b in (cos_k[k], sin_k[k])]
+    bw = np.stack(wall_cols, axis=1)
+    bh = np.stack(hole_cols, axis=1)
+    nw = bw.shape[1]
+    c2, s2 = cos_k[2], sin_k[2]
+
+    # parameters: centre offset (ox, oy), R0, oval (a, b), s; wall and hole coefficients
+    ox = oy = 0.0
+    r0, a2, b2 = float(r), 0.0, 0.0
+    lin = None
+    scale = None
+    prior = np.ones(n)
+    it = 0
+    for it in range(1, cfg.iterations + 1):
+        ex, ey = dx - ox, dy - oy
+        rho = np.sqrt(ex * ex + ey * ey)
+        radius = r0 + a2 * c2 + b2 * s2 if cfg.oval else r0
+        q = np.sqrt(rho * rho + s * s)
+        t = (radius - q) / s
+        u = ndtr(t)
+        phi = _INV_SQRT_2PI * np.exp(-0.5 * t * t)
+        lin_cols = np.concatenate([bw * (1 - u)[:, None], bh * u[:, None]], axis=1)
+        if lin is None:
+            # levels for the starting geometry (plain least squares)
+            m, rhs = _normal(lin_cols, lin_cols, v - groove * (1 - u))
+            lin = np.linalg.solve(m + 1e-9 * np.eye(lin_cols.shape[1]), rhs)
+        wall = bw @ lin[:nw] + groove
+        hole = bh @ lin[nw:]
+        res = v - (wall + (hole - wall) * u)
+        if scale is None or it <= 2:
+            if cfg.texture_weighting:
+                inner, outer = u > 0.9, u < 0.1
+                var_in = (_MAD_TO_SIGMA * float(np.median(np.abs(res[inner])))) ** 2 if inner.sum() > 20 else 1.0
+                var_out = (_MAD_TO_SIGMA * float(np.median(np.abs(res[outer])))) ** 2 if outer.sum() > 20 else var_in
+                var = max(var_in, 0.25) + max(var_out - var_in, 0.0) * (1 - u) ** 2
+                prior = 1.0 / var
+                scale = 1.0
+            else:
+                scale = max(_MAD_TO_SIGMA * float(np.median(np.abs(res - np.median(res)))), 0.5)
+        a = np.abs(res) * np.sqrt(prior) / (cfg.huber_k * scale)
+        wts = prior * np.where(a <= 1.0, 1.0, 1.0 / np.maximum(a, 1e-12))
+        dh = (hole - wall) * phi
+        # d model / d parameter
+        drho_t = -rho / (q * s)  # dt/drho
+        inv_rho = 1.0 / np.maximum(rho, 1e-9)
+        cols = [
+            dh * drho_t * (-ex * inv_rho),  # d/d ox
+            dh * drho_t * (-ey * inv_rho),  # d/d oy
+            dh / s,  # d/d R0
+        ]
+        if cfg.oval:
+            cols += [dh / s * c2, dh / s * s2]
+        if cfg.fit_blur:
+            cols.append(dh * (-s / q - t) / s)  # dt/ds = -1/q - t/s
+        nl = len(cols)
+        jac = np.concatenate([np.stack(cols, axis=1), lin_cols], axis=1)
+        jw = jac * wts[:, None]
+        try:
+            m, rhs = _normal(jac, jw, res)
+            step = np.linalg.solve(m, rhs)
+        except np.linalg.LinAlgError:
+            return None
+        ox += step[0]
+        oy += step[1]
+        r0 += step[2]
+        k = 3
+        if cfg.oval:
+            a2 += step[3]
+            b2 += step[4]
+            k = 5
+        if cfg.fit_blur:
+            s = float(np.clip(s + step[k], 0.3, 4.0))
+        lin = lin + step[nl:]
+        if max(abs(step[0]), abs(step[1]), abs(step[2])) < 1e-3 and it >= 2:
+            break
+    if not (np.isfinite(ox) and np.isfinite(oy) and np.isfinite(r0)) or abs(r0 - r) > 2.0 or np.hypot(ox, oy) > 2.0:
+        return None
+    contrast = float(np.median(bw @ lin[:nw] - bh @ lin[nw:]))
+    return PhotometricFit(cx + ox, cy + oy, r0, s, contrast, float(scale), n, it)
