@@ -187,7 +187,8 @@ class Engine:
             raise EngineStateError(f"cannot reset while {self.state.value}")
         for ax in (self.devices.z, self.devices.c):
             try:
-                await ax.reset_fault()
+                # a link that dropped with the fault reconnects here: retried like any step
+                await self._with_retries(ax.reset_fault, f"reset {getattr(ax, 'name', 'axis')}")
             except DriverError as exc:
                 self._set(State.FAULTED, f"reset failed on {getattr(ax, 'name', 'axis')}: {exc}")
                 raise PlanEnded("faulted", self.reason) from exc
