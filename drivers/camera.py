@@ -26,7 +26,9 @@ _V4L2_MANUAL_EXPOSURE = 1
 
 
 def _is_device(source: int | str) -> bool:
-    return isinstance(source, int) or str(source).startswith("/dev/video")
+    """An index or anything under /dev/ (``/dev/video0``, a udev alias such as
+    ``/dev/bore-camera``) is a V4L2 device; any other path is a video file."""
+    return isinstance(source, int) or str(source).startswith("/dev/")
 
 
 class OpenCVCamera(Camera):
