@@ -58,7 +58,9 @@ def _station_command() -> list[str]:
     return [str(exe)] if exe.exists() else [sys.executable, "-m", "station.cli"]
 
 
-@pytest.fixture(scope="session")
+# module scope, not session: Playwright's sync API keeps an event loop running in the
+# main thread while it is open, and every later test that calls asyncio.run would fail
+@pytest.fixture(scope="module")
 def station(tmp_path_factory) -> Station:
     from station.store import Store
     from station.store.tokens import TokenRepository
@@ -99,7 +101,7 @@ def station(tmp_path_factory) -> Station:
         log.close()
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture(scope="module")
 def browser():
     if not os.path.exists(CHROMIUM):
         pytest.fail(f"{CHROMIUM} is missing: install Debian's chromium (apt-get install -y chromium; "
