@@ -1,7 +1,8 @@
 """The FastAPI app: ``create_app(settings)``.
 
 The lifespan opens the one station session (see :mod:`api.runtime`) before the first
-request and closes it after the last. Errors come back as JSON ``{"detail": ...}``
+request and closes it after the last; the station runs on its own event loop in a
+thread of this process (:mod:`api.station_thread`), apart from the requests' loop. Errors come back as JSON ``{"detail": ...}``
 with a status that says whose problem it is: 4xx the request's (401 no token, 403
 wrong role, 404, 409 busy or wrong state, 413 too large, 422 invalid), 503 the
 store's, 504 a device or the store too slow.
@@ -34,7 +35,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         rt = StationRuntime(settings)
         await rt.open()
         try:
-            assets.apply_active(rt)
+            await assets.apply_active(rt)
         except BaseException:
             await rt.close()
             raise

@@ -2,30 +2,46 @@
 
 The app's lifespan opens one station session (``open_session``: the station from the
 composition root, the store, the engine) and keeps it until shutdown, because the
-station is one machine: a request must never build a second one. Inspections run as
-background asyncio tasks on the server's event loop, one at a time, so an HTTP
+station is one machine: a request must never build a second one.
+
+The station runs on its own event loop in a thread of this process (the "station
+thread", :mod:`api.station_thread`): the engine, the drivers with their heartbeats,
+the encoder, the camera and every inspection. The API's loop (uvicorn's) only
+answers requests; it reaches the station through thread-safe calls
+(``run_coroutine_threadsafe`` + ``wrap_future``) and hears from it through
+``api_loop.call_soon_threadsafe`` (engine events for SSE and the metrics, camera
+frames for MJPEG). However busy the web side is, the drives' heartbeats keep time.
+Inspections run as background jobs on the station loop, one at a time, so an HTTP
 request returns at once (202) while the axes move, and the MES polls the job.
 
 The camera is shared between the sequencer and the live MJPEG stream through
-:class:`SharedCamera`: one grab at a time, and the last frame kept, so that the
-stream shows the sequencer's own frames while an inspection runs and grabs (slowly)
-only when the station is idle.
+:class:`SharedCamera` (on the station loop: one grab at a time, the last frame kept)
+and :class:`LiveCamera` (on the API loop: the last frame handed over, and a grab
+asked of the station loop), so that the stream shows the sequencer's own frames
+while an inspection runs and grabs (slowly) only when the station is idle.
+
+What runs where: plain reads of the engine's state, reason and progress (one
+attribute each, atomic) are made from the API loop; whatever awaits a device,
+touches the engine's asyncio objects (pause, abort, reset, home) or changes what the
+station measures with (model, scale) runs on the station loop.
 """
 
 from __future__ import annotations
 
 import asyncio
+import concurrent.futures
 import contextlib
 import logging
 import time
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Callable
 
 from api.events import EventHub
 from api.metrics import Metrics
 from api.sessions import SessionStore
 from api.singleflight import SingleFlight
 from api.settings import Settings
+from api.station_thread import StationThread, to_loop
 from station.inspection.session import Session, open_session
 from station.parts.spec import PartSpec
 from station.sequencer.engine import EngineEvent, EngineStateError, PlanEnded, State
@@ -40,17 +56,19 @@ class Busy(Exception):
 
 
 class SharedCamera:
-    """The station's camera behind a lock, remembering the last frame.
+    """The station's camera behind a lock, remembering the last frame (station loop).
 
     The engine grabs through it (it replaces ``engine.devices.camera``), so the live
     stream can show the sequencer's frames without a second grab competing for the
-    device mid-scan.
+    device mid-scan. Every frame is also handed to ``on_frame(frame, at)`` (called on
+    the station loop; the runtime passes it on to the API loop).
     """
 
-    def __init__(self, camera):
+    def __init__(self, camera, on_frame: Callable[[Any, float], None] | None = None):
         self.camera = camera
         self.name = getattr(camera, "name", "camera")
         self._lock = asyncio.Lock()
+        self.on_frame = on_frame
         self.last = None  # drivers.interfaces.Frame
         self.last_at = 0.0  # time.monotonic() of the last grab
 
@@ -58,7 +76,9 @@ class SharedCamera:
         async with self._lock:
             frame = await self.camera.grab()
             self.last, self.last_at = frame, time.monotonic()
-            return frame
+        if self.on_frame is not None:
+            self.on_frame(frame, self.last_at)
+        return frame
 
     async def connect(self) -> None:
         await self.camera.connect()
@@ -67,14 +87,36 @@ class SharedCamera:
         await self.camera.close()
 
 
+class LiveCamera:
+    """The camera as the API loop sees it: the last frame the station thread handed
+    over (``last``, ``last_at``) and a grab that runs on the station loop."""
+
+    def __init__(self, thread: StationThread, shared: SharedCamera):
+        self._thread, self._shared = thread, shared
+        self.name = shared.name
+        self.last = None
+        self.last_at = 0.0
+
+    def frame_arrived(self, frame, at: float) -> None:
+        """On the API loop (``call_soon_threadsafe`` from the station thread)."""
+        if at >= self.last_at:
+            self.last, self.last_at = frame, at
+
+    async def grab(self):
+        return await self._thread.call(self._shared.grab())
+
+
 @dataclass
 class Job:
-    """The job running now: an inspection (kind "inspection") or homing ("home")."""
+    """The job running now: an inspection (kind "inspection") or homing ("home").
+
+    ``task`` is the ``concurrent.futures.Future`` of its coroutine on the station
+    loop: ``done()`` and ``cancel()`` are safe from the API loop."""
 
     kind: str
-    task: asyncio.Task
+    task: concurrent.futures.Future
     idempotency_key: str | None = None
-    inspection_id: asyncio.Future | None = None  # resolves to the inspection's id
+    inspection_id: asyncio.Future | None = None  # resolves to the inspection's id (API loop)
     started: float = 0.0
 
 
@@ -83,19 +125,24 @@ class _BeginNotifier:
 
     The service creates the inspection record itself (``begin_inspection``) and only
     returns at the end; the API must answer the job order with the id at once. This
-    thin proxy resolves a future with the id the moment the row is committed.
+    thin proxy resolves a future of the API loop with the id the moment the row is
+    committed (it runs in a worker thread of the station loop: it hops).
     """
 
     def __init__(self, store, future: asyncio.Future, loop: asyncio.AbstractEventLoop):
         self._store, self._future, self._loop = store, future, loop
+        self.iid: str | None = None
 
     def begin_inspection(self, *args, **kwargs) -> str:
         try:
             iid = self._store.begin_inspection(*args, **kwargs)
         except BaseException as exc:  # noqa: BLE001 - the waiting request must hear of it
-            self._loop.call_soon_threadsafe(_settle, self._future, None, exc)
+            with contextlib.suppress(RuntimeError):
+                self._loop.call_soon_threadsafe(_settle, self._future, None, exc)
             raise
-        self._loop.call_soon_threadsafe(_settle, self._future, iid, None)
+        self.iid = iid
+        with contextlib.suppress(RuntimeError):
+            self._loop.call_soon_threadsafe(_settle, self._future, iid, None)
         return iid
 
     def __getattr__(self, name: str) -> Any:
@@ -111,6 +158,16 @@ def _settle(future: asyncio.Future, value, exc) -> None:
         future.set_result(value)
 
 
+@dataclass
+class _Ended:
+    """How a job's coroutine on the station loop ended, for the API loop to publish."""
+
+    outcome: Any = None  # InspectionOutcome when it completed
+    seconds: float = 0.0
+    iid: str | None = None
+    reason: str | None = None  # set when it failed
+
+
 class StationRuntime:
     def __init__(self, settings: Settings):
         self.settings = settings
@@ -122,41 +179,53 @@ class StationRuntime:
         self.reads = SingleFlight()
         #: tokens whose hash was checked: sha256(token) -> record (api/auth.py)
         self.verified_tokens: dict[str, object] = {}
+        #: the station's own loop and thread (api/station_thread.py)
+        self.thread = StationThread()
+        self.api_loop: asyncio.AbstractEventLoop | None = None
+        self._to_api: Callable[..., None] = lambda fn, *args: None
         self.session: Session | None = None
         self.store = None
         self.tokens: TokenRepository | None = None
-        self.camera: SharedCamera | None = None
+        self.camera: LiveCamera | None = None
         self.job: Job | None = None
-        self._stack = contextlib.AsyncExitStack()
-        self._background: set[asyncio.Task] = set()
 
     # ------------------------------------------------------------------ life cycle
     async def open(self) -> None:
         s = self.settings
-        self.session = await self._stack.enter_async_context(open_session(
-            s.config, scenario=s.scenario, time_scale=s.time_scale, data_dir=s.data_dir, db_url=s.db_url,
-            world=s.world))
+        self.api_loop = asyncio.get_running_loop()
+        self._to_api = to_loop(self.api_loop)
+        self.session = await self.thread.start(
+            lambda: open_session(s.config, scenario=s.scenario, time_scale=s.time_scale, data_dir=s.data_dir,
+                                 db_url=s.db_url, world=s.world),
+            self._setup_station)
         self.store = self.session.store
         self.tokens = TokenRepository(self.store)
-        devices = self.session.engine.devices
-        if devices.camera is not None:
-            self.camera = SharedCamera(devices.camera)
-            devices.camera = self.camera
-        self.session.engine.subscribe(self._on_engine_event)
         s.parts_dir.mkdir(parents=True, exist_ok=True)
 
+    def _setup_station(self, session: Session) -> None:
+        """On the station loop, once the session is open: the shared camera, the engine's listener."""
+        devices = session.engine.devices
+        if devices.camera is not None:
+            shared = SharedCamera(devices.camera)
+            live = LiveCamera(self.thread, shared)
+            shared.on_frame = lambda frame, at: self._to_api(live.frame_arrived, frame, at)
+            devices.camera = shared
+            self.camera = live
+        session.engine.subscribe(self._on_engine_event)
+
     async def close(self) -> None:
-        """Abort a running job (the axes stop), end the live streams, close the station."""
+        """Abort a running job (the axes stop), end the live streams, close the station
+        and end its thread."""
         self.hub.close()
-        if self.job is not None and not self.job.task.done():
-            self.session.engine.abort("the API server is shutting down")
+        job = self.job
+        if job is not None and not job.task.done() and self.thread.alive:
             with contextlib.suppress(BaseException):
-                await asyncio.wait_for(asyncio.shield(self.job.task), timeout=10.0)
-            if not self.job.task.done():
-                self.job.task.cancel()
-        for t in list(self._background):
-            t.cancel()
-        await self._stack.aclose()
+                await self.thread.run(self.session.engine.abort, "the API server is shutting down")
+            with contextlib.suppress(BaseException):
+                await asyncio.wait_for(asyncio.shield(asyncio.wrap_future(job.task)), timeout=10.0)
+            if not job.task.done():
+                job.task.cancel()
+        await self.thread.stop()
 
     @property
     def engine(self):
@@ -170,8 +239,16 @@ class StationRuntime:
     def busy(self) -> bool:
         return self.job is not None and not self.job.task.done()
 
+    async def on_station(self, coro, timeout: float | None = None):
+        """Await ``coro`` run on the station loop (a device read, an engine call)."""
+        return await self.thread.call(coro, timeout=timeout)
+
     # ------------------------------------------------------------------ events
     def _on_engine_event(self, ev: EngineEvent) -> None:
+        """The engine's listener: called on the station loop, published on the API loop."""
+        self._to_api(self._publish_engine_event, ev)
+
+    def _publish_engine_event(self, ev: EngineEvent) -> None:
         data: dict[str, Any] = {"state": ev.state.value, "text": ev.text}
         if ev.kind == "progress":
             data.update(done=ev.data.get("done"), total=ev.data.get("total"))
@@ -184,6 +261,24 @@ class StationRuntime:
     def audit(self, who: str, what: str) -> None:
         """An entry of the audit log (the store's event log, kind "audit"): who changed what."""
         self.store.log_event("audit", f"{who}: {what}")
+
+    def _start_job(self, kind: str, coro, on_end: Callable[[concurrent.futures.Future], None], *,
+                   key: str | None = None, started: asyncio.Future | None = None) -> Job:
+        """Run ``coro`` on the station loop as the job; ``on_end(future)`` on the API loop
+        once it is done (so whoever hears of the end finds the station no longer busy)."""
+        fut = self.thread.submit(coro)
+        job = Job(kind, fut, key, started, time.monotonic())
+        self.job = job
+        self.metrics.busy.set(1)
+        fut.add_done_callback(lambda f: self._to_api(self._job_done, job, on_end, f))
+        return job
+
+    def _job_done(self, job: Job, on_end, fut: concurrent.futures.Future) -> None:
+        self.metrics.busy.set(0)
+        try:
+            on_end(fut)
+        except Exception:  # noqa: BLE001 - publishing must not break the loop's callback
+            log.exception("publishing the end of a %s job failed", job.kind)
 
     # ------------------------------------------------------------------ jobs
     async def start_inspection(self, part: PartSpec, serial: str, order_id: str | None,
@@ -203,13 +298,9 @@ class StationRuntime:
                 return existing, False
         if self.busy:
             raise Busy(self._busy_text())
-        loop = asyncio.get_running_loop()
-        started = loop.create_future()
-        service = self.session.service_for(part)
-        service.store = _BeginNotifier(self.store, started, loop)
-        task = loop.create_task(self._run_inspection(service, part, serial, order_id, idempotency_key, started))
-        self.job = Job("inspection", task, idempotency_key, started, time.monotonic())
-        self.metrics.busy.set(1)
+        started = asyncio.get_running_loop().create_future()
+        self._start_job("inspection", self._run_inspection(part, serial, order_id, idempotency_key, started),
+                        self._inspection_ended, key=idempotency_key, started=started)
         try:
             iid = await asyncio.wait_for(asyncio.shield(started), timeout=30.0)
         except DuplicateIdempotencyKey as dup:  # another process or a race: the same job
@@ -217,33 +308,48 @@ class StationRuntime:
         self.hub.publish("job", event="started", inspection_id=iid, part_number=part.part_number, serial=serial)
         return iid, True
 
-    async def _run_inspection(self, service, part, serial, order_id, key, started: asyncio.Future) -> None:
+    async def _run_inspection(self, part, serial, order_id, key, started: asyncio.Future) -> _Ended:
+        """On the station loop. Store writes go to this loop's own worker threads."""
         t0 = time.monotonic()
-        iid = None
+        notifier = None
         try:
+            service = self.session.service_for(part)
+            notifier = service.store = _BeginNotifier(self.store, started, self.api_loop)
             outcome = await service.inspect(part, serial, order_id=order_id, idempotency_key=key)
-            iid = outcome.id
-            label = outcome.result if outcome.state == "complete" else outcome.state
-            self.metrics.inspections.labels(label).inc()
-            self.metrics.duration.observe(time.monotonic() - t0)
-            self.hub.publish("job", event="finished", inspection_id=outcome.id, state=outcome.state,
-                             result=outcome.result, reason=outcome.reason)
-            self.hub.publish("result", **outcome.to_json())
+            return _Ended(outcome=outcome, seconds=time.monotonic() - t0, iid=outcome.id)
         except asyncio.CancelledError:
             raise
         except Exception as exc:  # noqa: BLE001 - a job must end recorded, whatever broke
             log.exception("inspection failed")
             reason = f"{type(exc).__name__}: {exc}"
-            if started.done() and not started.cancelled() and started.exception() is None:
-                iid = started.result()
+            iid = notifier.iid if notifier is not None else None
+            if iid is not None:
                 await self._finish_if_running(iid, reason)
-            _settle(started, None, exc)
-            self.metrics.inspections.labels("faulted").inc()
+            self._to_api(_settle, started, None, exc)
             with contextlib.suppress(StoreError):
                 await asyncio.to_thread(self.store.log_event, "alarm", f"inspection failed: {reason}", iid)
-            self.hub.publish("job", event="finished", inspection_id=iid, state="faulted", result=None, reason=reason)
-        finally:
-            self.metrics.busy.set(0)
+            return _Ended(iid=iid, reason=reason)
+
+    def _inspection_ended(self, fut: concurrent.futures.Future) -> None:
+        """On the API loop: the metrics and the events of a finished inspection."""
+        if fut.cancelled():
+            return
+        if fut.exception() is not None:
+            ended = _Ended(reason=f"{type(fut.exception()).__name__}: {fut.exception()}")
+        else:
+            ended = fut.result()
+        outcome = ended.outcome
+        if outcome is not None:
+            label = outcome.result if outcome.state == "complete" else outcome.state
+            self.metrics.inspections.labels(label).inc()
+            self.metrics.duration.observe(ended.seconds)
+            self.hub.publish("job", event="finished", inspection_id=outcome.id, state=outcome.state,
+                             result=outcome.result, reason=outcome.reason)
+            self.hub.publish("result", **outcome.to_json())
+        else:
+            self.metrics.inspections.labels("faulted").inc()
+            self.hub.publish("job", event="finished", inspection_id=ended.iid, state="faulted", result=None,
+                             reason=ended.reason)
 
     async def _finish_if_running(self, iid: str, reason: str) -> None:
         with contextlib.suppress(StoreError, ValueError):
@@ -256,7 +362,7 @@ class StationRuntime:
         if job is None:
             return "busy"
         if job.kind == "inspection" and job.inspection_id is not None and job.inspection_id.done() \
-                and job.inspection_id.exception() is None:
+                and not job.inspection_id.cancelled() and job.inspection_id.exception() is None:
             return f"the station is running inspection {job.inspection_id.result()}; try again when it ends"
         return f"the station is busy ({job.kind}); try again when it ends"
 
@@ -264,44 +370,49 @@ class StationRuntime:
     async def command(self, name: str, who: str) -> dict:
         """pause, resume, stop, abort, reset, home; EngineStateError when the state
         does not allow it, Busy for reset/home while a job runs."""
-        engine = self.engine
         if name in ("pause", "resume", "stop", "abort"):
-            if name in ("pause", "stop", "abort") and engine.state not in (State.RUNNING, State.PAUSED, State.STOPPING):
-                raise EngineStateError(f"cannot {name} while {engine.state.value}: nothing is running")
-            if name == "resume" and engine.state not in (State.PAUSED, State.RUNNING):
-                raise EngineStateError(f"cannot resume while {engine.state.value}: nothing is paused")
-            if name == "abort":
-                engine.abort(f"aborted by {who}")
-            else:
-                getattr(engine, name)()
+            await self.thread.run(self._engine_command, name, who)
         elif name in ("reset", "home"):
             if self.busy:
                 raise Busy(self._busy_text())
             if name == "reset":
                 try:
-                    await asyncio.wait_for(engine.reset(), timeout=self.settings.command_timeout_s)
+                    await self.thread.call(asyncio.wait_for(self.engine.reset(), timeout=self.settings.command_timeout_s))
                 except PlanEnded as ended:
                     raise EngineStateError(ended.reason) from None
             else:
-                if engine.state not in (State.IDLE, State.READY):
-                    raise EngineStateError(f"cannot home while {engine.state.value} (reset first)")
-                task = asyncio.get_running_loop().create_task(self._home())
-                self.job = Job("home", task, started=time.monotonic())
-                self.metrics.busy.set(1)
+                await self.thread.run(self._check_can_home)
+                self._start_job("home", self._home(), lambda fut: None)
         else:
             raise ValueError(f"unknown command {name!r}")
         with contextlib.suppress(StoreError):
             await asyncio.to_thread(self.store.log_event, "command", f"{name} by {who}")
         return self.station_status()
 
+    def _engine_command(self, name: str, who: str) -> None:
+        """On the station loop: the state check and the command, in one step."""
+        engine = self.engine
+        if name in ("pause", "stop", "abort") and engine.state not in (State.RUNNING, State.PAUSED, State.STOPPING):
+            raise EngineStateError(f"cannot {name} while {engine.state.value}: nothing is running")
+        if name == "resume" and engine.state not in (State.PAUSED, State.RUNNING):
+            raise EngineStateError(f"cannot resume while {engine.state.value}: nothing is paused")
+        if name == "abort":
+            engine.abort(f"aborted by {who}")
+        else:
+            getattr(engine, name)()
+
+    def _check_can_home(self) -> None:
+        engine = self.engine
+        if engine.state not in (State.IDLE, State.READY):
+            raise EngineStateError(f"cannot home while {engine.state.value} (reset first)")
+
     async def _home(self) -> None:
+        """On the station loop."""
         try:
             await asyncio.wait_for(self.engine.home(), timeout=self.engine.timeouts.home_s * 2)
         except (PlanEnded, asyncio.TimeoutError, EngineStateError) as exc:
             with contextlib.suppress(StoreError):
                 await asyncio.to_thread(self.store.log_event, "alarm", f"homing failed: {exc}")
-        finally:
-            self.metrics.busy.set(0)
 
     def station_status(self) -> dict:
         e = self.engine

@@ -62,19 +62,26 @@ def parse_calibration(text: str, source: str):
     return cal
 
 
-def apply_model(rt: StationRuntime, text: str, source: str) -> None:
-    """The compensation model the next inspection uses."""
-    rt.station.model = parse_model(text, source)
+async def apply_model(rt: StationRuntime, text: str, source: str) -> None:
+    """The compensation model the next inspection uses: parsed in a worker thread,
+    set on the station loop (the station reads it there)."""
+    model = await blocking(parse_model, text, source)
+    await rt.thread.run(setattr, rt.station, "model", model)
 
 
-def apply_calibration(rt: StationRuntime, text: str, source: str) -> None:
-    """The scale at the bore wall the vision stage measures with (when the file has one)."""
+def _set_scale(rt: StationRuntime, mm_per_px: float) -> None:
+    """On the station loop: the vision scale and the engine's measure stage together."""
     from station.inspection.session import vision_measure
 
-    cal = parse_calibration(text, source)
+    rt.station.mm_per_px = mm_per_px
+    rt.engine.devices.measure = vision_measure(mm_per_px)
+
+
+async def apply_calibration(rt: StationRuntime, text: str, source: str) -> None:
+    """The scale at the bore wall the vision stage measures with (when the file has one)."""
+    cal = await blocking(parse_calibration, text, source)
     if cal.mm_per_px is not None:
-        rt.station.mm_per_px = float(cal.mm_per_px)
-        rt.engine.devices.measure = vision_measure(float(cal.mm_per_px))
+        await rt.thread.run(_set_scale, rt, float(cal.mm_per_px))
 
 
 KINDS = {
@@ -124,7 +131,7 @@ def _register(kind: str) -> None:
         if rt.busy:
             raise HTTPException(status.HTTP_409_CONFLICT, f"cannot change the {what} while a job runs")
         text = await blocking(store.text, version)
-        apply(rt, text, f"{kind}/{version}")
+        await apply(rt, text, f"{kind}/{version}")
         await blocking(store.activate, version)
         await blocking(rt.audit, who.who, f"activated {what} version {version}")
         return {**entry, "active": True}
@@ -134,13 +141,13 @@ for _kind in KINDS:
     _register(_kind)
 
 
-def apply_active(rt: StationRuntime) -> None:
+async def apply_active(rt: StationRuntime) -> None:
     """At start: the station uses the versions last activated, not the config's defaults."""
     for kind, (store_of, _parse, apply, _what) in KINDS.items():
         store = store_of(rt)
-        active = store.index()["active"]
+        active = (await blocking(store.index))["active"]
         if active is not None:
-            apply(rt, store.text(active), f"{kind}/{active}")
+            await apply(rt, await blocking(store.text, active), f"{kind}/{active}")
 
 
 # ---------------------------------------------------------------------- the active model's curves

@@ -24,8 +24,8 @@ def runtime(request: Request) -> StationRuntime:
 #: the API's own worker threads: requests queue here, never in the default executor
 #: that the inspection itself uses for its store writes (a burst of reads must not
 #: hold up the running inspection's commits)
-#: Two: more threads contend for the GIL with the event loop that also carries the
-#: drives' heartbeats (station bench api).
+#: Two: more threads contend for the GIL with the station thread that carries the
+#: drives' heartbeats (api/station_thread.py, station bench api).
 API_THREADS = ThreadPoolExecutor(max_workers=2, thread_name_prefix="api")
 
 

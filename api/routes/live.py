@@ -8,7 +8,8 @@ every few seconds keeps proxies from closing a quiet stream.
 
 ``GET /api/v1/camera.mjpg`` is ``multipart/x-mixed-replace`` of JPEG frames: while an
 inspection runs, the sequencer's own frames (never a second grab that could delay
-it); while idle, a grab at a low rate.
+it); while idle, a grab at a low rate. Frames come from the station thread
+(``LiveCamera`` in :mod:`api.runtime`): this loop never touches the camera itself.
 """
 
 from __future__ import annotations

@@ -3,7 +3,6 @@ reachable), /metrics (Prometheus text format)."""
 
 from __future__ import annotations
 
-import asyncio
 
 from fastapi import APIRouter, Request, Response
 from fastapi.responses import JSONResponse
@@ -32,8 +31,9 @@ async def readyz(request: Request) -> JSONResponse:
     except Exception as exc:  # noqa: BLE001 - a probe reports, it does not fail
         checks["store"] = f"{type(exc).__name__}: {exc}"
     try:
-        await asyncio.wait_for(rt.station.z.status(), timeout=5.0)
-        await asyncio.wait_for(rt.station.c.status(), timeout=5.0)
+        # the drives answer on the station's own loop (api/station_thread.py)
+        await rt.on_station(rt.station.z.status(), timeout=5.0)
+        await rt.on_station(rt.station.c.status(), timeout=5.0)
         checks["station"] = "ok"
     except Exception as exc:  # noqa: BLE001
         checks["station"] = f"{type(exc).__name__}: {exc}"

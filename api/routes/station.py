@@ -23,9 +23,10 @@ async def get_station(request: Request, who: auth.Principal = Depends(auth.reade
     return runtime(request).station_status()
 
 
-async def _read(coro, timeout: float) -> tuple[object, str | None]:
+async def _read(rt, coro, timeout: float) -> tuple[object, str | None]:
+    """A device read, run on the station loop, with a deadline kept here."""
     try:
-        return await asyncio.wait_for(coro, timeout=timeout), None
+        return await rt.on_station(coro, timeout=timeout), None
     except Exception as exc:  # noqa: BLE001 - a device that does not answer is reported, not a 500
         return None, f"{type(exc).__name__}: {exc}"
 
@@ -40,7 +41,7 @@ async def get_axes(request: Request, who: auth.Principal = Depends(auth.reader))
     timeout = rt.settings.command_timeout_s / 2
     out: dict = {}
     for name, ax, unit in (("Z", st.z, "mm"), ("C", st.c, "deg")):
-        s, err = await _read(ax.status(), timeout)
+        s, err = await _read(rt, ax.status(), timeout)
         # the drive's last commanded target (None after a stop): the driver keeps it
         setpoint = getattr(ax, "_last_target", None)
         out[name] = {"unit": unit, "error": err, "setpoint": setpoint} if s is None else {
@@ -48,7 +49,7 @@ async def get_axes(request: Request, who: auth.Principal = Depends(auth.reader))
             "enabled": s.enabled, "homed": s.homed, "moving": s.moving, "in_position": s.in_position,
             "fault": s.fault, "fault_code": s.fault_code, "estop": s.estop, "error": None}
     if st.encoder is not None:
-        r, err = await _read(st.encoder.read(), timeout)
+        r, err = await _read(rt, st.encoder.read(), timeout)
         out["grating"] = {"unit": "mm", "error": err} if r is None else {
             "unit": "mm", "position": r.position_mm, "referenced": r.status.referenced, "ok": r.status.ok,
             "error": None}

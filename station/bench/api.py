@@ -10,6 +10,12 @@ drift hits both alike); reported are medians over the repeats of requests per se
 p50/p99 latency and the slowdown of the loaded inspection (its own start-to-finish
 time from the store) against the unloaded one.
 
+The server runs the station (engine, drives with their heartbeats, camera) on its own
+event loop in a thread (api/station_thread.py), apart from the requests' loop: the
+load reaches the station only through the GIL the two threads share, so the slowdown
+measures that, and a faulted loaded inspection (a starved drive watchdog) would mean
+the separation failed.
+
 Goals: p99 <= 50 ms, slowdown <= 5 %. Both processes share the machine's cores, so
 the clients' own CPU counts against the server: the figures are a worst case for a
 station PC that also runs its MES clients, not a datacentre load test.
