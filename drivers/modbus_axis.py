@@ -70,7 +70,10 @@ class ModbusServoAxis(_ServoAxis):
         default_velocity: float,
         default_acceleration: float,
         timeout_s: float = 0.5,
-        watchdog_timeout_ms: int = 500,
+        #: the drive stops the axis when no heartbeat came for this long: 1 s, ten
+        #: heartbeats, so a loaded station PC (a garbage collection, a busy core) does
+        #: not stop a healthy scan, while a dead controller still stops the axis in 1 s
+        watchdog_timeout_ms: int = 1000,
         heartbeat_period_s: float = 0.1,
         following_error_limit: float | None = None,
         in_position_window: float | None = None,
