@@ -149,7 +149,7 @@ class InspectionService:
                 self.store.log_event("alarm", f"scan log not written: {exc}", iid)
             return outcome
         finally:
-            self.engine._listeners.remove(log)
+            self.engine.unsubscribe(log)
 
     async def _not_stored(self, iid: str, part: PartSpec, serial: str, exc: StoreError) -> InspectionOutcome:
         """The result could not be committed: nothing of it is reported as a result. The

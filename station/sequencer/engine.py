@@ -126,6 +126,13 @@ class Engine:
     def subscribe(self, fn: Callable[[EngineEvent], None]) -> None:
         self._listeners.append(fn)
 
+    def unsubscribe(self, fn: Callable[[EngineEvent], None]) -> None:
+        """Stop calling ``fn``; a listener that is not subscribed is ignored."""
+        try:
+            self._listeners.remove(fn)
+        except ValueError:
+            pass
+
     def _emit(self, kind: str, text: str = "", **data) -> None:
         ev = EngineEvent(time.time(), kind, self.state, text, data)
         for fn in list(self._listeners):
