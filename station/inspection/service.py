@@ -14,6 +14,7 @@ limits, inclusive, conforms; the expanded uncertainty is recorded beside it.
 from __future__ import annotations
 
 import asyncio
+import hashlib
 import math
 import platform
 from dataclasses import dataclass, field
@@ -113,6 +114,11 @@ class InspectionService:
             "software_version": __version__,
             "python": platform.python_version(),
             "model": self.model.name,
+            # which numbers the compensation used: a change of any error value changes it
+            "model_fingerprint": hashlib.sha256(repr((self.model.endoscope_offset_mm, self.model.table_offset_mm,
+                                                      sorted(self.model.static_errors.items()),
+                                                      sorted(self.model.motions.items()))).encode()).hexdigest()[:16],
+            "camera_mm_per_px": self.geometry.mm_per_px,
             "part_spec": part.part_number,
             **self.traceability,
         }

@@ -54,6 +54,7 @@ def test_good_part_passes_and_is_stored(spec, tmp_path):
         assert rec.state == "complete" and rec.result == "pass"
         assert len(rec.characteristics) == 4 and len(rec.images) == 2
         assert rec.traceability["mode"] == "simulated" and rec.traceability["config_hash"]
+        assert len(rec.traceability["model_fingerprint"]) == 16 and rec.traceability["camera_mm_per_px"] == 0.01
         for img in rec.images:
             assert store.image_path(img).is_file()
 
