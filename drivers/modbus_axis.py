@@ -36,6 +36,7 @@ from drivers.interfaces import (
     DriverError,
     FollowingError,
     LinearAxis,
+    MoveInterrupted,
     ProtocolError,
     RotaryAxis,
     _ServoAxis,
@@ -47,6 +48,9 @@ log = logging.getLogger(__name__)
 #: how often wait_in_position polls the status word; 20 ms is well below a move's
 #: duration and keeps the bus load at 50 requests/s per axis
 DEFAULT_POLL_S = 0.02
+#: polls in a row at rest short of the target before a move counts as interrupted
+#: (10 x 20 ms: far longer than a drive takes to raise MOVING after START)
+RESTING_SHORT_POLLS = 10
 #: how often a request in flight checks its link (closed by the peer, corrupt reply)
 LINK_WATCH_S = 0.005
 #: bytes came back but no valid reply was made of them this long after: corrupt
@@ -379,12 +383,21 @@ class ModbusServoAxis(_ServoAxis):
     async def wait_in_position(self, timeout: float, poll_s: float = DEFAULT_POLL_S) -> AxisStatus:
         loop = asyncio.get_running_loop()
         deadline = loop.time() + timeout
+        resting_short = 0
         while True:
             st = await self.status()
             self._raise_if_fault(st)
             at_target = self._last_target is None or abs(st.position - self._last_target) <= self.in_position_window
             if st.in_position and not st.moving and at_target:
                 return st
+            # at rest, no fault, not at our target, on several polls in a row (not the
+            # instant between the START write and the drive's MOVING bit): the move was
+            # overridden or lost
+            resting_short = resting_short + 1 if (not st.moving and not at_target) else 0
+            if resting_short >= RESTING_SHORT_POLLS:
+                raise MoveInterrupted(
+                    f"at rest at {st.position:.6f} {getattr(self, 'unit', '')}, short of the target "
+                    f"{self._last_target:.6f}, without a fault", self.name)
             if loop.time() >= deadline:
                 raise DeviceTimeout(
                     f"not in position after {timeout} s (at {st.position:.6f} {getattr(self, 'unit', '')}, moving={st.moving})",

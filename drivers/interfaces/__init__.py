@@ -64,6 +64,12 @@ class FollowingError(DriveFault):
     """The drive's position lagged its command by more than its limit (a jam, a crash, a stuck brake)."""
 
 
+class MoveInterrupted(DriverError):
+    """The drive came to rest short of the commanded target without a fault: a command
+    was lost, or a stale one (a stop delayed on the link) overrode it. Re-issuing the
+    absolute move is safe."""
+
+
 # --------------------------------------------------------------------------- axes
 
 

@@ -31,6 +31,7 @@ from drivers.interfaces import (
     DriveFault,
     DriverError,
     LinearAxis,
+    MoveInterrupted,
     PositionEncoder,
     ProtocolError,
     RotaryAxis,
@@ -280,10 +281,21 @@ class Engine:
             return None
         if isinstance(msg, m.Move):
             ax = d.axis(msg.axis)
-            await self._with_retries(lambda: ax.move_to(msg.position, msg.velocity), f"move {msg.axis}")
-            if msg.wait:
-                status = await ax.wait_in_position(timeout=self.timeouts.move_s)
+            for attempt in range(self.retries + 1):
+                await self._with_retries(lambda: ax.move_to(msg.position, msg.velocity), f"move {msg.axis}")
+                if not msg.wait:
+                    return None
+                try:
+                    status = await ax.wait_in_position(timeout=self.timeouts.move_s)
+                except MoveInterrupted as exc:
+                    # the absolute move is re-issued: a lost or stale command, not the machine
+                    if attempt >= self.retries:
+                        raise
+                    self.retries_used += 1
+                    self._emit("retry", f"move {msg.axis}: {exc} (move re-issued, {attempt + 1} of {self.retries})")
+                    continue
                 self._check_estop(status)
+                return None
             return None
         if isinstance(msg, m.ReadAxis):
             return await self._with_retries(d.axis(msg.axis).read_position, f"read {msg.axis}")

@@ -219,3 +219,19 @@ async def test_rtu_over_a_pty_null_modem_moves_and_survives_crc_errors():
     finally:
         await axis.close()
         await station.stop()
+
+
+async def test_move_stopped_short_is_move_interrupted_and_reissue_completes(z_axis, twins):
+    """A stop that arrives late (delayed on the link) halts a later move: the driver
+    reports it as MoveInterrupted, not as a 60 s timeout, and re-issuing the move works."""
+    from drivers.interfaces import MoveInterrupted
+
+    await z_axis.enable(True)
+    await z_axis.move_to(150.0)  # several seconds of travel, even at the tests' time scale
+    await asyncio.sleep(0.02)
+    twins.physics["Z"].stop()  # the stale stop
+    with pytest.raises(MoveInterrupted, match="short of the target"):
+        await z_axis.wait_in_position(timeout=10.0)
+    await z_axis.move_to(150.0)
+    st = await z_axis.wait_in_position(timeout=30.0)
+    assert abs(st.position - 150.0) <= 2e-4
