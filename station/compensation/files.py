@@ -129,6 +129,17 @@ def _number(text: str, source: str, line: int, column: str) -> float:
         raise FormatError(source, line, column, f"not a number: {text.strip()!r}") from None
 
 
+def _metadata_number(metadata: dict[str, str], key: str, source: str, default: float = 0.0) -> float:
+    """A number from the ``# key: value`` lines; a bad one is a FormatError naming the key."""
+    text = metadata.get(key, "")
+    if not text:
+        return default
+    try:
+        return float(text)
+    except ValueError:
+        raise FormatError(source, None, key, f"metadata {key!r} is not a number: {text!r}") from None
+
+
 def _kind_of(metadata: dict[str, str], source: str, default: str = "linear") -> str:
     kind = metadata.get("kind", default)
     if kind not in ERROR_UNIT:
@@ -197,10 +208,10 @@ def table_from_csv(text: str, source: str = "<text>") -> CompensationTable:
         raise FormatError(source, None, None, f"metadata says mode {metadata['mode']!r} but the columns are {mode}")
     columns, lines = _csv_columns(rows[1:], header, wanted, source)
     common = dict(kind=kind, position=columns["position"], axis=metadata.get("axis", ""), line=lines, source=source)
+    backlash = _metadata_number(metadata, "backlash", source)
     if mode == "averaged":
-        backlash = float(metadata.get("backlash", "0") or 0)
         return CompensationTable.averaged(error_mean=columns["error_mean"], backlash=backlash, **common)
-    if "backlash" in metadata and float(metadata["backlash"]) != 0.0:
+    if backlash != 0.0:
         raise FormatError(source, None, None, "a bidirectional table carries its reversal in its columns; "
                                               "remove the 'backlash' metadata")
     return CompensationTable.bidirectional(error_up=columns["error_up"], error_down=columns["error_down"], **common)
@@ -308,7 +319,7 @@ def from_json(text: str, source: str = "<text>") -> CompensationTable | SegmentM
             return CompensationTable.bidirectional(error_up=_floats(doc["error_up"], source, "error_up"),
                                                    error_down=_floats(doc["error_down"], source, "error_down"),
                                                    **common)
-    except ValueError as exc:
+    except (TypeError, ValueError) as exc:
         if isinstance(exc, FormatError):
             raise
         raise FormatError(source, None, None, str(exc)) from None

@@ -337,3 +337,15 @@ def test_cli_convert_and_build(tmp_path):
     assert r.exit_code != 0
     assert "jump of +5" in one_line(r.stdout)
     assert not (tmp_path / "s.comp").exists()
+
+
+def test_bad_metadata_numbers_are_format_errors():
+    """Found by the fuzzer: a malformed '# backlash:' line, and a JSON backlash that is
+    not a number, must be refused with the file named, not crash."""
+    from station.compensation.files import FormatError, from_json, table_from_csv
+
+    with pytest.raises(FormatError, match="t.csv, column 'backlash': metadata 'backlash' is not a number"):
+        table_from_csv("# kind: linear\n# mode: averaged\n# backlash:: 0.0\nposition,error_mean\n0.0,0.0\n30.0,1.5\n",
+                       "t.csv")
+    with pytest.raises(FormatError):
+        from_json('{"kind": "linear", "position": [0, 10], "error_mean": [0, 1], "backlash": [1]}', "t.json")
