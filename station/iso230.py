@@ -222,20 +222,16 @@ def analyse(recording: Recording) -> Iso230Result:
 
     no_up = st.n_up == 0
     no_down = st.n_down == 0
-    if no_up.any():
-        warnings.append(f"no up (+1) approach at target(s) {_fmt_targets(st.target, no_up)}: "
-                        "left out of B, B_mean, M, R and of every up-direction figure")
-    if no_down.any():
-        warnings.append(f"no down (-1) approach at target(s) {_fmt_targets(st.target, no_down)}: "
-                        "left out of B, B_mean, M, R and of every down-direction figure")
+    for missing, word, sign in ((no_up, "up", "+1"), (no_down, "down", "-1")):
+        if missing.any():
+            warnings.append(f"no {word} ({sign}) approach at target(s) {_fmt_targets(st.target, missing)}: "
+                            f"left out of B, B_mean, M, R and of every {word}-direction figure")
     single_up = st.n_up == 1
     single_down = st.n_down == 1
-    if single_up.any():
-        warnings.append(f"only one up approach at target(s) {_fmt_targets(st.target, single_up)}: "
-                        "s_up is undefined there; left out of R_up, R, A_up and A")
-    if single_down.any():
-        warnings.append(f"only one down approach at target(s) {_fmt_targets(st.target, single_down)}: "
-                        "s_down is undefined there; left out of R_down, R, A_down and A")
+    for single, word in ((single_up, "up"), (single_down, "down")):
+        if single.any():
+            warnings.append(f"only one {word} approach at target(s) {_fmt_targets(st.target, single)}: "
+                            f"s_{word} is undefined there; left out of R_{word}, R, A_{word} and A")
     counts = np.concatenate([st.n_up[st.n_up > 0], st.n_down[st.n_down > 0]])
     if counts.size and counts.min() != counts.max():
         warnings.append(f"uneven number of approaches (from {int(counts.min())} to {int(counts.max())} "

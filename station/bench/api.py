@@ -57,6 +57,17 @@ def _server(data: Path, port: int, time_scale: float) -> subprocess.Popen:
     return subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env={**os.environ, "PYTHONUNBUFFERED": "1"})
 
 
+def stop_server(proc: subprocess.Popen) -> None:
+    """Stop a `station serve` child: SIGTERM (a clean shutdown closes the station and
+    its twins), SIGKILL if it has not ended within 20 s."""
+    proc.terminate()
+    try:
+        proc.wait(timeout=20)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait(timeout=10)
+
+
 def _duration_s(rec: dict) -> float:
     return (datetime.fromisoformat(rec["finished_at"]) - datetime.fromisoformat(rec["started_at"])).total_seconds()
 
@@ -164,12 +175,7 @@ def run(repeats: int = 3, clients: int = 50, time_scale: float = 1.0, progress=N
                 if progress:
                     progress()
         finally:
-            proc.terminate()
-            try:
-                proc.wait(timeout=20)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait(timeout=10)
+            stop_server(proc)
 
     def med(rows, key):
         values = [r[key] for r in rows if key in r]

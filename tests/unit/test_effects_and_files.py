@@ -19,16 +19,11 @@ from station.effects import (
     ThermalExpansion,
     effect_from_dict,
 )
+from station.bench.reliability import AXIS_MODEL_SEED, RECORDING_SEED
 from station.recording import RecordingError, parse_recording
 
-GOOD = """# axis: Z
-# kind: linear
-time_s,run,direction,target,deviation,temperature_c,note
-0.0,1,+1,0.0,0.1,20.0,a
-1.0,1,+1,60.0,3.2,20.1,b
-2.0,1,-1,60.0,1.1,20.2,
-3.0,1,-1,0.0,-0.9,20.3,c
-"""
+# the same files the fuzzer starts from (one copy of the seed data)
+GOOD = RECORDING_SEED
 
 
 # ---------------------------------------------------------------- vocabulary formulas (the spec's table)
@@ -134,22 +129,7 @@ def test_recording_without_rows_or_with_short_row():
 
 
 # ---------------------------------------------------------------- axis models
-MODEL = """
-[axis]
-name = "Z"
-kind = "linear"
-
-[baseline]
-target = [0.0, 60.0, 120.0]
-deviation = [0.0, 6.0, 18.0]
-
-[noise]
-sigma = 0.5
-
-[[effects]]
-name = "backlash"
-reversal = 4.0
-"""
+MODEL = AXIS_MODEL_SEED
 
 
 def test_axis_model_round_trip_and_predict(tmp_path):
