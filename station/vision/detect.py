@@ -17,6 +17,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from station.vision.fit import median
+
 #: downsampling factor of the coarse stage (holes >= 20 px stay >= 5 px across)
 COARSE_FACTOR = 4
 #: further downsampling of the coarse frame for its (smooth) background estimate
@@ -61,8 +63,12 @@ def detect_candidates(image: np.ndarray, cfg: DetectConfig = DetectConfig()) -> 
     f = COARSE_FACTOR
     h, w = image.shape
     hc, wc = h // f * f, w // f * f
-    small_u8 = cv2.resize(image[:hc, :wc], (wc // f, hc // f), interpolation=cv2.INTER_AREA)
-    small = small_u8.astype(np.float32)
+    # 4x4 area means as two exact 2x2 steps in float32: OpenCV's INTER_AREA has a fast
+    # path for a factor of 2 (0.2 ms per 1280x1024 frame against 0.6 ms for 4x at once)
+    small = image[:hc, :wc].astype(np.float32)
+    for _ in range(int(round(np.log2(f)))):
+        small = cv2.resize(small, (small.shape[1] // 2, small.shape[0] // 2), interpolation=cv2.INTER_AREA)
+    small_u8 = np.clip(np.rint(small), 0, 255).astype(np.uint8)  # medianBlur wants 8 bits
     # the wall's typical level: a median over a window twice the largest hole, where
     # a hole covers at most a fifth of the window and so cannot pull the median; unlike
     # a closing (upper envelope) it follows dark blotches and vignetted corners
@@ -80,8 +86,8 @@ def detect_candidates(image: np.ndarray, cfg: DetectConfig = DetectConfig()) -> 
     darkness = 1.0 - small / np.maximum(background, 1.0)
     # robust spread of texture + noise; every 2nd pixel each way is plenty for a median
     sample = darkness[::2, ::2]
-    med = float(np.median(sample))
-    spread = 1.4826 * float(np.median(np.abs(sample - med)))  # MAD -> sigma for Gaussian data
+    med = median(sample)
+    spread = 1.4826 * median(np.abs(sample - med))  # MAD -> sigma for Gaussian data
     threshold = med + min(max(cfg.k_sigma * spread, cfg.min_darkness), cfg.max_threshold)
     # a second, higher threshold separates a dark hole from a groove that touches it
     # (merged, the pair fails the shape tests).  The higher level's mask lies inside the
@@ -143,7 +149,7 @@ def _components(
                 y_px=float(cy_s * f + (f - 1) / 2),
                 radius_px=float(radius_s * f),
                 touches_border=bool(touches),
-                darkness=float(np.median(inside)),
+                darkness=median(inside),
             )
         )
     return out, failed

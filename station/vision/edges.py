@@ -30,6 +30,8 @@ import cv2
 import numpy as np
 from scipy.special import i0e, i1e
 
+from station.vision.fit import median
+
 #: smoothing of the derivative-of-Gaussian filter (px): suppresses sensor noise while
 #: adding only sigma^2 = 1 px^2 to the edge width, which the blur correction removes
 SMOOTH_SIGMA_PX = 1.0
@@ -136,7 +138,7 @@ def ray_edges(
     # scanning outwards the first local maximum of at least half the typical rim
     # strength is the rim, even where a dark honing groove lies just outside it (whose
     # far side would otherwise win the global maximum)
-    strong = 0.5 * float(np.median(g.max(axis=1)))
+    strong = 0.5 * median(g.max(axis=1))
     local_max = np.zeros_like(g, dtype=bool)
     local_max[:, 1:-1] = (g[:, 1:-1] >= g[:, :-2]) & (g[:, 1:-1] > g[:, 2:]) & (g[:, 1:-1] >= strong)
     k = np.argmax(local_max, axis=1)

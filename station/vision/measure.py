@@ -24,7 +24,7 @@ from station.vision.calibration import CameraCalibration
 from station.vision.detect import Candidate, DetectConfig, detect_candidates
 from station.vision.edges import KERNEL_RADIUS_PX, deblurred_radius, gradient, profile_width2, psf_variance, ray_edges
 from station.vision.edges import SMOOTH_SIGMA_PX
-from station.vision.fit import fit_ellipse_direct, ransac_circle, robust_circle, taubin_circle
+from station.vision.fit import fit_ellipse_direct, median, ransac_circle, robust_circle, taubin_circle
 from station.vision.photometric import PhotometricConfig, refine_hole
 
 
@@ -82,7 +82,7 @@ def _profile_weights(sigma2: np.ndarray, profiles: np.ndarray, peak: np.ndarray)
     w = 1 / (1 + (dev / median dev)^2), i.e. inverse-variance weighting if a ray's
     edge error grows in proportion to how much texture or noise distorts its profile.
     """
-    med = np.nanmedian(sigma2)
+    med = median(sigma2[np.isfinite(sigma2)])
     ratio = sigma2 / med
     keep = (ratio > 0.5) & (ratio < 2.0)
     prof = profiles / np.maximum(peak, 1e-9)[:, None]
@@ -93,7 +93,7 @@ def _profile_weights(sigma2: np.ndarray, profiles: np.ndarray, peak: np.ndarray)
     basis = np.stack([tmpl, np.gradient(tmpl)], axis=1)
     coef, *_ = np.linalg.lstsq(basis, prof.T, rcond=None)
     dev = np.sqrt(((prof - (basis @ coef).T) ** 2).mean(axis=1))
-    scale = max(float(np.median(dev)), 1e-6)
+    scale = max(median(dev), 1e-6)
     return np.where(keep, 1.0 / (1.0 + (dev / scale) ** 2), 0.0)
 
 
@@ -161,7 +161,7 @@ def measure_candidate(
         return None
     sigma_px = float(np.sqrt(profile_width2(edges.profiles[fit.inliers], edges.step_px)))
     # a Gaussian-blurred step of height c has a derivative peak c / (sqrt(2 pi) sigma)
-    contrast_dn = float(np.median(edges.peak[fit.inliers]) * np.sqrt(2 * np.pi) * sigma_px)
+    contrast_dn = float(median(edges.peak[fit.inliers]) * np.sqrt(2 * np.pi) * sigma_px)
     psf2 = psf_variance(sigma_px**2, r)
     r_true = deblurred_radius(r, float(np.sqrt(psf2)))
     if whole and cfg.photometric is not None and np.isfinite(psf2):
