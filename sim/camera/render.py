@@ -23,6 +23,7 @@ recovers); without distortion those are the image coordinates.
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from functools import lru_cache
 
 import cv2
 import numpy as np
@@ -153,6 +154,15 @@ def _inside(hole: HoleSpec, xu: np.ndarray, yu: np.ndarray) -> np.ndarray:
     return np.sqrt((xr / a) ** 2 + (yr / b) ** 2)
 
 
+@lru_cache(maxsize=4)
+def _grid_jacobian(lens: BrownLens, width_px: int, height_px: int) -> tuple[np.ndarray, ...]:
+    """d(ideal x, y) / d(sensor x, y) at every pixel (central differences of the grid)."""
+    gx, gy = ideal_pixel_grid(lens, width_px, height_px)
+    jxy, jxx = np.gradient(gx)
+    jyy, jyx = np.gradient(gy)
+    return jxx, jxy, jyx, jyy
+
+
 def hole_coverage(hole: HoleSpec, params: FrameParams) -> tuple[tuple[int, int, int, int], np.ndarray, bool, tuple]:
     """Area fraction of each pixel inside the hole, over the hole's bounding box.
 
@@ -177,8 +187,14 @@ def hole_coverage(hole: HoleSpec, params: FrameParams) -> tuple[tuple[int, int, 
     y1 = int(np.clip(np.ceil(ey.max()) + 4, 0, h))
     if x1 <= x0 or y1 <= y0:
         return (x0, y0, x0, y0), np.zeros((0, 0)), True, (float(icx), float(icy))
-    yy, xx = np.mgrid[y0:y1, x0:x1].astype(np.float64)
-    xu, yu = (lens.undistort_px(xx, yy) if lens is not None and lens.has_distortion else (xx, yy))
+    distorted = lens is not None and lens.has_distortion
+    if distorted:
+        # the ideal coordinates of the pixel centres, from the frame's cached grid
+        gx, gy = ideal_pixel_grid(lens, w, h)
+        xu, yu = gx[y0:y1, x0:x1], gy[y0:y1, x0:x1]
+    else:
+        yy, xx = np.mgrid[y0:y1, x0:x1].astype(np.float64)
+        xu, yu = xx, yy
     q = _inside(hole, xu, yu)
     cover = (q < 1.0).astype(np.float64)
     # band where a pixel may be cut by the edge: distance ~ (q-1)*b, pixel half-diagonal
@@ -186,21 +202,54 @@ def hole_coverage(hole: HoleSpec, params: FrameParams) -> tuple[tuple[int, int, 
     band = np.abs(q - 1.0) * b < 1.5
     if band.any():
         off = (np.arange(SUPERSAMPLE) + 0.5) / SUPERSAMPLE - 0.5
-        ox, oy = np.meshgrid(off, off)
-        sx = xx[band][:, None] + ox.ravel()[None, :]
-        sy = yy[band][:, None] + oy.ravel()[None, :]
-        if lens is not None and lens.has_distortion:
-            sx, sy = lens.undistort_px(sx, sy)
+        ox, oy = (o.ravel()[None, :] for o in np.meshgrid(off, off))
+        cx_, cy_ = xu[band][:, None], yu[band][:, None]
+        if distorted:
+            # sub-samples through the lens's local Jacobian: inside one pixel the
+            # distortion is linear to ~1e-5 px (its second derivative is ~1e-4 / px)
+            jxx, jxy, jyx, jyy = (j[y0:y1, x0:x1][band][:, None] for j in _grid_jacobian(lens, w, h))
+            sx = cx_ + jxx * ox + jxy * oy
+            sy = cy_ + jyx * ox + jyy * oy
+        else:
+            sx, sy = cx_ + ox, cy_ + oy
         cover[band] = (_inside(hole, sx, sy) < 1.0).mean(axis=1)
     return (x0, y0, x1, y1), cover, partial, (float(icx), float(icy))
 
 
-def render_frame(params: FrameParams, holes: list[HoleSpec], seed: int | None = 0) -> Frame:
-    """Render one frame; the same (params, holes, seed) gives the same image."""
+def wall_patch(params: FrameParams, seed: int | None) -> np.ndarray:
+    """The bore wall's radiance over the whole frame, before holes, blur and noise: a
+    camera that stays put sees the same patch again (``render_frame(wall=...)``)."""
+    xu, yu = ideal_pixel_grid(params.lens, params.width_px, params.height_px)
+    return wall_radiance(np.random.default_rng(seed), xu, yu, params)
+
+
+@lru_cache(maxsize=4)
+def _vignetting_gain(width_px: int, height_px: int, cx: float, cy: float, strength: float) -> np.ndarray:
+    """Relative illumination (r^2 law), float32, cached: it is the same for every frame."""
+    yy, xx = np.ogrid[0:height_px, 0:width_px]
+    r2 = ((xx - cx) ** 2 + (yy - cy) ** 2) / ((width_px / 2) ** 2 + (height_px / 2) ** 2)
+    gain = (1.0 - strength * r2).astype(np.float32)
+    gain.setflags(write=False)
+    return gain
+
+
+def render_frame(params: FrameParams, holes: list[HoleSpec], seed: int | None = 0,
+                 wall: np.ndarray | None = None) -> Frame:
+    """Render one frame; the same (params, holes, seed, wall) gives the same image.
+
+    ``wall``: the wall's radiance from :func:`wall_patch` (not modified), for a camera
+    that looks at the same patch of wall again; without it the patch is drawn from
+    ``seed``. The holes, blur, vignetting and the sensor's noise are drawn per frame.
+    """
     rng = np.random.default_rng(seed)
     w, h = params.width_px, params.height_px
-    xu, yu = ideal_pixel_grid(params.lens, w, h)
-    radiance = wall_radiance(rng, xu, yu, params)
+    if wall is None:
+        xu, yu = ideal_pixel_grid(params.lens, w, h)
+        radiance = wall_radiance(rng, xu, yu, params)
+    else:
+        if wall.shape != (h, w):
+            raise ValueError(f"wall patch is {wall.shape[1]} x {wall.shape[0]} px, the frame {w} x {h}")
+        radiance = wall.astype(np.float32, copy=True)
     truths: list[HoleTruth] = []
     for hole in holes:
         (x0, y0, x1, y1), cover, partial, (icx, icy) = hole_coverage(hole, params)
@@ -215,9 +264,7 @@ def render_frame(params: FrameParams, holes: list[HoleSpec], seed: int | None = 
     if params.vignetting:
         cx = params.lens.cx_px if params.lens else (w - 1) / 2
         cy = params.lens.cy_px if params.lens else (h - 1) / 2
-        yy, xx = np.ogrid[0:h, 0:w]
-        r2 = ((xx - cx) ** 2 + (yy - cy) ** 2) / ((w / 2) ** 2 + (h / 2) ** 2)
-        radiance *= (1.0 - params.vignetting * r2).astype(np.float32)
+        radiance *= _vignetting_gain(w, h, float(cx), float(cy), float(params.vignetting))
     signal = np.clip(radiance, 0, None)
     noise = np.sqrt(signal / params.gain_e_per_dn) * rng.standard_normal((h, w), dtype=np.float32)
     noise += params.read_noise_dn * rng.standard_normal((h, w), dtype=np.float32)

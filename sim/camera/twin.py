@@ -12,15 +12,20 @@ Image axes: x to the right is the tangential direction of increasing part angle,
 y down is decreasing axial position (the bore's axis points up in the image).
 Faults: dropped connection, delay, black frames, frozen frames (``sim.faults``).
 
-Known simplification: the wall texture is drawn anew for each frame (its statistics
-are the wall's, its grooves do not stay put when the camera moves); the holes and
-their positions, which are what is measured, are exact.
+The wall: a camera that stays put sees the same patch of wall again (only the
+sensor's noise changes from frame to frame), as a real one does; the patch is kept
+per view position (rounded to the pixel) and drawn from a seed of that position, so
+a return to a place shows the same texture. Known simplification: a camera that
+moves sees a new patch (its statistics are the wall's, but its grooves do not
+travel with the move); the holes and their positions, which are what is measured,
+are exact.
 """
 
 from __future__ import annotations
 
 import asyncio
 import time
+from collections import OrderedDict
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -28,7 +33,7 @@ import numpy as np
 from drivers.interfaces import CommunicationLost, DeviceTimeout, Frame
 from drivers.interfaces import Camera
 from sim.camera.lens import BrownLens
-from sim.camera.render import FrameParams, HoleSpec, render_frame
+from sim.camera.render import FrameParams, HoleSpec, render_frame, wall_patch
 from sim.faults import CAMERA_FAULTS, FaultKind, FaultSwitch
 from sim.world import World
 
@@ -72,6 +77,8 @@ class CameraTwin(Camera):
         self.faults = FaultSwitch(CAMERA_FAULTS, name="camera")
         self.grab_timeout_s = grab_timeout_s
         self._rng = np.random.default_rng(seed)
+        self._seed = seed
+        self._walls: OrderedDict[tuple[int, int], np.ndarray] = OrderedDict()
         self._sequence = 0
         self._connected = False
         self._last: Frame | None = None
@@ -129,13 +136,30 @@ class CameraTwin(Camera):
             specs, truth = self.view()
             seed = int(self._rng.integers(0, 2**31))
             # rendering a frame takes tens of ms: off the event loop
-            frame = await asyncio.to_thread(render_frame, p, specs, seed)
+            frame = await asyncio.to_thread(self._render, p, specs, seed, truth)
             image = frame.image
             self.last_truth = truth
         self._sequence += 1
         out = Frame(image, time.time(), self._sequence)
         self._last = out
         return out
+
+
+    #: wall patches kept (one per view position; 5 MB each at 1280 x 1024)
+    WALLS_KEPT = 4
+
+    def _render(self, p: FrameParams, specs: list[HoleSpec], seed: int, truth: ViewTruth):
+        s = self.optics.mm_per_px
+        key = (round(truth.axial_mm / s), round(np.deg2rad(truth.angle_deg) * self.world.part.bore_diameter_mm / 2.0 / s))
+        wall = self._walls.get(key)
+        if wall is None:
+            wall = wall_patch(p, hash((self._seed, key)) & 0x7FFFFFFF)
+            self._walls[key] = wall
+            while len(self._walls) > self.WALLS_KEPT:
+                self._walls.popitem(last=False)
+        else:
+            self._walls.move_to_end(key)
+        return render_frame(p, specs, seed, wall=wall)
 
 
 def small_optics(width_px: int = 320, height_px: int = 256, mm_per_px: float = 0.01) -> CameraOptics:

@@ -105,3 +105,20 @@ def test_camera_faults(rig):
     cam.faults.clear()
     asyncio.run(cam.connect())  # the link comes back
     assert grab(cam).image.max() > 50
+
+
+def test_a_camera_that_stays_put_sees_the_same_wall_and_new_noise(rig):
+    clock, world, z, c, cam = rig
+    move(clock, z, 40.0)  # plain wall, no hole in view
+    a, b = (grab(cam).image.astype(float) for _ in range(2))
+    move(clock, z, 40.5)  # 50 px further: another patch of wall
+    d = grab(cam).image.astype(float)
+    same, moved = np.std(a - b), np.std(a - d)
+    # two frames of one patch differ by the sensor's noise only (shot and read noise
+    # at the wall's level, twice); another patch differs by the texture too
+    p = cam.optics.params
+    noise = np.sqrt(2.0 * (p.wall_level_dn / p.gain_e_per_dn + p.read_noise_dn**2))
+    assert same < 1.1 * noise and moved > 1.5 * same
+    move(clock, z, 40.0)  # back again: the same texture as before
+    e = grab(cam).image.astype(float)
+    assert np.std(a - e) < 1.1 * noise
