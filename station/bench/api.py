@@ -24,8 +24,10 @@ station PC that also runs its MES clients, not a datacentre load test.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import os
 import socket
+import ssl
 import statistics
 import subprocess
 import sys
@@ -80,43 +82,66 @@ def _percentile(values: list[float], q: float) -> float:
     return s[k]
 
 
-async def _inspection(url: str, token: str, serial: str, clients: int) -> dict:
+async def _inspection(url: str, token: str, serial: str, clients: int, interval_s: float = 0.0) -> dict:
     import httpx
 
     headers = {"Authorization": f"Bearer {token}"}
-    async with httpx.AsyncClient(base_url=url, headers=headers, timeout=60.0) as c:
-        r = await c.post("/api/v1/job-orders", json={"part_number": PART, "serial": serial})
-        r.raise_for_status()
-        iid = r.json()["id"]
-        path = f"/api/v1/inspections/{iid}"
-        latencies: list[float] = []
-        errors = [0]
-        done = asyncio.Event()
+    # the clients exist before the inspection starts (building 50 of them is the load
+    # generator's cost, not the server's), sharing one TLS context (unused on http://)
+    tls = ssl.create_default_context()
+    async with contextlib.AsyncExitStack() as stack:
+        pool = [await stack.enter_async_context(httpx.AsyncClient(base_url=url, headers=headers, timeout=60.0,
+                                                                  verify=tls))
+                for _ in range(clients + 1)]
+        return await _measure(pool, serial, clients, interval_s)
 
-        async def client() -> None:
-            async with httpx.AsyncClient(base_url=url, headers=headers, timeout=60.0) as own:
-                while not done.is_set():
-                    t0 = time.perf_counter()
-                    try:
-                        resp = await own.get(path)
-                        ok = resp.status_code == 200
-                    except httpx.HTTPError:
-                        ok = False
-                    if ok:
-                        latencies.append(time.perf_counter() - t0)
-                    else:
-                        errors[0] += 1
 
-        tasks = [asyncio.create_task(client()) for _ in range(clients)]
-        t0 = time.perf_counter()
-        while True:  # the watcher: one poll every 0.2 s (the load, if any, runs beside it)
-            rec = (await c.get(path)).json()
-            if rec["state"] != "running":
-                break
-            await asyncio.sleep(0.2)
-        done.set()
-        window = time.perf_counter() - t0
-        await asyncio.gather(*tasks)
+async def _measure(pool, serial: str, clients: int, interval_s: float) -> dict:
+    import httpx
+
+    c = pool[-1]
+    r = await c.post("/api/v1/job-orders", json={"part_number": PART, "serial": serial})
+    r.raise_for_status()
+    iid = r.json()["id"]
+    path = f"/api/v1/inspections/{iid}"
+    latencies: list[float] = []
+    errors = [0]
+    done = asyncio.Event()
+
+    async def client(k: int) -> None:
+        own = pool[k]
+        # paced clients start spread over one period; each request is due at its slot
+        # and its latency counts from the slot, so a slow server is not excused by the
+        # requests it delayed (no coordinated omission)
+        due = time.perf_counter() + interval_s * k / max(clients, 1)
+        while not done.is_set():
+            if interval_s > 0:
+                wait = due - time.perf_counter()
+                if wait > 0:
+                    await asyncio.sleep(wait)
+                t0, due = due, due + interval_s
+            else:
+                t0 = time.perf_counter()
+            try:
+                resp = await own.get(path)
+                ok = resp.status_code == 200
+            except httpx.HTTPError:
+                ok = False
+            if ok:
+                latencies.append(time.perf_counter() - t0)
+            else:
+                errors[0] += 1
+
+    tasks = [asyncio.create_task(client(k)) for k in range(clients)]
+    t0 = time.perf_counter()
+    while True:  # the watcher: one poll every 0.2 s (the load, if any, runs beside it)
+        rec = (await c.get(path)).json()
+        if rec["state"] != "running":
+            break
+        await asyncio.sleep(0.2)
+    done.set()
+    window = time.perf_counter() - t0
+    await asyncio.gather(*tasks)
     out = {"inspection_s": _duration_s(rec), "state": rec["state"], "result": rec["result"],
            "reason": rec.get("reason")}
     if clients:
@@ -135,7 +160,7 @@ def _recover(url: str, headers: dict) -> None:
             c.post("/api/v1/station/reset")
 
 
-def run(repeats: int = 3, clients: int = 50, time_scale: float = 1.0, progress=None) -> dict:
+def run(repeats: int = 3, clients: int = 50, time_scale: float = 1.0, interval_s: float = 0.0, progress=None) -> dict:
     from station.store import Store
     from station.store.tokens import TokenRepository
 
@@ -171,7 +196,7 @@ def run(repeats: int = 3, clients: int = 50, time_scale: float = 1.0, progress=N
                 if progress:
                     progress()
                 _recover(url, headers)
-                loaded.append(asyncio.run(_inspection(url, token, f"BENCH-L{i:02d}", clients)))
+                loaded.append(asyncio.run(_inspection(url, token, f"BENCH-L{i:02d}", clients, interval_s)))
                 if progress:
                     progress()
         finally:
@@ -189,7 +214,8 @@ def run(repeats: int = 3, clients: int = 50, time_scale: float = 1.0, progress=N
     p99 = med(loaded, "p99_ms")
     return {
         "endpoint": "GET /api/v1/inspections/{id} (the running inspection)",
-        "clients": clients, "repeats": repeats, "time_scale": time_scale, "cpus": os.cpu_count(),
+        "clients": clients, "interval_s": interval_s, "offered_rps": clients / interval_s if interval_s > 0 else None,
+        "repeats": repeats, "time_scale": time_scale, "cpus": os.cpu_count(),
         "rps_median": med(loaded, "rps"), "p50_ms_median": med(loaded, "p50_ms"), "p99_ms_median": p99,
         "requests_total": sum(r["requests"] for r in loaded), "errors_total": sum(r["errors"] for r in loaded),
         "faulted_quiet": len(quiet) - len(q_ok), "faulted_loaded": len(loaded) - len(l_ok),
@@ -208,6 +234,7 @@ def register(bench_app: typer.Typer) -> None:
         repeats: int = typer.Option(3, help="inspections with and without load (each)"),
         clients: int = typer.Option(50, help="concurrent clients polling the running inspection"),
         time_scale: float = typer.Option(1.0, "--time-scale", help="simulated moves run this much faster"),
+        interval: float = typer.Option(0.0, "--interval", help="each client polls once per INTERVAL s (0: back to back)"),
         json: bool = typer.Option(False, "--json"),
     ) -> None:
         """Requests per second and p99 latency of GET /inspections/{id} under 50 clients, and
@@ -218,7 +245,7 @@ def register(bench_app: typer.Typer) -> None:
 
         with Progress(console=err_console, transient=True) as prog:
             task = prog.add_task("inspections", total=2 * repeats)
-            res = run(repeats, clients, time_scale, progress=lambda: prog.advance(task))
+            res = run(repeats, clients, time_scale, interval, progress=lambda: prog.advance(task))
         if json:
             print_json(res)
             return
