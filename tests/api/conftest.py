@@ -53,7 +53,10 @@ def make_tokens(data_dir: Path) -> dict[str, str]:
 def start_server(data_dir: Path, **settings) -> tuple[Server, uvicorn.Server, threading.Thread]:
     tokens = make_tokens(data_dir)
     app = create_app(Settings(data_dir=data_dir, time_scale=TIME_SCALE, sse_keepalive_s=1.0, **settings))
-    sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    # proto IPPROTO_TCP, not 0: asyncio sets TCP_NODELAY only on sockets that say they
+    # are TCP; without it every response (headers, then body) waits ~40 ms on Nagle and
+    # the client's delayed ACK
+    sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM, socket.IPPROTO_TCP)
     sock.bind(("127.0.0.1", 0))
     port = sock.getsockname()[1]
     server = uvicorn.Server(uvicorn.Config(app, log_level="warning", timeout_graceful_shutdown=3,
