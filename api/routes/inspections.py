@@ -18,9 +18,10 @@ from pydantic import BaseModel, ConfigDict, Field
 from api import auth
 from api.qif import qif_bytes
 from api.routes.common import blocking, runtime
+from api.routes.parts import load_by_number
 from api.runtime import Busy
 from station import __version__
-from station.parts import PartSpecError, load_part
+from station.parts import PartSpecError
 from station.parts.spec import PART_NUMBER_PATTERN
 from station.store import InspectionNotFound
 
@@ -80,7 +81,7 @@ async def create_job_order(order: JobOrder, request: Request, response: Response
                            who: auth.Principal = Depends(auth.job_orders)) -> dict:
     rt = runtime(request)
     try:
-        spec = await blocking(load_part, order.part_number, [rt.settings.parts_dir])
+        spec = await blocking(load_by_number, order.part_number, rt.settings.parts_dir)
     except PartSpecError as exc:
         raise HTTPException(status.HTTP_422_UNPROCESSABLE_CONTENT, f"part {order.part_number}: {exc}") from None
     try:

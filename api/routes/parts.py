@@ -17,14 +17,30 @@ from api import auth
 from api.routes.common import blocking, runtime
 from api.toml_write import dumps
 from station.parts import PartSpecError, list_parts, load_part
-from station.parts.loader import _problems_of
+from station.parts.loader import Problem, _problems_of
 from station.parts.spec import PartSpec, is_part_number
 
 router = APIRouter(prefix="/api/v1", tags=["part specs"])
 
 
+def is_plain_part_number(text: str) -> bool:
+    """A part number from a request that ``load_part`` takes as a number, never as a
+    file: it reads a string ending in ``.toml`` as a path (from the server's working
+    directory), which a request must not reach."""
+    return is_part_number(text) and not text.endswith(".toml")
+
+
+def load_by_number(part_number: str, parts_dir: Path) -> PartSpec:
+    """The spec of a part number from a request: ``<data>/parts`` first, then the
+    built-ins; never a file named by the request (:func:`is_plain_part_number`)."""
+    if not is_plain_part_number(part_number):
+        raise PartSpecError([Problem(repr(part_number), None, "",
+                                     "not a part number (letters, digits, '.', '_', '-'; not ending in .toml)")])
+    return load_part(part_number, [parts_dir])
+
+
 def _check_number(part_number: str) -> None:
-    if not is_part_number(part_number):
+    if not is_plain_part_number(part_number):
         raise HTTPException(status.HTTP_404_NOT_FOUND, f"{part_number!r} is not a part number")
 
 
@@ -42,7 +58,7 @@ async def get_parts(request: Request, who: auth.Principal = Depends(auth.reader)
 async def get_part(part_number: str, request: Request, who: auth.Principal = Depends(auth.reader)) -> dict:
     _check_number(part_number)
     try:
-        spec = await blocking(load_part, part_number, [runtime(request).settings.parts_dir])
+        spec = await blocking(load_by_number, part_number, runtime(request).settings.parts_dir)
     except PartSpecError as exc:
         raise HTTPException(status.HTTP_404_NOT_FOUND, str(exc)) from None
     return spec.to_json()
@@ -79,6 +95,6 @@ async def put_part(part_number: str, request: Request, body: dict = Body(..., de
     text = dumps(spec.model_dump(mode="json", exclude_none=True),
                  header=f"part spec stored through the REST API by {who.name}")
     await blocking(_write_atomically, path, text)
-    stored = await blocking(load_part, part_number, [rt.settings.parts_dir])  # it must read back as sent
+    stored = await blocking(load_by_number, part_number, rt.settings.parts_dir)  # it must read back as sent
     await blocking(rt.audit, who.who, f"{'replaced' if existed else 'created'} part spec {part_number}")
     return stored.to_json()
