@@ -14,10 +14,11 @@ import contextlib
 import logging
 from pathlib import Path
 
-from fastapi import FastAPI, Request
+from fastapi import FastAPI, HTTPException, Request, status
 from fastapi.responses import JSONResponse, RedirectResponse
 from fastapi.staticfiles import StaticFiles
 
+from api import logsafe
 from api.routes import assets, inspections, live, ops, parts, reports, session, station
 from api.runtime import StationRuntime
 from api.settings import Settings
@@ -32,6 +33,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
 
     @contextlib.asynccontextmanager
     async def lifespan(app: FastAPI):
+        logsafe.install()  # after uvicorn set its logging up: no token in an access-log line
         rt = StationRuntime(settings)
         await rt.open()
         try:
@@ -49,21 +51,15 @@ def create_app(settings: Settings | None = None) -> FastAPI:
                   description="Job orders in, job responses (results, QIF) out; station state, "
                               "commands, part specs, models, calibrations, reports and live data.")
 
-    @app.middleware("http")
-    async def limit_body(request: Request, call_next):
-        """Refuse a declared body above the upload limit before reading it."""
-        length = request.headers.get("content-length")
-        # multipart framing adds a little to the file itself
-        if length is not None and length.isdigit() and int(length) > settings.max_upload_bytes + 64 * 1024:
-            return JSONResponse({"detail": f"request body larger than {settings.max_upload_bytes} bytes"},
-                                status_code=413)
-        return await call_next(request)
-
     @app.exception_handler(StoreError)
     async def store_error(request: Request, exc: StoreError):
         log.error("store error: %s", exc)
         code = 503 if isinstance(exc, StoreUnavailable) else 500
         return JSONResponse({"detail": str(exc)}, status_code=code)
+
+    # multipart framing adds a little to the file itself
+    app.add_middleware(BodyLimit, limit=settings.max_upload_bytes + 64 * 1024,
+                       message=f"request body larger than {settings.max_upload_bytes} bytes")
 
     @app.middleware("http")
     async def panel_headers(request: Request, call_next):
@@ -87,6 +83,43 @@ def create_app(settings: Settings | None = None) -> FastAPI:
 
     app.mount("/panel", StaticFiles(directory=PANEL_DIR, html=True), name="panel")
     return app
+
+
+class BodyLimit:
+    """Refuse a request body above ``limit`` bytes with 413 (an ASGI middleware).
+
+    A declared ``Content-Length`` above the limit is refused before a byte of the body
+    is read. A body without one (``Transfer-Encoding: chunked``) is counted as it
+    arrives and refused as soon as it passes the limit, so no request makes the server
+    parse, buffer or spool more than ``limit`` bytes (multipart uploads are spooled
+    by Starlette before the route sees them, JSON bodies read whole).
+    """
+
+    def __init__(self, app, limit: int, message: str):
+        self.app, self.limit, self.message = app, limit, message
+
+    async def __call__(self, scope, receive, send):
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        for name, value in scope.get("headers", ()):
+            if name == b"content-length" and value.isdigit() and int(value) > self.limit:
+                await JSONResponse({"detail": self.message}, status_code=413)(scope, receive, send)
+                return
+        received = 0
+
+        async def limited_receive():
+            nonlocal received
+            message = await receive()
+            if message["type"] == "http.request":
+                received += len(message.get("body", b""))
+                if received > self.limit:
+                    # raised inside the route's body read: FastAPI passes an
+                    # HTTPException on, and the app answers it as usual (JSON 413)
+                    raise HTTPException(status.HTTP_413_CONTENT_TOO_LARGE, self.message)
+            return message
+
+        await self.app(scope, limited_receive, send)
 
 
 #: the operator panel: static HTML, CSS and JS modules (no build step)
