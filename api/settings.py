@@ -24,6 +24,12 @@ class Settings:
     #: simulation: moves run this much faster than real time
     time_scale: float | None = None
     max_upload_bytes: int = MAX_UPLOAD_BYTES
+    #: mark the panel's session cookie ``Secure`` (sent over https only) whatever the
+    #: request's scheme: True for a station behind a TLS-terminating reverse proxy that
+    #: does not pass ``X-Forwarded-Proto`` from a trusted address; False (default) for
+    #: plain http on 127.0.0.1 or a segmented station network. A request that arrives
+    #: as https (directly or through a trusted proxy) gets ``Secure`` either way.
+    cookie_secure: bool = False
     #: how often the camera stream grabs a frame while no inspection runs
     idle_camera_hz: float = 2.0
     #: SSE keep-alive comment interval (proxies close silent connections)

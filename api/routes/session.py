@@ -40,6 +40,12 @@ def _origin_ok(request: Request) -> bool:
     return origin == f"{request.url.scheme}://{request.headers.get('host', '')}"
 
 
+def _secure(request: Request) -> bool:
+    """The cookie is ``Secure`` over https, and always when the settings say the
+    station is served behind TLS (``cookie_secure``)."""
+    return runtime(request).settings.cookie_secure or request.url.scheme == "https"
+
+
 def _session_json(who: auth.Principal, sess) -> dict:
     return {"name": who.name, "role": who.role, "token_id": who.token_id, "kind": "session",
             "csrf_token": sess.csrf_token, "expires_at": _iso(sess.expires_at)}
@@ -49,8 +55,8 @@ def _session_json(who: auth.Principal, sess) -> dict:
                                     403: {"description": "a login from another site's page"}})
 async def login(body: Login, request: Request, response: Response) -> dict:
     """Log in to the panel with an API token: sets the session cookie (HttpOnly,
-    SameSite=Strict, Secure over https) and returns the CSRF token to send as
-    ``X-CSRF-Token`` with every write."""
+    SameSite=Strict, Secure over https or with the setting ``cookie_secure``) and
+    returns the CSRF token to send as ``X-CSRF-Token`` with every write."""
     if not _origin_ok(request):
         raise HTTPException(status.HTTP_403_FORBIDDEN, "login from another site's page refused")
     rt = runtime(request)
@@ -61,7 +67,7 @@ async def login(body: Login, request: Request, response: Response) -> dict:
     rt.sessions.drop(request.cookies.get(SESSION_COOKIE))  # a new login replaces the old session
     session_id, sess = rt.sessions.create(who)
     response.set_cookie(SESSION_COOKIE, session_id, max_age=int(ABSOLUTE_S), path="/", httponly=True,
-                        samesite="strict", secure=request.url.scheme == "https")
+                        samesite="strict", secure=_secure(request))
     response.headers["Cache-Control"] = "no-store"
     await blocking(rt.store.log_event, "audit", f"{who.who}: logged in to the panel")
     return _session_json(who, sess)
@@ -85,7 +91,6 @@ async def logout(request: Request, response: Response, who: auth.Principal = Dep
     if "authorization" in request.headers or not rt.sessions.drop(request.cookies.get(SESSION_COOKIE)):
         raise HTTPException(status.HTTP_404_NOT_FOUND,
                             "no panel session to end (API tokens are revoked with `station token revoke`)")
-    response.delete_cookie(SESSION_COOKIE, path="/", httponly=True, samesite="strict",
-                           secure=request.url.scheme == "https")
+    response.delete_cookie(SESSION_COOKIE, path="/", httponly=True, samesite="strict", secure=_secure(request))
     await blocking(rt.store.log_event, "audit", f"{who.who}: logged out of the panel")
     return {"ended": True, "time": _iso(time.time())}

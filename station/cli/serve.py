@@ -24,6 +24,8 @@ def register(app: typer.Typer) -> None:
         data: Path = typer.Option(Path("var"), "--data", help="data folder: database, images, parts, models"),
         time_scale: Optional[float] = typer.Option(None, "--time-scale", help="simulation: moves run this much faster"),
         db: Optional[str] = typer.Option(None, "--db", help="database URL (default: SQLite in the data folder)"),
+        cookie_secure: bool = typer.Option(False, "--cookie-secure", help="mark the panel's session cookie Secure "
+                                           "(https only): for a station behind a TLS reverse proxy (docs/security.md)"),
     ) -> None:
         """Run the REST API (docs/api.md). Create a token first: station token create --role mes."""
         import uvicorn
@@ -33,7 +35,8 @@ def register(app: typer.Typer) -> None:
 
         if time_scale is not None and not time_scale > 0:
             fail("--time-scale must be positive")
-        settings = Settings(config=config, scenario=scenario, data_dir=data, db_url=db, time_scale=time_scale)
+        settings = Settings(config=config, scenario=scenario, data_dir=data, db_url=db, time_scale=time_scale,
+                            cookie_secure=cookie_secure)
         try:
             # open SSE/MJPEG streams end when the runtime closes; this bounds the wait for them
             uvicorn.run(create_app(settings), host=host, port=port, timeout_graceful_shutdown=5,
