@@ -222,7 +222,7 @@ def build_station(config_path: str | Path | None = None, *, scenario: str | Path
         from sim.camera.twin import CameraOptics, CameraTwin
 
         optics = CameraOptics()
-        cam = CameraTwin(world, twins.station.physics["Z"], twins.station.physics["C"], optics)
+        cam = CameraTwin(world, twins.station.physics["Z"], twins.station.physics["C"], optics, render_process=True)
     except BaseException:
         twins.stop()
         raise

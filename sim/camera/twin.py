@@ -24,6 +24,7 @@ are exact.
 from __future__ import annotations
 
 import asyncio
+import logging
 import time
 from collections import OrderedDict
 from dataclasses import dataclass, field, replace
@@ -33,9 +34,12 @@ import numpy as np
 from drivers.interfaces import CommunicationLost, DeviceTimeout, Frame
 from drivers.interfaces import Camera
 from sim.camera.lens import BrownLens
-from sim.camera.render import FrameParams, HoleSpec, render_frame, wall_patch
+from sim.camera.render import FrameParams, HoleSpec
+from sim.camera.renderer import RendererLost, RendererProcess, render_image
 from sim.faults import CAMERA_FAULTS, FaultKind, FaultSwitch
 from sim.world import World
+
+log = logging.getLogger("sim.camera")
 
 
 @dataclass(frozen=True)
@@ -69,7 +73,7 @@ class CameraTwin(Camera):
     name = "camera-twin"
 
     def __init__(self, world: World, z_physics, c_physics, optics: CameraOptics | None = None,
-                 *, seed: int = 0, grab_timeout_s: float = 1.0):
+                 *, seed: int = 0, grab_timeout_s: float = 1.0, render_process: bool = False):
         self.world = world
         self.z = z_physics
         self.c = c_physics
@@ -79,6 +83,8 @@ class CameraTwin(Camera):
         self._rng = np.random.default_rng(seed)
         self._seed = seed
         self._walls: OrderedDict[tuple[int, int], np.ndarray] = OrderedDict()
+        self._render_process = render_process
+        self._renderer: RendererProcess | None = None
         self._sequence = 0
         self._connected = False
         self._last: Frame | None = None
@@ -87,10 +93,20 @@ class CameraTwin(Camera):
     async def connect(self) -> None:
         if self.faults.is_active(FaultKind.DROP_CONNECTION):
             raise CommunicationLost("camera does not answer", self.name)
+        if self._render_process and self._renderer is None:
+            self._renderer = RendererProcess()
+            try:
+                await self._renderer.start()
+            except RendererLost as exc:
+                log.warning("camera twin: %s; rendering in a thread", exc)
+                self._renderer = None
         self._connected = True
 
     async def close(self) -> None:
         self._connected = False
+        if self._renderer is not None:
+            self._renderer.stop()
+            self._renderer = None
 
     def view(self) -> tuple[list[HoleSpec], ViewTruth]:
         """The holes in view at the drives' present positions, in ideal pixels."""
@@ -135,9 +151,9 @@ class CameraTwin(Camera):
         else:
             specs, truth = self.view()
             seed = int(self._rng.integers(0, 2**31))
-            # rendering a frame takes tens of ms: off the event loop
-            frame = await asyncio.to_thread(self._render, p, specs, seed, truth)
-            image = frame.image
+            # rendering a frame takes tens of ms: off the event loop (and, with a
+            # renderer process, off this interpreter's GIL, as a real camera's pixels are)
+            image = await self._render(p, specs, seed, truth)
             self.last_truth = truth
         self._sequence += 1
         out = Frame(image, time.time(), self._sequence)
@@ -145,21 +161,23 @@ class CameraTwin(Camera):
         return out
 
 
-    #: wall patches kept (one per view position; 5 MB each at 1280 x 1024)
-    WALLS_KEPT = 4
-
-    def _render(self, p: FrameParams, specs: list[HoleSpec], seed: int, truth: ViewTruth):
+    def _wall_key(self, truth: ViewTruth) -> tuple[int, int]:
         s = self.optics.mm_per_px
-        key = (round(truth.axial_mm / s), round(np.deg2rad(truth.angle_deg) * self.world.part.bore_diameter_mm / 2.0 / s))
-        wall = self._walls.get(key)
-        if wall is None:
-            wall = wall_patch(p, hash((self._seed, key)) & 0x7FFFFFFF)
-            self._walls[key] = wall
-            while len(self._walls) > self.WALLS_KEPT:
-                self._walls.popitem(last=False)
-        else:
-            self._walls.move_to_end(key)
-        return render_frame(p, specs, seed, wall=wall)
+        return (round(truth.axial_mm / s),
+                round(np.deg2rad(truth.angle_deg) * self.world.part.bore_diameter_mm / 2.0 / s))
+
+    async def _render(self, p: FrameParams, specs: list[HoleSpec], seed: int, truth: ViewTruth) -> np.ndarray:
+        """The frame's pixels: in the renderer process when there is one, else in a thread."""
+        key = self._wall_key(truth)
+        wall_seed = hash((self._seed, key)) & 0x7FFFFFFF
+        if self._renderer is not None:
+            try:
+                return await self._renderer.render(p, specs, seed, key, wall_seed)
+            except RendererLost as exc:
+                # the twin's own machinery failed, not the camera: render here from now on
+                log.warning("camera twin: %s; rendering in a thread from now on", exc)
+                self._renderer = None
+        return await asyncio.to_thread(render_image, p, specs, seed, key, wall_seed, self._walls)
 
 
 def small_optics(width_px: int = 320, height_px: int = 256, mm_per_px: float = 0.01) -> CameraOptics:

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import asyncio
+import os
+import signal
 
 import numpy as np
 import pytest
@@ -122,3 +124,22 @@ def test_a_camera_that_stays_put_sees_the_same_wall_and_new_noise(rig):
     move(clock, z, 40.0)  # back again: the same texture as before
     e = grab(cam).image.astype(float)
     assert np.std(a - e) < 1.1 * noise
+
+
+def test_the_camera_keeps_delivering_when_its_renderer_process_dies(rig):
+    clock, world, z, c, cam = rig
+    twin = CameraTwin(world, z, c, small_optics(), seed=3, render_process=True)
+
+    async def go():
+        await twin.connect()
+        try:
+            first = await twin.grab()
+            os.kill(twin._renderer.pid, signal.SIGKILL)
+            frames = [await twin.grab() for _ in range(3)]  # rendered in a thread from the loss on
+            return first, frames, twin._renderer
+        finally:
+            await twin.close()
+
+    first, frames, renderer = asyncio.run(go())
+    assert renderer is None
+    assert all(f.image.shape == first.image.shape and f.sequence > first.sequence for f in frames)

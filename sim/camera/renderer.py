@@ -1,0 +1,118 @@
+"""The camera twin's pixels, rendered in a process of their own.
+
+A real camera makes its pixels in its own silicon: the station's interpreter only
+receives them. The twin's renderer costs tens of milliseconds of numpy per frame; in
+the station's process it would take the interpreter's GIL from the drivers, the
+engine and the API for that long, and the simulated station would be slower under
+load than a real one. So the served station renders in a worker process (one,
+started from a ``forkserver`` with the renderer preloaded, so a new worker starts in
+milliseconds), and the twin itself (where the endoscope looks, which holes are in
+view: the physics) stays in the station's process.
+
+The worker keeps the wall patches (``sim.camera.twin``: a camera that stays put sees
+the same wall) and sends back the 8-bit image. A worker that dies or does not answer
+raises :class:`RendererLost`; the twin then renders in a thread.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import concurrent.futures
+import multiprocessing
+from collections import OrderedDict
+from concurrent.futures.process import BrokenProcessPool
+
+import numpy as np
+
+from sim.camera.render import FrameParams, HoleSpec, render_frame, wall_patch
+
+#: wall patches kept (one per view position; 5 MB each at 1280 x 1024)
+WALLS_KEPT = 4
+
+#: the first frame waits for the worker's start; later ones for one render
+START_TIMEOUT_S = 30.0
+RENDER_TIMEOUT_S = 10.0
+
+
+class RendererLost(RuntimeError):
+    """The renderer process died, did not start or did not answer in time."""
+
+
+def render_image(params: FrameParams, specs: list[HoleSpec], seed: int, wall_key: tuple[int, int],
+                 wall_seed: int, walls: OrderedDict) -> np.ndarray:
+    """Render one frame over the wall patch of ``wall_key`` (kept in ``walls``)."""
+    wall = walls.get(wall_key)
+    if wall is None or wall.shape != (params.height_px, params.width_px):
+        wall = wall_patch(params, wall_seed)
+        walls[wall_key] = wall
+        while len(walls) > WALLS_KEPT:
+            walls.popitem(last=False)
+    else:
+        walls.move_to_end(wall_key)
+    return render_frame(params, specs, seed, wall=wall).image
+
+
+_WORKER_WALLS: OrderedDict = OrderedDict()
+
+
+def _render_in_worker(params, specs, seed, wall_key, wall_seed) -> np.ndarray:
+    return render_image(params, specs, seed, wall_key, wall_seed, _WORKER_WALLS)
+
+
+def _ready() -> bool:
+    return True
+
+
+_CONTEXT: multiprocessing.context.BaseContext | None = None
+
+
+def _context() -> multiprocessing.context.BaseContext:
+    """A forkserver that has imported the renderer (numpy, OpenCV) once for all workers;
+    never a plain fork of the station's multi-threaded process."""
+    global _CONTEXT
+    if _CONTEXT is None:
+        ctx = multiprocessing.get_context("forkserver")
+        ctx.set_forkserver_preload(["sim.camera.render", "sim.camera.renderer"])
+        _CONTEXT = ctx
+    return _CONTEXT
+
+
+class RendererProcess:
+    """One worker process rendering the twin's frames."""
+
+    def __init__(self) -> None:
+        self._pool: concurrent.futures.ProcessPoolExecutor | None = None
+
+    async def start(self) -> None:
+        try:
+            self._pool = concurrent.futures.ProcessPoolExecutor(max_workers=1, mp_context=_context())
+            await self._call(_ready, timeout=START_TIMEOUT_S)
+        except (OSError, ValueError) as exc:
+            self.stop()
+            raise RendererLost(f"cannot start the renderer process: {exc}") from exc
+
+    async def render(self, params: FrameParams, specs: list[HoleSpec], seed: int,
+                     wall_key: tuple[int, int], wall_seed: int) -> np.ndarray:
+        return await self._call(_render_in_worker, params, specs, seed, wall_key, wall_seed,
+                                timeout=RENDER_TIMEOUT_S)
+
+    async def _call(self, fn, *args, timeout: float):
+        if self._pool is None:
+            raise RendererLost("the renderer process is stopped")
+        loop = asyncio.get_running_loop()
+        try:
+            return await asyncio.wait_for(loop.run_in_executor(self._pool, fn, *args), timeout)
+        except (BrokenProcessPool, asyncio.TimeoutError) as exc:
+            self.stop()
+            what = "did not answer in time" if isinstance(exc, asyncio.TimeoutError) else "died"
+            raise RendererLost(f"the renderer process {what}") from exc
+
+    @property
+    def pid(self) -> int | None:
+        procs = getattr(self._pool, "_processes", None) or {}
+        return next(iter(procs), None)
+
+    def stop(self) -> None:
+        pool, self._pool = self._pool, None
+        if pool is not None:
+            pool.shutdown(wait=False, cancel_futures=True)

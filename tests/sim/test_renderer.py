@@ -1,0 +1,52 @@
+"""The camera twin's renderer process: the same pixels as in-process, and a lost
+worker does not lose the camera."""
+
+from __future__ import annotations
+
+import asyncio
+import os
+import signal
+from collections import OrderedDict
+
+import numpy as np
+import pytest
+
+from sim.camera.render import HoleSpec
+from sim.camera.renderer import RendererLost, RendererProcess, render_image
+from sim.camera.twin import small_optics
+
+PARAMS = small_optics().params
+SPECS = [HoleSpec(160.3, 128.7, 40.0)]
+
+
+def test_the_worker_renders_what_the_thread_renders():
+    async def go():
+        r = RendererProcess()
+        await r.start()
+        try:
+            return await r.render(PARAMS, SPECS, 11, (5, 7), 99), await r.render(PARAMS, SPECS, 12, (5, 7), 99)
+        finally:
+            r.stop()
+
+    a, b = asyncio.run(go())
+    walls: OrderedDict = OrderedDict()
+    np.testing.assert_array_equal(a, render_image(PARAMS, SPECS, 11, (5, 7), 99, walls))
+    np.testing.assert_array_equal(b, render_image(PARAMS, SPECS, 12, (5, 7), 99, walls))
+    assert not np.array_equal(a, b)  # new sensor noise on the same wall
+
+
+def test_a_dead_worker_is_reported_and_stopped():
+    async def go():
+        r = RendererProcess()
+        await r.start()
+        pid = r.pid
+        assert pid is not None
+        os.kill(pid, signal.SIGKILL)
+        with pytest.raises(RendererLost, match="died"):
+            for _ in range(50):  # the pool notices the death within a few calls
+                await r.render(PARAMS, SPECS, 1, (0, 0), 1)
+                await asyncio.sleep(0.05)
+        with pytest.raises(RendererLost, match="stopped"):
+            await r.render(PARAMS, SPECS, 1, (0, 0), 1)
+
+    asyncio.run(go())
