@@ -9,6 +9,7 @@ response: state, verdict and every characteristic with its limits and uncertaint
 
 from __future__ import annotations
 
+import contextlib
 from datetime import datetime
 from typing import Annotated, Literal
 
@@ -23,7 +24,7 @@ from api.runtime import Busy
 from station import __version__
 from station.parts import PartSpecError
 from station.parts.spec import PART_NUMBER_PATTERN
-from station.store import InspectionNotFound
+from station.store import InspectionNotFound, StoreError
 
 router = APIRouter(prefix="/api/v1", tags=["job orders and inspections"])
 
@@ -88,6 +89,11 @@ async def create_job_order(order: JobOrder, request: Request, response: Response
         iid, created = await rt.start_inspection(spec, order.serial, order.order_id, idempotency_key)
     except Busy as exc:
         raise HTTPException(status.HTTP_409_CONFLICT, str(exc)) from None
+    if created:  # who ordered it (the record names the order, not the caller); the job runs either way
+        what = f"ordered inspection {iid} of part {spec.part_number}, serial {order.serial!r}" + (
+            f", order {order.order_id!r}" if order.order_id else "")
+        with contextlib.suppress(StoreError):
+            await blocking(rt.audit, who.who, what)
     rec = await _get_record(request, iid)
     if not created:
         response.status_code = status.HTTP_200_OK

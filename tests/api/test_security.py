@@ -193,6 +193,28 @@ def test_the_csrf_token_is_compared_in_constant_time(sec, compare_spy):
             "with hmac.compare_digest"
 
 
+def test_job_orders_and_commands_name_who_gave_them(sec):
+    """Repudiation: the audit log says which token ordered an inspection, the command
+    log which one commanded the station (one short inspection, aborted)."""
+    from tests.api.conftest import PART, wait_done
+
+    with httpx.Client(base_url=sec.url, headers=_bearer(sec, "mes"), timeout=30) as mes, \
+            httpx.Client(base_url=sec.url, headers=_bearer(sec, "operator"), timeout=30) as operator:
+        wait_idle(mes)
+        r = mes.post("/api/v1/job-orders", json={"part_number": PART, "serial": "WHO-1", "order_id": "PO-7"})
+        assert r.status_code == 202, r.text
+        iid = r.json()["id"]
+        # the job runs when the order is answered (an inspection takes seconds): abort it
+        assert operator.post("/api/v1/station/abort").status_code == 200
+        assert wait_done(mes, iid)["state"] == "aborted"
+        wait_idle(mes)
+    audit = [e.message for e in sec.runtime.store.events(kind="audit", limit=1000, newest_first=True)]
+    assert any(m.startswith("test mes (token ") and f"ordered inspection {iid}" in m and "'WHO-1'" in m
+               and "'PO-7'" in m for m in audit), audit[:5]
+    commands = [e.message for e in sec.runtime.store.events(kind="command", limit=1000, newest_first=True)]
+    assert any(m.startswith("abort by test operator (token ") for m in commands), commands[:5]
+
+
 # ============================================================= the panel's session cookie
 def test_the_session_cookie_is_httponly_samesite_strict_and_kept_hashed(sec):
     r = _login(sec, sec.tokens["operator"])
