@@ -58,6 +58,11 @@ SAFE_METHODS = frozenset({"GET", "HEAD", "OPTIONS"})
 #: most tokens whose slow hash check is remembered (a handful in practice)
 VERIFIED_MAX = 1000
 
+#: a token's revocation is read from the database at most this often per token: a
+#: `station token revoke` (another process) takes effect within this time, and fifty
+#: clients polling with one token cost one read per second, not one per request
+REVOCATION_CHECK_S = 1.0
+
 
 async def verify_token(request: Request, token: str) -> Principal | None:
     """The principal of a valid API token, or None.
@@ -65,8 +70,8 @@ async def verify_token(request: Request, token: str) -> Principal | None:
     The salted PBKDF2 check runs once per token and process; after it, the token's
     SHA-256 finds the record (256 random bits: a fast hash is enough to look it up,
     the stored hash stays slow), and only its revocation is read from the database,
-    on every request, so ``station token revoke`` still takes effect at once.
-    Concurrent requests with the same token share that read (api/singleflight.py).
+    at most every REVOCATION_CHECK_S per token, so ``station token revoke`` takes
+    effect within a second. Concurrent requests share that read (api/singleflight.py).
     """
     rt = request.app.state.runtime
     key = hashlib.sha256(token.encode()).hexdigest()
@@ -79,11 +84,15 @@ async def verify_token(request: Request, token: str) -> Principal | None:
             rt.verified_tokens.clear()
         rt.verified_tokens[key] = record
         return Principal(record.name, record.role, record.id)
-    active = await rt.reads.run(("token", known.id), lambda: asyncio.wait_for(
-        in_api_thread(token_is_active, rt.store, known.id), timeout=10.0))
-    if not active:
-        rt.verified_tokens.pop(key, None)
-        return None
+    now = time.monotonic()
+    if now - rt.token_checked.get(known.id, -REVOCATION_CHECK_S) >= REVOCATION_CHECK_S:
+        active = await rt.reads.run(("token", known.id), lambda: asyncio.wait_for(
+            in_api_thread(token_is_active, rt.store, known.id), timeout=10.0))
+        if not active:
+            rt.verified_tokens.pop(key, None)
+            rt.token_checked.pop(known.id, None)
+            return None
+        rt.token_checked[known.id] = now
     return Principal(known.name, known.role, known.id)
 
 

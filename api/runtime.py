@@ -179,6 +179,9 @@ class StationRuntime:
         self.reads = SingleFlight()
         #: tokens whose hash was checked: sha256(token) -> record (api/auth.py)
         self.verified_tokens: dict[str, object] = {}
+        #: token id -> monotonic time its revocation was last read as "not revoked"
+        self.token_checked: dict[int, float] = {}
+        self.records = None
         #: the station's own loop and thread (api/station_thread.py)
         self.thread = StationThread()
         self.api_loop: asyncio.AbstractEventLoop | None = None
@@ -199,6 +202,11 @@ class StationRuntime:
                                  db_url=s.db_url, world=s.world),
             self._setup_station)
         self.store = self.session.store
+        from api.records import RecordCache
+        from api.routes.common import blocking
+
+        #: inspection records, read once per committed change (api/records.py)
+        self.records = RecordCache(self.store, blocking)
         self.tokens = TokenRepository(self.store)
         s.parts_dir.mkdir(parents=True, exist_ok=True)
 

@@ -67,8 +67,8 @@ def job_response(rec) -> dict:
 async def _get_record(request: Request, inspection_id: str):
     rt = runtime(request)
     try:
-        # clients polling the same inspection share one read (api/singleflight.py)
-        return await rt.reads.run(("inspection", inspection_id), lambda: blocking(rt.store.get, inspection_id))
+        # read once per committed change; clients polling meanwhile share it (api/records.py)
+        return await rt.records.get(inspection_id)
     except InspectionNotFound:
         raise HTTPException(status.HTTP_404_NOT_FOUND, f"no inspection {inspection_id!r}") from None
 

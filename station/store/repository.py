@@ -129,6 +129,12 @@ class Store:
         self._write_sessions = sessionmaker(self.engine.execution_options(**{WRITE_OPTION: True}),
                                             class_=_StoreSession, expire_on_commit=False)
         self._lock_fd: int | None = None
+        #: incremented after every committed change to an inspection's record (begin,
+        #: characteristics, images, finish, recovery; not the event log). A reader that
+        #: noted it before a read knows the record it read is current while it is
+        #: unchanged (api/records.py caches on it). Writes by other processes are not
+        #: counted: the process that owns the station is the only writer of inspections.
+        self.record_generation = 0
         if migrate:
             try:
                 self._guard("bring the database schema up to date", lambda: upgrade_engine(self.engine))
@@ -274,6 +280,7 @@ class Store:
                 s.flush()  # the inspection row first: the event refers to it
                 s.add(Event(inspection_id=inspection_id, at=utcnow(), kind="state",
                             message=f"running: part {part_number}" + (f", serial {serial}" if serial else "")))
+            self.record_generation += 1
         except StoreIntegrityError:
             if idempotency_key is not None:
                 existing = self.find_by_idempotency_key(idempotency_key)
@@ -292,6 +299,7 @@ class Store:
         with self._transaction("record characteristic results") as s:
             self._running(s, inspection_id, "record characteristic results")
             self._add_measurements(s, inspection_id, items)
+        self.record_generation += 1
 
     @staticmethod
     def _add_measurements(s: Session, inspection_id: str, items: list[Measurement]) -> None:
@@ -346,6 +354,7 @@ class Store:
                                            f"{exc.strerror or exc}") from exc
         finally:
             tmp.unlink(missing_ok=True)  # still there only when the record was not made
+        self.record_generation += 1
         return ImageRecord(subject, str(rel), digest, created)
 
     def finish(self, inspection_id: str, state: str, result: str | None = None, reason: str | None = None, *,
@@ -379,6 +388,7 @@ class Store:
             insp.state, insp.result, insp.reason, insp.finished_at = state, result, reason, utcnow()
             s.add(Event(inspection_id=inspection_id, at=utcnow(), kind="state",
                         message=f"{state}" + (f": {result}" if result else "") + (f" ({reason})" if reason else "")))
+        self.record_generation += 1
         return self.get(inspection_id)
 
     def recover_interrupted(self, reason: str | None = None) -> list[str]:
@@ -393,7 +403,9 @@ class Store:
             for insp in stale:
                 insp.state, insp.result, insp.reason, insp.finished_at = "interrupted", None, reason, now
                 s.add(Event(inspection_id=insp.id, at=now, kind="state", message=f"interrupted: {reason}"))
-            return [i.id for i in stale]
+            ids = [i.id for i in stale]
+        self.record_generation += 1
+        return ids
 
     def log_event(self, kind: str, message: str, inspection_id: str | None = None) -> EventRecord:
         """Append an event (an alarm, a state change of the station) to the log."""

@@ -1,4 +1,4 @@
-"""API tokens: revocation takes effect at once; tokens are stored as salted hashes.
+"""API tokens: revocation takes effect within a second; tokens are stored as salted hashes.
 
 Who may call which endpoint (every route against every role, no token, bad tokens
 and panel sessions with and without their CSRF token) is tested in
@@ -21,6 +21,23 @@ def test_a_revoked_token_is_refused(api):
     assert _status(api, token) == 200
     repo.revoke(record.id)
     assert _status(api, token) == 401
+
+
+def test_a_token_revoked_while_in_use_is_refused_within_the_check_interval(api):
+    import time
+
+    from api.auth import REVOCATION_CHECK_S
+    from station.store.tokens import TokenRepository
+
+    repo = TokenRepository(api.runtime.store)
+    record, token = repo.create("operator", name="polling client")
+    assert [_status(api, token) for _ in range(3)] == [200, 200, 200]  # verified, then kept
+    revoked = time.monotonic()
+    repo.revoke(record.id)  # as `station token revoke` does, behind the API's back
+    while _status(api, token) != 401:
+        assert time.monotonic() - revoked < REVOCATION_CHECK_S + 1.0, "the revoked token is still accepted"
+        time.sleep(0.05)
+    assert _status(api, token) == 401  # and stays refused
 
 
 def test_tokens_are_stored_hashed(api):
