@@ -73,11 +73,12 @@ def contour_ellipse(image: np.ndarray) -> list[tuple]:
     return out
 
 
-def ours(image: np.ndarray, photometric: bool = False) -> list[tuple]:
+def ours(image: np.ndarray, photometric: bool = True) -> list[tuple]:
     from station.vision.measure import MeasureConfig, measure_holes
-    from station.vision.photometric import PhotometricConfig
 
-    cfg = MeasureConfig(photometric=PhotometricConfig()) if photometric else MeasureConfig()
+    # the default pipeline refines whole holes' diameters photometrically; without it,
+    # the rays' diameter only (the pipeline of earlier rounds)
+    cfg = MeasureConfig() if photometric else MeasureConfig(photometric=None)
     return [(m.x_px, m.y_px, m.diameter_px, m.partial) for m in measure_holes(image, cfg=cfg)]
 
 
@@ -85,13 +86,13 @@ METHODS = {"ours": ours, "hough_gradient_alt": hough_alt, "contours_fit_ellipse"
 SHORT = {"ours": "ours", "hough_gradient_alt": "Hough ALT", "contours_fit_ellipse": "fitEllipse"}
 
 
-def run(frames: int = 40, seed: int = 1000, envelope: str = "station", photometric: bool = False) -> dict:
+def run(frames: int = 40, seed: int = 1000, envelope: str = "station", photometric: bool = True) -> dict:
     from sim.camera.render import random_frame  # the CLI side may import sim
 
     cv2.setNumThreads(1)
     rendered = [random_frame(seed + i, envelope=envelope) for i in range(frames)]
     results = {}
-    methods = {**METHODS, "ours": (lambda im: ours(im, photometric=True)) if photometric else ours}
+    methods = {**METHODS, "ours": ours if photometric else (lambda im: ours(im, photometric=False))}
     for name, fn in methods.items():
         fn(rendered[0].image)  # warm-up (imports, allocations)
         total, times, cpu = Score(), [], []
@@ -140,13 +141,14 @@ def register(bench_app: typer.Typer) -> None:
         frames: int = typer.Option(40, "--frames", min=1, help="rendered 1280x1024 frames"),
         seed: int = typer.Option(1000, "--seed"),
         envelope: str = typer.Option("station", "--envelope", help="station (default) or wide (stress test)"),
-        photometric: bool = typer.Option(False, "--photometric", help="ours with the photometric diameter refinement"),
+        rays_only: bool = typer.Option(False, "--rays-only",
+                                       help="ours without the photometric diameter refinement (on by default)"),
         as_json: bool = typer.Option(False, "--json", help="one JSON object on stdout"),
     ) -> None:
         """Hole measurement: ours vs HoughCircles(ALT) vs contours+fitEllipse."""
         from rich.table import Table
 
-        r = run(frames, seed, envelope, photometric)
+        r = run(frames, seed, envelope, photometric=not rays_only)
         if as_json:
             print_json(r)
             return

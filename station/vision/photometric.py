@@ -34,6 +34,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import ndtr
 
+from station.vision.fit import median
+
 #: 1 / sqrt(2 pi)
 _INV_SQRT_2PI = 0.3989422804014327
 #: MAD -> standard deviation for Gaussian data
@@ -42,14 +44,19 @@ _MAD_TO_SIGMA = 1.4826
 
 @dataclass(frozen=True)
 class PhotometricConfig:
-    #: annulus half-width around the rim: k_sigma * s + pad_px on each side
-    k_sigma: float = 2.5
+    #: annulus half-width around the rim: k_sigma * s + pad_px on each side (2.0 instead
+    #: of 2.5: ~a fifth fewer pixels; dev frames 3000-3199, 296 holes: diameter median
+    #: 0.0202 vs 0.0191 px, within its sampling noise, 90th percentile 0.056 vs 0.064,
+    #: worst 0.18 vs 0.20)
+    k_sigma: float = 2.0
     pad_px: float = 1.0
     #: Fourier order of the wall level in angle
     wall_order: int = 4
     #: Huber threshold in robust standard deviations of the residuals
     huber_k: float = 1.345
-    iterations: int = 6
+    #: Gauss-Newton steps: from the ray fit's circle 3 do as well as 6 (dev frames
+    #: 3000-3199: the same diameter median, 0.0191 px at k_sigma 2.5, 0.0202 at 2.0)
+    iterations: int = 3
     #: fit the blur (else keep the one measured on the rays)
     fit_blur: bool = True
     oval: bool = True
@@ -218,13 +225,13 @@ def refine_hole(
         if scale is None or it <= 2:
             if cfg.texture_weighting:
                 inner, outer = u > 0.9, u < 0.1
-                var_in = (_MAD_TO_SIGMA * float(np.median(np.abs(res[inner])))) ** 2 if inner.sum() > 20 else 1.0
-                var_out = (_MAD_TO_SIGMA * float(np.median(np.abs(res[outer])))) ** 2 if outer.sum() > 20 else var_in
+                var_in = (_MAD_TO_SIGMA * median(np.abs(res[inner]))) ** 2 if inner.sum() > 20 else 1.0
+                var_out = (_MAD_TO_SIGMA * median(np.abs(res[outer]))) ** 2 if outer.sum() > 20 else var_in
                 var = max(var_in, 0.25) + max(var_out - var_in, 0.0) * (1 - u) ** 2
                 prior = 1.0 / var
                 scale = 1.0
             else:
-                scale = max(_MAD_TO_SIGMA * float(np.median(np.abs(res - np.median(res)))), 0.5)
+                scale = max(_MAD_TO_SIGMA * median(np.abs(res - median(res))), 0.5)
         a = np.abs(res) * np.sqrt(prior) / (cfg.huber_k * scale)
         wts = prior * np.where(a <= 1.0, 1.0, 1.0 / np.maximum(a, 1e-12))
         dh = (hole - wall) * phi
@@ -263,5 +270,5 @@ def refine_hole(
             break
     if not (np.isfinite(ox) and np.isfinite(oy) and np.isfinite(r0)) or abs(r0 - r) > 2.0 or np.hypot(ox, oy) > 2.0:
         return None
-    contrast = float(np.median(bw @ lin[:nw] - bh @ lin[nw:]))
+    contrast = median(bw @ lin[:nw] - bh @ lin[nw:])
     return PhotometricFit(cx + ox, cy + oy, r0, s, contrast, float(scale), n, it)

@@ -16,6 +16,7 @@ from sim.camera.render import FrameParams, HoleSpec, random_holes, random_params
 from station.vision import measure_holes
 from station.vision.edges import deblurred_radius
 from station.vision.fit import fit_ellipse_direct, ransac_circle, robust_circle, taubin_circle
+from station.vision.measure import MeasureConfig
 from station.vision.scoring import Score, score_frame
 
 
@@ -227,6 +228,7 @@ def test_photometric_refinement_on_clean_and_grooved_holes():
     from station.vision.photometric import PhotometricConfig
 
     cfg = MeasureConfig(photometric=PhotometricConfig())
+    rays_only = MeasureConfig(photometric=None)
     clean = FrameParams(width_px=320, height_px=256, groove_depth=0.0, grain=0.0, blotch=0.0, vignetting=0.3,
                         gain_e_per_dn=1e12, read_noise_dn=0.0)
     for d, blur in ((24.0, 2.0), (60.0, 1.2), (96.0, 0.8)):
@@ -238,7 +240,7 @@ def test_photometric_refinement_on_clean_and_grooved_holes():
         rng = np.random.default_rng(900 + i)
         p = random_params(rng, groove_depth=0.08)  # the roughest walls of the envelope
         f = render_frame(p, random_holes(rng, p, n_whole=3), seed=i)
-        for c, errs in ((cfg, err_ph), (MeasureConfig(), err_rays)):
+        for c, errs in ((cfg, err_ph), (rays_only, err_rays)):
             s = _score(f, measure_holes(f.image, cfg=c)).summary()
             assert s["misses"] == 0 and s["phantoms"] == 0
             errs += list(np.abs(_score(f, measure_holes(f.image, cfg=c)).diameter_err_px))
@@ -262,9 +264,30 @@ def test_blur_correction_recovers_known_diameters_on_clean_frames(contrast):
         for blur in (0.8, 1.4, 2.0):
             p = replace(clean, blur_sigma_px=blur, hole_level_dn=clean.wall_level_dn * (1 - contrast))
             f = render_frame(p, [HoleSpec(160.37, 127.71, d)], seed=0)
-            (m,) = measure_holes(f.image)
+            # the rays' diameter (the photometric refinement, on by default, has its own
+            # model and its own test)
+            (m,) = measure_holes(f.image, cfg=MeasureConfig(photometric=None))
             assert m.diameter_px == pytest.approx(d, abs=0.015), (d, blur)
             assert m.edge_sigma_px > blur  # the measured width holds the camera blur
+
+
+def test_default_pipeline_refines_diameters_photometrically_and_keeps_the_rays_centres():
+    """The photometric fit is on by default and replaces whole holes' diameters only:
+    the centres (and every cut hole) are exactly those of the rays-only pipeline."""
+    from station.vision.measure import MeasureConfig
+
+    assert MeasureConfig().photometric is not None
+    rng = np.random.default_rng(77)
+    p = random_params(rng)
+    f = render_frame(p, random_holes(rng, p, n_whole=3, n_partial=1), seed=5)
+    ours, rays = measure_holes(f.image), measure_holes(f.image, cfg=MeasureConfig(photometric=None))
+    assert len(ours) == len(rays) == 4
+    for a, b in zip(ours, rays):
+        assert (a.x_px, a.y_px, a.partial) == (b.x_px, b.y_px, b.partial)
+        if a.partial:
+            assert a.diameter_px == b.diameter_px
+        else:
+            assert a.diameter_px != b.diameter_px and abs(a.diameter_px - b.diameter_px) < 0.2
 
 
 def test_median_helper_equals_numpy_median():
