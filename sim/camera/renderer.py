@@ -11,7 +11,8 @@ view: the physics) stays in the station's process.
 
 The worker keeps the wall patches (``sim.camera.twin``: a camera that stays put sees
 the same wall) and sends back the 8-bit image. A worker that dies or does not answer
-raises :class:`RendererLost`; the twin then renders in a thread.
+raises :class:`RendererLost`; the twin then renders in a thread. A worker whose
+station process is gone (killed outright) ends itself within half a second.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from __future__ import annotations
 import asyncio
 import concurrent.futures
 import multiprocessing
+import os
 from collections import OrderedDict
 from concurrent.futures.process import BrokenProcessPool
 
@@ -63,6 +65,29 @@ def _ready() -> bool:
     return True
 
 
+def _watch_owner(owner_pid: int, period_s: float = 0.5) -> None:
+    """In the worker: end it when the station process that owns it is gone.
+
+    A station killed outright (SIGKILL, a crash) sends no goodbye, and a pool worker
+    would wait on its queue forever (and keep the forkserver alive with it).
+    """
+    import os
+    import threading
+    import time
+
+    def watch() -> None:
+        while True:
+            time.sleep(period_s)
+            try:
+                os.kill(owner_pid, 0)
+            except ProcessLookupError:
+                os._exit(0)
+            except PermissionError:  # a pid reused by another user's process: ours is gone
+                os._exit(0)
+
+    threading.Thread(target=watch, name="owner-watch", daemon=True).start()
+
+
 _CONTEXT: multiprocessing.context.BaseContext | None = None
 
 
@@ -85,7 +110,8 @@ class RendererProcess:
 
     async def start(self) -> None:
         try:
-            self._pool = concurrent.futures.ProcessPoolExecutor(max_workers=1, mp_context=_context())
+            self._pool = concurrent.futures.ProcessPoolExecutor(max_workers=1, mp_context=_context(),
+                                                                initializer=_watch_owner, initargs=(os.getpid(),))
             await self._call(_ready, timeout=START_TIMEOUT_S)
         except (OSError, ValueError) as exc:
             self.stop()

@@ -50,3 +50,44 @@ def test_a_dead_worker_is_reported_and_stopped():
             await r.render(PARAMS, SPECS, 1, (0, 0), 1)
 
     asyncio.run(go())
+
+
+OWNER = """
+import asyncio, sys, time
+from sim.camera.renderer import RendererProcess
+async def main():
+    r = RendererProcess()
+    await r.start()
+    print(r.pid, flush=True)
+    time.sleep(60)
+asyncio.run(main())
+"""
+
+
+def _alive(pid: int) -> bool:
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().split(")")[1].split()[0] != "Z"
+    except FileNotFoundError:
+        return False
+
+
+def test_a_worker_ends_itself_when_its_station_is_killed_outright():
+    import subprocess
+    import sys
+    import time
+
+    owner = subprocess.Popen([sys.executable, "-c", OWNER], stdout=subprocess.PIPE, text=True)
+    try:
+        worker = int(owner.stdout.readline())
+        assert _alive(worker)
+        owner.kill()  # SIGKILL: no clean shutdown of the pool
+        owner.wait(timeout=10)
+        deadline = time.monotonic() + 5.0
+        while _alive(worker) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert not _alive(worker), "the renderer worker outlived its station"
+    finally:
+        if owner.poll() is None:
+            owner.kill()
+            owner.wait(timeout=10)
