@@ -26,11 +26,8 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import os
-import socket
 import ssl
 import statistics
-import subprocess
-import sys
 import tempfile
 import time
 from datetime import datetime
@@ -38,36 +35,12 @@ from pathlib import Path
 
 import typer
 
+from station.bench import served
 from station.cli.common import err_console, out_console, print_json
 
 PART = "ZDZG-22.2-12.3851"
 GOAL_P99_MS = 50.0
 GOAL_SLOWDOWN = 0.05
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def _server(data: Path, port: int, time_scale: float) -> subprocess.Popen:
-    exe = Path(sys.executable).with_name("station")
-    cmd = [str(exe)] if exe.exists() else [sys.executable, "-m", "station.cli"]
-    cmd += ["serve", "--host", "127.0.0.1", "--port", str(port), "--data", str(data), "--time-scale", str(time_scale)]
-    log = open(data / "server.log", "w")
-    return subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env={**os.environ, "PYTHONUNBUFFERED": "1"})
-
-
-def stop_server(proc: subprocess.Popen) -> None:
-    """Stop a `station serve` child: SIGTERM (a clean shutdown closes the station and
-    its twins), SIGKILL if it has not ended within 20 s."""
-    proc.terminate()
-    try:
-        proc.wait(timeout=20)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        proc.wait(timeout=10)
 
 
 def _duration_s(rec: dict) -> float:
@@ -168,24 +141,9 @@ def run(repeats: int = 3, clients: int = 50, time_scale: float = 1.0, interval_s
         data = Path(tmp)
         with Store(data_dir=data) as store:
             token = TokenRepository(store).create("admin", name="bench")[1]  # reset after a fault too
-        port = _free_port()
-        url = f"http://127.0.0.1:{port}"
-        proc = _server(data, port, time_scale)
+        server = served.start(data, time_scale=time_scale)
+        proc, url = server.proc, server.url
         try:
-            import httpx
-
-            deadline = time.monotonic() + 120
-            while True:
-                if proc.poll() is not None:
-                    raise RuntimeError("station serve exited: " + (data / "server.log").read_text()[-2000:])
-                try:
-                    if httpx.get(f"{url}/readyz", timeout=2).status_code == 200:
-                        break
-                except httpx.HTTPError:
-                    pass
-                if time.monotonic() > deadline:
-                    raise RuntimeError("station serve did not become ready")
-                time.sleep(0.2)
             # one inspection to warm up (imports, first frames, SQLite pages)
             asyncio.run(_inspection(url, token, "BENCH-WARM", 0))
             quiet, loaded = [], []
@@ -200,7 +158,7 @@ def run(repeats: int = 3, clients: int = 50, time_scale: float = 1.0, interval_s
                 if progress:
                     progress()
         finally:
-            stop_server(proc)
+            served.stop(proc)
 
     def med(rows, key):
         values = [r[key] for r in rows if key in r]

@@ -13,10 +13,6 @@ from __future__ import annotations
 
 import os
 import re
-import socket
-import subprocess
-import sys
-import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -47,21 +43,11 @@ class Station:
                             timeout=30.0)
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def _station_command() -> list[str]:
-    exe = Path(sys.executable).with_name("station")
-    return [str(exe)] if exe.exists() else [sys.executable, "-m", "station.cli"]
-
-
 # module scope, not session: Playwright's sync API keeps an event loop running in the
 # main thread while it is open, and every later test that calls asyncio.run would fail
 @pytest.fixture(scope="module")
 def station(tmp_path_factory) -> Station:
+    from station.bench import served
     from station.store import Store
     from station.store.tokens import TokenRepository
 
@@ -69,36 +55,11 @@ def station(tmp_path_factory) -> Station:
     with Store(data_dir=data) as store:
         repo = TokenRepository(store)
         tokens = {role: repo.create(role, name=f"Test {role.title()}")[1] for role in ROLES}
-    port = _free_port()
-    log = open(data / "server.log", "w")
-    proc = subprocess.Popen(_station_command() + ["serve", "--host", "127.0.0.1", "--port", str(port), "--data",
-                                                  str(data), "--time-scale", str(TIME_SCALE)],
-                            stdout=log, stderr=subprocess.STDOUT, cwd=data)
-    url = f"http://127.0.0.1:{port}"
+    server = served.start(data, time_scale=TIME_SCALE, extra=[], ready_timeout_s=90)
     try:
-        deadline = time.monotonic() + 90
-        while True:
-            if proc.poll() is not None:
-                raise RuntimeError(f"station serve exited ({proc.returncode}): "
-                                   + (data / "server.log").read_text()[-2000:])
-            try:
-                if httpx.get(f"{url}/readyz", timeout=2).status_code == 200:
-                    break
-            except httpx.HTTPError:
-                pass
-            if time.monotonic() > deadline:
-                raise RuntimeError("station serve did not become ready: "
-                                   + (data / "server.log").read_text()[-2000:])
-            time.sleep(0.2)
-        yield Station(url, data, tokens)
+        yield Station(server.url, data, tokens)
     finally:
-        proc.terminate()
-        try:
-            proc.wait(timeout=20)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait(timeout=10)
-        log.close()
+        served.stop(server.proc)
 
 
 @pytest.fixture(scope="module")

@@ -1,0 +1,259 @@
+"""``station bench soak``: repeated inspections through the served station, watching
+its memory, open files and threads for growth.
+
+A station runs through shifts without a restart; a leak of one image, one socket or
+one thread per inspection would end a shift in an out-of-memory kill or "too many
+open files". The soak serves the simulated station (`station serve` in a child
+process, 127.0.0.1, a temporary data folder), orders inspections one after another
+through the REST API while ``pollers`` clients poll the running one, and after each
+inspection samples the server process from ``/proc``: resident memory (VmRSS), open
+file descriptors, threads, and the renderer worker's memory (the camera twin's pixels,
+sim/camera/renderer.py).
+
+Verdict, after a warm-up (the first ``warmup`` fraction of the inspections: imports,
+caches and SQLite pages fill up):
+
+* descriptors and threads: the range over the rest is at most ``FD_SLACK`` / ``THREAD_SLACK``
+  (connections of the pollers come and go; a leak grows with every inspection);
+* memory: the least-squares slope over the rest, in kB per inspection, is below
+  ``RSS_SLOPE_KB``, and the net growth over the rest is below ``RSS_GROWTH_MB``.
+  An inspection saves crops and keeps one frame per hole: a leaked frame would be
+  1.3 MB per inspection, far above the bar; the allocator's own plateauing stays under it.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import os
+import tempfile
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+
+from station.bench import served
+
+PART = "ZDZG-22.2-12.3851"
+FD_SLACK = 2
+THREAD_SLACK = 2
+RSS_SLOPE_KB = 150.0
+RSS_GROWTH_MB = 8.0
+
+
+def _status(pid: int) -> dict[str, int]:
+    out = {}
+    with open(f"/proc/{pid}/status") as f:
+        for line in f:
+            key, _, value = line.partition(":")
+            if key in ("VmRSS", "Threads"):
+                out[key] = int(value.split()[0])
+    return out
+
+
+def sample(pid: int) -> dict[str, int]:
+    """Resident kB, open descriptors and threads of one process."""
+    st = _status(pid)
+    return {"rss_kb": st.get("VmRSS", 0), "fds": len(os.listdir(f"/proc/{pid}/fd")), "threads": st.get("Threads", 0)}
+
+
+def settled_sample(pid: int, reads: int = 5, period_s: float = 0.2) -> dict[str, int]:
+    """The fewest descriptors (and the memory then) over about a second: the pollers'
+    connections closing as an inspection ends are not a leak; a leaked one stays."""
+    best = sample(pid)
+    for _ in range(reads - 1):
+        time.sleep(period_s)
+        s = sample(pid)
+        if s["fds"] < best["fds"]:
+            best = s
+    return best
+
+
+def _renderer_rss_kb(server_pid: int) -> int | None:
+    """Resident kB of the camera twin's renderer: the forkserver the server started
+    and its worker (a child of the forkserver, not of the server); None without one."""
+    total = 0
+    found = False
+    for entry in os.listdir("/proc"):
+        if not entry.isdigit():
+            continue
+        try:
+            with open(f"/proc/{entry}/cmdline", "rb") as f:
+                cmd = f.read()
+            if b"multiprocessing.forkserver" not in cmd:
+                continue
+            with open(f"/proc/{entry}/stat") as f:
+                ppid = int(f.read().rsplit(")", 1)[1].split()[1])
+            if ppid == server_pid or _parent(ppid) == server_pid:
+                total += _status(int(entry)).get("VmRSS", 0)
+                found = True
+        except (OSError, ValueError, IndexError):
+            continue
+    return total if found else None
+
+
+def _parent(pid: int) -> int | None:
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return int(f.read().rsplit(")", 1)[1].split()[1])
+    except (OSError, ValueError, IndexError):
+        return None
+
+
+@dataclass
+class SoakResult:
+    samples: list[dict[str, Any]] = field(default_factory=list)
+    warmup: int = 0
+    failed: list[str] = field(default_factory=list)
+
+    def verdict(self) -> dict[str, Any]:
+        rest = self.samples[self.warmup:]
+        if len(rest) < 3:
+            raise ValueError("a soak needs at least 3 inspections after the warm-up")
+        n = np.arange(len(rest), dtype=float)
+        rss = np.array([s["rss_kb"] for s in rest], dtype=float)
+        slope = float(np.polyfit(n, rss, 1)[0])
+        q = max(1, len(rest) // 4)
+        growth_mb = float(np.median(rss[-q:]) - np.median(rss[:q])) / 1024.0
+        fds = [s["fds"] for s in rest]
+        threads = [s["threads"] for s in rest]
+        out = {
+            "inspections": len(self.samples), "warmup": self.warmup, "failed": self.failed,
+            "rss_mb_first": rest[0]["rss_kb"] / 1024.0, "rss_mb_last": rest[-1]["rss_kb"] / 1024.0,
+            "rss_slope_kb_per_inspection": slope, "rss_growth_mb": growth_mb,
+            "fds_min": min(fds), "fds_max": max(fds), "threads_min": min(threads), "threads_max": max(threads),
+            "bars": {"rss_slope_kb": RSS_SLOPE_KB, "rss_growth_mb": RSS_GROWTH_MB, "fd_slack": FD_SLACK,
+                     "thread_slack": THREAD_SLACK},
+        }
+        renderer = [s["renderer_rss_kb"] for s in rest if s.get("renderer_rss_kb") is not None]
+        if len(renderer) >= 3:
+            out["renderer_rss_slope_kb_per_inspection"] = float(np.polyfit(np.arange(len(renderer)), renderer, 1)[0])
+        out["ok"] = (not self.failed and slope < RSS_SLOPE_KB and growth_mb < RSS_GROWTH_MB
+                     and max(fds) - min(fds) <= FD_SLACK and max(threads) - min(threads) <= THREAD_SLACK
+                     and out.get("renderer_rss_slope_kb_per_inspection", 0.0) < RSS_SLOPE_KB)
+        return out
+
+
+async def _one(url: str, token: str, serial: str, pollers: int, timeout_s: float) -> dict:
+    import httpx
+
+    headers = {"Authorization": f"Bearer {token}"}
+    async with httpx.AsyncClient(base_url=url, headers=headers, timeout=30.0) as c:
+        r = await c.post("/api/v1/job-orders", json={"part_number": PART, "serial": serial})
+        r.raise_for_status()
+        path = f"/api/v1/inspections/{r.json()['id']}"
+        done = asyncio.Event()
+
+        async def poll() -> None:
+            while not done.is_set():
+                await c.get(path)
+                await asyncio.sleep(0.05)
+
+        tasks = [asyncio.create_task(poll()) for _ in range(pollers)]
+        deadline = time.monotonic() + timeout_s
+        try:
+            while True:
+                rec = (await c.get(path)).json()
+                if rec["state"] != "running":
+                    return rec
+                if time.monotonic() > deadline:
+                    raise TimeoutError(f"inspection {serial} still running after {timeout_s:.0f} s")
+                await asyncio.sleep(0.1)
+        finally:
+            done.set()
+            await asyncio.gather(*tasks, return_exceptions=True)
+
+
+def run(inspections: int = 60, pollers: int = 5, time_scale: float = 20.0, warmup: float = 0.25,
+        progress: Callable[[], None] | None = None) -> SoakResult:
+    from station.store import Store
+    from station.store.tokens import TokenRepository
+
+    if inspections < 4:
+        raise ValueError("a soak needs at least 4 inspections")
+    res = SoakResult(warmup=max(1, int(round(warmup * inspections))))
+    with tempfile.TemporaryDirectory(prefix="soak-") as tmp:
+        data = Path(tmp)
+        with Store(data_dir=data) as store:
+            token = TokenRepository(store).create("admin", name="soak")[1]
+        with served.served(data, time_scale=time_scale) as server:
+            pid = server.proc.pid
+            for i in range(inspections):
+                rec = asyncio.run(_one(server.url, token, f"SOAK-{i:04d}", pollers, 300.0))
+                if rec["state"] != "complete":
+                    res.failed.append(f"SOAK-{i:04d}: {rec['state']} ({rec.get('reason')})")
+                s = settled_sample(pid)
+                s["renderer_rss_kb"] = _renderer_rss_kb(pid)
+                s["inspection"] = i
+                s["t"] = time.time()
+                res.samples.append(s)
+                if progress:
+                    progress()
+    return res
+
+
+def plot(result: SoakResult, path: Path) -> Path:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    n = [s["inspection"] for s in result.samples]
+    fig, (a, b) = plt.subplots(2, 1, figsize=(8, 6), sharex=True)
+    a.plot(n, [s["rss_kb"] / 1024 for s in result.samples], label="server RSS")
+    rr = [s.get("renderer_rss_kb") for s in result.samples]
+    if any(v is not None for v in rr):
+        a.plot(n, [v / 1024 if v is not None else np.nan for v in rr], label="renderer RSS")
+    a.axvline(result.warmup - 0.5, color="grey", ls=":", label="end of warm-up")
+    a.set_ylabel("MB")
+    a.legend()
+    b.plot(n, [s["fds"] for s in result.samples], label="open descriptors")
+    b.plot(n, [s["threads"] for s in result.samples], label="threads")
+    b.set_xlabel("inspection")
+    b.legend()
+    fig.suptitle("soak: the served station after each inspection")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def register(bench_app) -> None:
+    import typer
+
+    from station.cli.common import err_console, out_console, print_json
+
+    @bench_app.command("soak")
+    def soak(
+        inspections: int = typer.Option(60, help="inspections in a row"),
+        pollers: int = typer.Option(5, help="clients polling the running inspection"),
+        time_scale: float = typer.Option(20.0, "--time-scale", help="simulated moves run this much faster"),
+        plot_path: Path = typer.Option(None, "--plot", help="write a PNG of memory, descriptors and threads"),
+        json: bool = typer.Option(False, "--json"),
+    ) -> None:
+        """Repeated inspections through the served station: growth of memory, open
+        descriptors and threads (exit 1 when one grows)."""
+        from rich.progress import Progress
+
+        if inspections < 4 or pollers < 0 or not time_scale > 0:
+            raise typer.BadParameter("at least 4 inspections, pollers >= 0, a positive time scale")
+        with Progress(console=err_console, transient=True) as prog:
+            task = prog.add_task("inspections", total=inspections)
+            res = run(inspections, pollers, time_scale, progress=lambda: prog.advance(task))
+        v = res.verdict()
+        if plot_path is not None:
+            plot(res, plot_path)
+        if json:
+            print_json({**v, "samples": res.samples})
+        else:
+            out_console.print(
+                f"{v['inspections']} inspections ({v['warmup']} warm-up), {len(v['failed'])} failed; server RSS "
+                f"{v['rss_mb_first']:.1f} -> {v['rss_mb_last']:.1f} MB, slope {v['rss_slope_kb_per_inspection']:+.1f} "
+                f"kB/inspection (bar {RSS_SLOPE_KB:.0f}), net {v['rss_growth_mb']:+.2f} MB (bar {RSS_GROWTH_MB:.0f}); "
+                f"descriptors {v['fds_min']}-{v['fds_max']}, threads {v['threads_min']}-{v['threads_max']}"
+                + (f"; renderer slope {v['renderer_rss_slope_kb_per_inspection']:+.1f} kB/inspection"
+                   if "renderer_rss_slope_kb_per_inspection" in v else "")
+                + (" -- OK" if v["ok"] else " -- GROWTH or FAILURES"), highlight=False)
+        if not v["ok"]:
+            raise typer.Exit(1)

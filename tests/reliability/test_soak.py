@@ -1,0 +1,27 @@
+"""Soak: repeated inspections through the served station do not grow its memory,
+open descriptors or threads (station/bench/soak.py; `station bench soak` runs longer)."""
+
+from __future__ import annotations
+
+from station.bench.soak import RSS_SLOPE_KB, SoakResult, run
+
+
+def synthetic(rss_step_kb=0.0, fd_step=0, n=20, warmup=4):
+    return SoakResult(samples=[{"rss_kb": 250_000 + i * rss_step_kb, "fds": 42 + i * fd_step, "threads": 15,
+                                "inspection": i} for i in range(n)], warmup=warmup)
+
+
+def test_the_verdict_sees_a_leaked_frame_or_descriptor_per_inspection():
+    assert synthetic().verdict()["ok"]
+    assert not synthetic(rss_step_kb=1280.0).verdict()["ok"]  # one 1280 x 1024 frame kept per inspection
+    assert not synthetic(fd_step=1).verdict()["ok"]  # one socket or file left open per inspection
+    assert synthetic(rss_step_kb=RSS_SLOPE_KB / 3).verdict()["ok"]
+
+
+def test_repeated_inspections_leave_no_growth():
+    res = run(inspections=16, pollers=3, time_scale=50.0)
+    v = res.verdict()
+    assert not v["failed"], v["failed"]
+    assert v["fds_max"] - v["fds_min"] <= 2, [s["fds"] for s in res.samples]
+    assert v["threads_max"] - v["threads_min"] <= 2, [s["threads"] for s in res.samples]
+    assert v["ok"], v
