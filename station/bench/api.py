@@ -38,7 +38,6 @@ from pathlib import Path
 import typer
 
 from station.bench import served
-from station.cli.common import err_console, out_console, print_json
 
 PART = "ZDZG-22.2-12.3851"
 GOAL_P99_MS = 50.0
@@ -199,6 +198,8 @@ def run(repeats: int = 3, clients: int = 50, time_scale: float = 1.0, interval_s
 
 
 def register(bench_app: typer.Typer) -> None:
+    from station.cli.common import err_console, out_console, print_json  # the CLI imports this module
+
     @bench_app.command("api")
     def api_bench(
         repeats: int = typer.Option(3, help="inspections with and without load (each)"),
