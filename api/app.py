@@ -18,7 +18,7 @@ from fastapi import FastAPI, HTTPException, Request, status
 from fastapi.responses import JSONResponse, RedirectResponse
 from fastapi.staticfiles import StaticFiles
 
-from api import logsafe
+from api import logsafe, openapi_links
 from api.routes import assets, inspections, live, ops, parts, reports, session, station
 from api.runtime import StationRuntime
 from api.settings import Settings
@@ -71,6 +71,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         return RedirectResponse("/panel/", status_code=303)
 
     app.mount("/panel", StaticFiles(directory=PANEL_DIR, html=True), name="panel")
+    openapi_links.install(app)
     return app
 
 

@@ -13,6 +13,11 @@ The worker keeps the wall patches (``sim.camera.twin``: a camera that stays put 
 the same wall) and sends back the 8-bit image. A worker that dies or does not answer
 raises :class:`RendererLost`; the twin then renders in a thread. A worker whose
 station process is gone (killed outright) ends itself within half a second.
+
+As with any ``multiprocessing`` start method but fork, a script that starts a
+simulated station must guard its entry with ``if __name__ == "__main__":`` (the
+forkserver imports the main module); the ``station`` command does. Without the guard
+the worker cannot start and the twin renders in a thread (with a warning).
 """
 
 from __future__ import annotations

@@ -48,3 +48,48 @@ def test_no_server_errors(fuzz_server):
         no_5xx()
         tested.append(f"{operation.method.upper()} {operation.path}")
     assert len(tested) >= 18, tested  # the schema's operations were found and exercised
+
+
+def test_stateful_sequences_follow_the_links_without_server_errors(fuzz_server):
+    """Sequences along the schema's OpenAPI links (api/openapi_links.py): a job order,
+    then its inspection and QIF; an upload, then its activation; a part written, then
+    read. Every response 2xx-4xx."""
+    import time
+
+    import httpx
+
+    schema = schemathesis.openapi.from_url(f"{fuzz_server.url}/openapi.json")
+    headers = {"Authorization": f"Bearer {fuzz_server.tokens['admin']}"}
+    # one finished inspection, so the list's items lead to their records (an inferred link)
+    with httpx.Client(base_url=fuzz_server.url, headers=headers, timeout=60) as c:
+        for _ in range(600):
+            r = c.post("/api/v1/job-orders", json={"part_number": "ZDZG-22.2-12.3851", "serial": "STATEFUL-1"})
+            if r.status_code != 409:
+                break
+            time.sleep(0.1)  # a job started by the stateless fuzzing is still running
+        assert r.status_code == 202, r.text
+        while c.get(f"/api/v1/inspections/{r.json()['id']}").json()["state"] == "running":
+            time.sleep(0.1)
+    base = schema.as_state_machine()
+    followed: list[str] = []
+
+    class Workflow(base):
+        def before_call(self, case):
+            case.headers = {**(case.headers or {}), **headers}
+
+        def get_call_kwargs(self, case):
+            return {"base_url": fuzz_server.url, "timeout": 60}
+
+        def validate_response(self, response, case, additional_checks=None, **kwargs):
+            assert response.status_code < 500, (f"{case.method} {case.formatted_path} -> {response.status_code}: "
+                                                f"{response.text[:500]}")
+
+        def after_call(self, response, case):
+            followed.append(f"{case.method} {case.operation.path} {response.status_code}")
+
+    link_rules = [name for name in dir(Workflow) if name.startswith(("POST_", "PUT_", "GET_"))]
+    assert any(n.startswith("POST_api_v1_job_orders") and "GetInspection" in n for n in link_rules), link_rules
+    Workflow.run(settings=settings(max_examples=15, stateful_step_count=4, deadline=None, derandomize=True,
+                                   database=None, suppress_health_check=list(HealthCheck)))
+    # a link was really followed: an inspection fetched by the id a job order returned
+    assert any(f.startswith("GET /api/v1/inspections/{inspection_id} 200") for f in followed), followed[:40]
