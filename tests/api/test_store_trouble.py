@@ -1,0 +1,50 @@
+"""A locked database is a clear 503 and an alarm-worthy reason, never a 500 or a
+crash; once the lock is gone the station orders and stores again."""
+
+from __future__ import annotations
+
+import sqlite3
+import time
+
+import pytest
+
+from tests.api.conftest import start_server, stop_server
+
+PART = "ZDZG-22.2-12.3851"
+
+
+@pytest.fixture()
+def lone_server(tmp_path):
+    srv, server, thread = start_server(tmp_path)
+    try:
+        yield srv
+    finally:
+        stop_server(server, thread)
+
+
+def test_a_database_locked_by_another_program_gives_503_then_recovers(lone_server):
+    srv = lone_server
+    holder = sqlite3.connect(srv.data_dir / "station.db", timeout=1.0, isolation_level=None)
+    try:
+        holder.execute("BEGIN EXCLUSIVE")  # another program (a backup tool, a sqlite3 shell) holds the write lock
+        with srv.client("mes") as c:
+            t0 = time.monotonic()
+            r = c.post("/api/v1/job-orders", json={"part_number": PART, "serial": "LOCKED-1"})
+            waited = time.monotonic() - t0
+        assert r.status_code == 503, r.text
+        assert "locked" in r.json()["detail"]
+        assert waited < 30.0
+    finally:
+        holder.execute("ROLLBACK")
+        holder.close()
+    with srv.client("mes") as c:
+        r = c.post("/api/v1/job-orders", json={"part_number": PART, "serial": "LOCKED-2"})
+        assert r.status_code == 202, r.text
+        iid = r.json()["id"]
+        deadline = time.monotonic() + 120
+        while (rec := c.get(f"/api/v1/inspections/{iid}").json())["state"] == "running":
+            assert time.monotonic() < deadline
+            time.sleep(0.2)
+        assert rec["state"] == "complete" and rec["result"] == "pass"
+        states = c.get("/api/v1/station").json()
+        assert states["state"] in ("ready", "idle"), states
