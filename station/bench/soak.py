@@ -238,12 +238,22 @@ def register(bench_app) -> None:
 
         if inspections < 4 or pollers < 0 or not time_scale > 0:
             raise typer.BadParameter("at least 4 inspections, pollers >= 0, a positive time scale")
+        if plot_path is not None:
+            # before minutes of work, not after: a plot that cannot be written loses nothing
+            try:
+                plot_path.parent.mkdir(parents=True, exist_ok=True)
+            except OSError as exc:
+                raise typer.BadParameter(f"cannot write the plot to {plot_path}: {exc}") from None
         with Progress(console=err_console, transient=True) as prog:
             task = prog.add_task("inspections", total=inspections)
             res = run(inspections, pollers, time_scale, progress=lambda: prog.advance(task))
         v = res.verdict()
         if plot_path is not None:
-            plot(res, plot_path)
+            try:
+                plot(res, plot_path)
+                err_console.print(f"plot: {plot_path}", highlight=False)
+            except OSError as exc:  # the figures below are still printed
+                err_console.print(f"plot not written to {plot_path}: {exc}", highlight=False)
         if json:
             print_json({**v, "samples": res.samples})
         else:
