@@ -161,6 +161,14 @@ class CameraTwin(Camera):
         return out
 
 
+    def render_here(self) -> None:
+        """Render in this process (a thread) from now on: for benchmarks that time the
+        twin's rendering apart from the station's own work."""
+        self._render_process = False
+        if self._renderer is not None:
+            self._renderer.stop()
+            self._renderer = None
+
     def _wall_key(self, truth: ViewTruth) -> tuple[int, int]:
         s = self.optics.mm_per_px
         return (round(truth.axial_mm / s),

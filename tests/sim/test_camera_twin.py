@@ -143,3 +143,22 @@ def test_the_camera_keeps_delivering_when_its_renderer_process_dies(rig):
     first, frames, renderer = asyncio.run(go())
     assert renderer is None
     assert all(f.image.shape == first.image.shape and f.sequence > first.sequence for f in frames)
+
+
+def test_render_here_stops_the_worker_and_keeps_the_pixels(rig):
+    clock, world, z, c, cam = rig
+    twin = CameraTwin(world, z, c, small_optics(), seed=3, render_process=True)
+
+    async def go():
+        await twin.connect()
+        try:
+            pid = twin._renderer.pid
+            twin.render_here()
+            frame = await twin.grab()
+            return pid, frame, twin._renderer
+        finally:
+            await twin.close()
+
+    pid, frame, renderer = asyncio.run(go())
+    assert pid is not None and renderer is None
+    assert frame.image.shape == (256, 320) and frame.image.std() > 1.0  # a rendered wall, not a blank
