@@ -26,6 +26,7 @@ from __future__ import annotations
 import fcntl
 import json
 import os
+import threading
 import uuid
 from contextlib import contextmanager
 from dataclasses import asdict
@@ -135,6 +136,7 @@ class Store:
         #: unchanged (api/records.py caches on it). Writes by other processes are not
         #: counted: the process that owns the station is the only writer of inspections.
         self.record_generation = 0
+        self._generation_lock = threading.Lock()  # the station's and the API's threads both write
         if migrate:
             try:
                 self._guard("bring the database schema up to date", lambda: upgrade_engine(self.engine))
@@ -220,6 +222,11 @@ class Store:
             # e.g. a database migrated by a newer station than this one
             raise StoreError(f"results store {self._where()}: cannot {what}: {exc}") from exc
 
+    def _bump_records(self) -> None:
+        """After a commit that changed an inspection's record (see ``record_generation``)."""
+        with self._generation_lock:
+            self.record_generation += 1
+
     @contextmanager
     def _transaction(self, what: str, *, write: bool = True) -> Iterator[Session]:
         """One session, one transaction: committed at the end of the block, rolled back
@@ -280,7 +287,7 @@ class Store:
                 s.flush()  # the inspection row first: the event refers to it
                 s.add(Event(inspection_id=inspection_id, at=utcnow(), kind="state",
                             message=f"running: part {part_number}" + (f", serial {serial}" if serial else "")))
-            self.record_generation += 1
+            self._bump_records()
         except StoreIntegrityError:
             if idempotency_key is not None:
                 existing = self.find_by_idempotency_key(idempotency_key)
@@ -299,7 +306,7 @@ class Store:
         with self._transaction("record characteristic results") as s:
             self._running(s, inspection_id, "record characteristic results")
             self._add_measurements(s, inspection_id, items)
-        self.record_generation += 1
+        self._bump_records()
 
     @staticmethod
     def _add_measurements(s: Session, inspection_id: str, items: list[Measurement]) -> None:
@@ -354,7 +361,7 @@ class Store:
                                            f"{exc.strerror or exc}") from exc
         finally:
             tmp.unlink(missing_ok=True)  # still there only when the record was not made
-        self.record_generation += 1
+        self._bump_records()
         return ImageRecord(subject, str(rel), digest, created)
 
     def finish(self, inspection_id: str, state: str, result: str | None = None, reason: str | None = None, *,
@@ -388,7 +395,7 @@ class Store:
             insp.state, insp.result, insp.reason, insp.finished_at = state, result, reason, utcnow()
             s.add(Event(inspection_id=inspection_id, at=utcnow(), kind="state",
                         message=f"{state}" + (f": {result}" if result else "") + (f" ({reason})" if reason else "")))
-        self.record_generation += 1
+        self._bump_records()
         return self.get(inspection_id)
 
     def recover_interrupted(self, reason: str | None = None) -> list[str]:
@@ -404,7 +411,7 @@ class Store:
                 insp.state, insp.result, insp.reason, insp.finished_at = "interrupted", None, reason, now
                 s.add(Event(inspection_id=insp.id, at=now, kind="state", message=f"interrupted: {reason}"))
             ids = [i.id for i in stale]
-        self.record_generation += 1
+        self._bump_records()
         return ids
 
     def log_event(self, kind: str, message: str, inspection_id: str | None = None) -> EventRecord:

@@ -76,3 +76,33 @@ def test_not_found_is_not_cached():
         return store.reads
 
     assert asyncio.run(go()) == 2
+
+
+def test_the_store_counts_every_change_of_a_record_and_nothing_else(tmp_path):
+    import numpy as np
+
+    from station.store import Measurement, Store
+
+    with Store(data_dir=tmp_path) as store:
+        seen = [store.record_generation]
+
+        def changed():
+            seen.append(store.record_generation)
+            return seen[-1] > seen[-2]
+
+        iid = store.begin_inspection("P-1", serial="S")
+        assert changed()
+        store.log_event("note", "an event is not part of the record", iid)
+        assert not changed()
+        store.record_characteristic(iid, Measurement("c", 1.0, 0.5, 1.5, 1.0, True))
+        assert changed()
+        store.add_image(iid, "hole_1", "hole_1", np.zeros((8, 8), np.uint8))
+        assert changed()
+        store.get(iid)
+        assert not changed()
+        store.finish(iid, "complete", "pass")
+        assert changed()
+        other = store.begin_inspection("P-1", serial="T")
+        assert changed()
+        assert store.recover_interrupted() == [other]
+        assert changed()
