@@ -126,39 +126,39 @@ def test_a_camera_that_stays_put_sees_the_same_wall_and_new_noise(rig):
     assert np.std(a - e) < 1.1 * noise
 
 
-def test_the_camera_keeps_delivering_when_its_renderer_process_dies(rig):
-    clock, world, z, c, cam = rig
+def with_worker_twin(rig, body):
+    """Run ``body(twin)`` on a camera twin rendering in a worker process."""
+    clock, world, z, c, _ = rig
     twin = CameraTwin(world, z, c, small_optics(), seed=3, render_process=True)
 
     async def go():
         await twin.connect()
         try:
-            first = await twin.grab()
-            os.kill(twin._renderer.pid, signal.SIGKILL)
-            frames = [await twin.grab() for _ in range(3)]  # rendered in a thread from the loss on
-            return first, frames, twin._renderer
+            return await body(twin)
         finally:
             await twin.close()
 
-    first, frames, renderer = asyncio.run(go())
+    return asyncio.run(go())
+
+
+def test_the_camera_keeps_delivering_when_its_renderer_process_dies(rig):
+    async def body(twin):
+        first = await twin.grab()
+        os.kill(twin._renderer.pid, signal.SIGKILL)
+        frames = [await twin.grab() for _ in range(3)]  # rendered in a thread from the loss on
+        return first, frames, twin._renderer
+
+    first, frames, renderer = with_worker_twin(rig, body)
     assert renderer is None
     assert all(f.image.shape == first.image.shape and f.sequence > first.sequence for f in frames)
 
 
 def test_render_here_stops_the_worker_and_keeps_the_pixels(rig):
-    clock, world, z, c, cam = rig
-    twin = CameraTwin(world, z, c, small_optics(), seed=3, render_process=True)
+    async def body(twin):
+        pid = twin._renderer.pid
+        twin.render_here()
+        return pid, await twin.grab(), twin._renderer
 
-    async def go():
-        await twin.connect()
-        try:
-            pid = twin._renderer.pid
-            twin.render_here()
-            frame = await twin.grab()
-            return pid, frame, twin._renderer
-        finally:
-            await twin.close()
-
-    pid, frame, renderer = asyncio.run(go())
+    pid, frame, renderer = with_worker_twin(rig, body)
     assert pid is not None and renderer is None
     assert frame.image.shape == (256, 320) and frame.image.std() > 1.0  # a rendered wall, not a blank
