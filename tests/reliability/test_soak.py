@@ -15,6 +15,10 @@ def test_the_verdict_sees_a_leaked_frame_or_descriptor_per_inspection():
     assert synthetic().verdict()["ok"]
     assert not synthetic(rss_step_kb=1280.0).verdict()["ok"]  # one 1280 x 1024 frame kept per inspection
     assert not synthetic(fd_step=1).verdict()["ok"]  # one socket or file left open per inspection
+    slow = synthetic(n=40, warmup=4)  # one descriptor every third inspection: within the range bar early on
+    for i, sample in enumerate(slow.samples):
+        sample["fds"] += i // 3
+    assert not slow.verdict()["ok"]
     assert synthetic(rss_step_kb=RSS_SLOPE_KB / 3).verdict()["ok"]
 
 
@@ -22,6 +26,4 @@ def test_repeated_inspections_leave_no_growth():
     res = run(inspections=16, pollers=3, time_scale=50.0)
     v = res.verdict()
     assert not v["failed"], v["failed"]
-    assert v["fds_max"] - v["fds_min"] <= 2, [s["fds"] for s in res.samples]
-    assert v["threads_max"] - v["threads_min"] <= 2, [s["threads"] for s in res.samples]
-    assert v["ok"], v
+    assert v["ok"], (v, [(s["fds"], s["threads"], s["rss_kb"]) for s in res.samples])
