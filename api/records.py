@@ -51,8 +51,3 @@ class RecordCache:
         while len(self._records) > KEPT:
             self._records.popitem(last=False)
         return record
-
-    def clear(self) -> None:
-        self._records.clear()
-
-

@@ -26,6 +26,8 @@ import asyncio
 import concurrent.futures
 import multiprocessing
 import os
+import threading
+import time
 from collections import OrderedDict
 from concurrent.futures.process import BrokenProcessPool
 
@@ -76,18 +78,12 @@ def _watch_owner(owner_pid: int, period_s: float = 0.5) -> None:
     A station killed outright (SIGKILL, a crash) sends no goodbye, and a pool worker
     would wait on its queue forever (and keep the forkserver alive with it).
     """
-    import os
-    import threading
-    import time
-
     def watch() -> None:
         while True:
             time.sleep(period_s)
             try:
                 os.kill(owner_pid, 0)
-            except ProcessLookupError:
-                os._exit(0)
-            except PermissionError:  # a pid reused by another user's process: ours is gone
+            except (ProcessLookupError, PermissionError):  # gone (or its pid reused by another user)
                 os._exit(0)
 
     threading.Thread(target=watch, name="owner-watch", daemon=True).start()

@@ -104,6 +104,9 @@ class CameraTwin(Camera):
 
     async def close(self) -> None:
         self._connected = False
+        self._stop_renderer()
+
+    def _stop_renderer(self) -> None:
         if self._renderer is not None:
             self._renderer.stop()
             self._renderer = None
@@ -160,14 +163,11 @@ class CameraTwin(Camera):
         self._last = out
         return out
 
-
     def render_here(self) -> None:
         """Render in this process (a thread) from now on: for benchmarks that time the
         twin's rendering apart from the station's own work."""
         self._render_process = False
-        if self._renderer is not None:
-            self._renderer.stop()
-            self._renderer = None
+        self._stop_renderer()
 
     def _wall_key(self, truth: ViewTruth) -> tuple[int, int]:
         s = self.optics.mm_per_px
@@ -184,7 +184,7 @@ class CameraTwin(Camera):
             except RendererLost as exc:
                 # the twin's own machinery failed, not the camera: render here from now on
                 log.warning("camera twin: %s; rendering in a thread from now on", exc)
-                self._renderer = None
+                self._stop_renderer()
         return await asyncio.to_thread(render_image, p, specs, seed, key, wall_seed, self._walls)
 
 

@@ -88,9 +88,8 @@ def _renderer_rss_kb(server_pid: int) -> int | None:
                 cmd = f.read()
             if b"multiprocessing.forkserver" not in cmd:
                 continue
-            with open(f"/proc/{entry}/stat") as f:
-                ppid = int(f.read().rsplit(")", 1)[1].split()[1])
-            if ppid == server_pid or _parent(ppid) == server_pid:
+            ppid = _parent(int(entry))
+            if ppid is not None and server_pid in (ppid, _parent(ppid)):
                 total += _status(int(entry)).get("VmRSS", 0)
                 found = True
         except (OSError, ValueError, IndexError):
