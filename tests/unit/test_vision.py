@@ -12,7 +12,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from sim.camera.render import FrameParams, HoleSpec, random_holes, random_params, render_frame
+from sim.camera.render import FrameParams, HoleSpec, random_frame, random_holes, random_params, render_frame
 from station.vision import measure_holes
 from station.vision.edges import deblurred_radius
 from station.vision.fit import fit_ellipse_direct, ransac_circle, robust_circle, taubin_circle
@@ -246,6 +246,29 @@ def test_photometric_refinement_on_clean_and_grooved_holes():
             errs += list(np.abs(_score(f, measure_holes(f.image, cfg=c)).diameter_err_px))
     assert max(err_ph) < 0.1
     assert np.mean(err_ph) <= np.mean(err_rays) + 0.005
+
+
+def test_the_grooves_cut_by_the_hole_before_the_blur_are_modelled():
+    """Grooves only (no grain, no sensor noise, 8 % deep): the term for a groove cut by
+    the hole before the blur (B[G (1 - c)] - B[G] (1 - B[c])) must take out part of the
+    grooves' error (observed: mean |error| 0.0127 -> 0.0100 px, worst 0.059 -> 0.040 px
+    on these 36 holes)."""
+    from station.vision.photometric import PhotometricConfig
+
+    frames = [random_frame(500 + i, n_whole=3, n_partial=0, grain=0.0, blotch=0.0, groove_depth=0.08,
+                           read_noise_dn=0.0, gain_e_per_dn=1e9) for i in range(12)]
+
+    def mean_abs(cut: bool) -> float:
+        cfg = MeasureConfig(photometric=PhotometricConfig(groove_cut_term=cut))
+        errs = []
+        for f in frames:
+            s = _score(f, measure_holes(f.image, cfg=cfg))
+            assert s.summary()["misses"] == 0
+            errs += list(np.abs(s.diameter_err_px))
+        return float(np.mean(errs))
+
+    with_term, without = mean_abs(True), mean_abs(False)
+    assert with_term < 0.9 * without
 
 
 # ---------------------------------------------------------------- blur correction, fits, helpers

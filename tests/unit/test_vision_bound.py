@@ -1,0 +1,71 @@
+"""The Cramer-Rao bound of a hole's diameter (station bench vision-bound).
+
+The bound is only worth quoting if (1) its matrix-free solve is the dense one, and
+(2) it is what an efficient estimator really reaches on the renderer's frames: not
+a factor off in either direction.
+"""
+
+import numpy as np
+import pytest
+
+from sim.camera.render import FrameParams, HoleSpec, render_frame
+from station.bench.vision_bound import HoleCase, _Geometry, diameter_bound_px, fisher, predicted_median_abs
+from station.vision.photometric import PhotometricConfig, refine_hole
+
+
+def _dense_fisher(case: HoleCase) -> np.ndarray:
+    geo = _Geometry(case, blur_known=False, with_grain=True)
+    p, h, w = geo.jac.shape
+    n = h * w
+    eye = np.eye(n).reshape(n, h, w)
+    cov = np.concatenate([geo.apply_cov(eye[i:i + 256]) for i in range(0, n, 256)]).reshape(n, n)
+    assert np.abs(cov - cov.T).max() < 1e-9 * np.abs(cov).max()  # a covariance is symmetric
+    assert np.linalg.eigvalsh(cov).min() > 0
+    j = geo.jac.reshape(p, n)
+    return j @ np.linalg.solve(cov, j.T)
+
+
+def test_matrix_free_fisher_equals_the_dense_computation():
+    case = HoleCase(radius_px=7.0, blur_px=1.3, wall_dn=150, hole_dn=55, grain=0.04, gain_e_per_dn=30,
+                    read_noise_dn=2.0, vignetting_gain=0.85, frac_x=0.31, frac_y=-0.22)
+    dense = _dense_fisher(case)
+    f, names = fisher(case)
+    assert names[0] == "R"
+    assert np.abs(f - dense).max() <= 1e-7 * np.abs(dense).max()
+
+
+def test_grain_and_an_unknown_blur_cost_information():
+    case = HoleCase(radius_px=20.0, blur_px=1.5, wall_dn=150, hole_dn=60, grain=0.03, gain_e_per_dn=40,
+                    read_noise_dn=1.5)
+    sensor = diameter_bound_px(case, with_grain=False)
+    grain = diameter_bound_px(case)
+    known = diameter_bound_px(case, blur_known=True)
+    assert sensor < known < grain
+    # a hole twice as large has twice the rim: about 1/sqrt(2) of the scatter
+    big = diameter_bound_px(HoleCase(**{**case.__dict__, "radius_px": 40.0}), with_grain=False)
+    assert 0.55 < big / sensor < 0.85
+
+
+def test_predicted_median_of_equal_sigmas_is_the_half_normal_median():
+    assert predicted_median_abs(np.full(201, 0.02), draws=2000) == pytest.approx(0.6745 * 0.02, rel=0.03)
+
+
+def test_the_bound_is_what_a_least_squares_fit_reaches_on_rendered_frames():
+    """Monte Carlo: 100 renders of one hole with fresh sensor noise (no texture), the
+    photometric fit with the same nuisance parameters as the bound (wall Fourier order
+    4, no radial slope, blur fitted, plain least squares): its scatter must be at or
+    a little above the bound (an efficient estimator), never far below (a wrong bound)."""
+    r, s = 18.0, 1.4
+    params = FrameParams(width_px=160, height_px=160, wall_level_dn=150, hole_level_dn=60, grain=0.0,
+                         groove_depth=0.0, blotch=0.0, blur_sigma_px=s, gain_e_per_dn=40, read_noise_dn=1.5,
+                         vignetting=0.0)
+    hole = HoleSpec(80.3, 79.8, 2 * r)
+    cfg = PhotometricConfig(k_sigma=3.0, pad_px=3.0, groove_angles_deg=None, huber_k=100.0, iterations=5)
+    errs = []
+    for seed in range(100):
+        fit = refine_hole(render_frame(params, [hole], seed=seed).image, 80.3, 79.8, r, np.hypot(s, 0.29), cfg)
+        errs.append(2 * fit.r - 2 * r)
+    case = HoleCase(r, s, 150, 60, 0.0, 40, 1.5, frac_x=0.3, frac_y=-0.2)
+    bound = diameter_bound_px(case, with_grain=False, slope_order=-1)
+    ratio = float(np.std(errs)) / bound
+    assert 0.8 < ratio < 1.5, (np.std(errs), bound)
