@@ -40,14 +40,22 @@ class MeasureConfig:
     #: minimum share of the rim that must be measurable (a quarter: 90 deg of arc)
     min_coverage: float = 0.25
     #: below this a "hole" is a texture crossing: on rendered frames real holes score
-    #: >= 0.3 (low contrast, heavy blur) and texture candidates <= 0.1
+    #: >= 0.3 (low contrast, heavy blur) and most texture candidates <= 0.1 (not all:
+    #: see min_relative_contrast)
     min_confidence: float = 0.15
-    #: refine whole holes' diameter by a blurred-disc intensity fit with a honing-groove
-    #: model (``photometric.py``); on by default since its annulus was narrowed and its
-    #: iterations cut (~1.3 ms CPU per whole hole); None: the rays' diameter only (docs/vision.md)
+    #: a hole must be this much darker than the wall just outside its rim ((wall -
+    #: inside) / wall, medians of the pixels clear of the rim's blur).  A through-hole
+    #: is dark: dev frames 3000-3199 and 9000-9199 (585 whole, 185 cut holes) measure
+    #: >= 0.35 on the station envelope (40-85 % contrast) and >= 0.23 on the wide one
+    #: (30-80 %); the crossing of deep honing grooves that passed every other test
+    #: there measured 0.13.
+    min_relative_contrast: float = 0.2
+    #: refine whole holes' diameter and centre by a blurred-disc intensity fit with a
+    #: honing-groove model (``photometric.py``); on by default since its annulus was
+    #: narrowed and its iterations cut; None: the rays only (docs/vision.md)
     photometric: PhotometricConfig | None = PhotometricConfig()
     #: rays per px of rim on holes clear of the border when the photometric fit is on;
-    #: 1.0 keeps the rays (and so the centre, which stays the rays') as without it
+    #: 1.0 keeps the rays as without it (the centre is half the rays')
     ray_density_photometric: float = 1.0
 
 
@@ -161,20 +169,28 @@ def measure_candidate(
     if coverage < cfg.min_coverage or inlier_fraction < cfg.min_inlier_fraction:
         return None
     sigma_px = float(np.sqrt(profile_width2(edges.profiles[fit.inliers], edges.step_px)))
+    if relative_contrast(image, cx, cy, r, sigma_px) < cfg.min_relative_contrast:
+        return None  # too faint for a through-hole: crossing grooves
     # a Gaussian-blurred step of height c has a derivative peak c / (sqrt(2 pi) sigma)
     contrast_dn = float(median(edges.peak[fit.inliers]) * np.sqrt(2 * np.pi) * sigma_px)
     psf2 = psf_variance(sigma_px**2, r)
     r_true = deblurred_radius(r, float(np.sqrt(psf2)))
+    shift = np.zeros(2)
     if whole and cfg.photometric is not None and np.isfinite(psf2):
         # the image's own blur: the rays' width less our smoothing and bilinear sampling
         blur = float(np.sqrt(max(psf2 - SMOOTH_SIGMA_PX**2 - 1.0 / 6.0, 0.09)))
         ph = refine_hole(image, cx, cy, r_true, blur, cfg.photometric)
         if ph is not None:
             # the radius from the intensities (it uses the textureless hole side and
-            # the groove model); the centre stays the rays' (their worst case is
-            # smaller: on tuning frames 0.11 px against 0.13 px, medians alike)
+            # the groove model); the centre half-way between the rays' and the fit's:
+            # their errors are partly independent (dev frames 3000-3199 / 9000-9199,
+            # whole holes: centre median 0.025 / 0.023 px from the rays, 0.023 / 0.022
+            # from the fit, 0.023 / 0.020 for the mean; worst 0.18 / 0.15, 0.14 / 0.14,
+            # 0.13 / 0.14; errors > 0.1 px 9 / 7, 2 / 8, 2 / 1; weights 0.35-0.65 alike)
             r_true = ph.r
-    pts = edges.points + (r_true - r) * edges.directions
+            shift = 0.5 * np.array([ph.cx - cx, ph.cy - cy])
+            cx, cy = cx + shift[0], cy + shift[1]
+    pts = edges.points + shift + (r_true - r) * edges.directions
     if calibration is not None:
         pts = calibration.undistort_px(pts)
         cal = robust_circle(pts[fit.inliers], taubin_circle(pts[fit.inliers]), oval=whole)
@@ -210,6 +226,28 @@ def measure_candidate(
         minor_px=2 * ell[3] if ell else None,
         angle_deg=ell[4] if ell else None,
     )
+
+
+def relative_contrast(image: np.ndarray, cx: float, cy: float, r: float, blur_px: float) -> float:
+    """(wall - inside) / wall: medians of the pixels inside the rim's blur and of a 6 px
+    ring outside it, over the part of both within the frame (NaN when either is empty)."""
+    h, w = image.shape
+    r_wall = r + 2 * blur_px + 1
+    r_out = r_wall + 6
+    x0, x1 = max(int(cx - r_out), 0), min(int(cx + r_out) + 2, w)
+    y0, y1 = max(int(cy - r_out), 0), min(int(cy + r_out) + 2, h)
+    if x1 <= x0 or y1 <= y0:
+        return float("nan")
+    dx = np.arange(x0, x1) - cx
+    dy = np.arange(y0, y1) - cy
+    d2 = dx[None, :] ** 2 + dy[:, None] ** 2
+    v = image[y0:y1, x0:x1]
+    r_in = max(r - 2 * blur_px - 0.5, 0.5 * r)
+    inside, ring = v[d2 < r_in * r_in], v[(d2 > r_wall * r_wall) & (d2 < r_out * r_out)]
+    if inside.size == 0 or ring.size == 0:
+        return float("nan")
+    wall = median(ring.astype(np.float64))
+    return float((wall - median(inside.astype(np.float64))) / max(wall, 1.0))
 
 
 def measure_holes(

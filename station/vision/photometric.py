@@ -95,6 +95,7 @@ class PhotometricFit:
     r: float  # mean radius R0 (px)
     blur_px: float  # s: camera blur with the pixel's area
     contrast_dn: float  # median wall level - hole level over the annulus
+    wall_dn: float  # median wall level over the annulus
     rms_dn: float  # robust residual scale
     n_pixels: int
     iterations: int
@@ -300,5 +301,6 @@ def refine_hole(
             break
     if not (np.isfinite(ox) and np.isfinite(oy) and np.isfinite(r0)) or abs(r0 - r) > 2.0 or np.hypot(ox, oy) > 2.0:
         return None
-    contrast = median(bw @ lin[:nw] - bh @ lin[nw:])
-    return PhotometricFit(cx + ox, cy + oy, r0, s, contrast, float(scale), n, it)
+    wall_level = bw @ lin[:nw]
+    contrast = median(wall_level - bh @ lin[nw:])
+    return PhotometricFit(cx + ox, cy + oy, r0, s, contrast, median(wall_level), float(scale), n, it)
