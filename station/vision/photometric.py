@@ -54,9 +54,11 @@ class PhotometricConfig:
     wall_order: int = 4
     #: Huber threshold in robust standard deviations of the residuals: 5 keeps gross
     #: outliers (dust, a glint) from pulling the fit and is least squares otherwise;
-    #: the grain is Gaussian and the grooves are modelled, and 1.345 cost accuracy
-    #: (dev frames 3000-3199 / 9000-9199, with the cut term and an 18 px ring: diameter
-    #: median 0.0171 / 0.0191 px at 1.345 against 0.0162 / 0.0180 at 5)
+    #: the grain is Gaussian and the grooves are modelled; the gain over 1.345 is small
+    #: (dev frames 3000-3199 / 9000-9199, with the cut term and an 18 px ring, diameter
+    #: |error| px: median 0.0166 / 0.0186 at 1.345 against 0.0162 / 0.0180 at 5, mean
+    #: 0.0248 / 0.0265 against 0.0250 / 0.0259, 90th percentile 0.054 / 0.058 against
+    #: 0.055 / 0.054)
     huber_k: float = 5.0
     #: Gauss-Newton steps: from the ray fit's circle 3 do as well as 6 (dev frames
     #: 3000-3199: the same diameter median, 0.0191 px at k_sigma 2.5, 0.0202 at 2.0)
