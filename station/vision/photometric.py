@@ -88,6 +88,22 @@ class PhotometricConfig:
     #: 0.0271 -> 0.0175 / 0.0262, 9000-9199 0.0211 / 0.0277 -> 0.0183 / 0.0270; with the
     #: term's sign flipped 0.0205 / 0.0301, at 0.5x or 2x its size worse than at 1x
     groove_cut_term: bool = True
+    #: the smooth wall's radial slope at the rim (blotches, vignetting): B[W (1 - c)]
+    #: for a wall W = W0 + g (rho - R) is W (1 - u) - s_cam^2 g phi(t) / s, a shift of
+    #: the edge by s_cam^2 g / (W - H) (0.006 px for 0.25 DN/px at s = 1.2 px and 60 DN
+    #: of contrast).  The annulus cannot tell g from R (a free slope costs more than it
+    #: gains: docs/vision.md), so g comes from the groove ring, once its grooves are
+    #: removed: a level and a slope, each a Fourier series in angle (the slope of this
+    #: order; -1: none) ...
+    ring_slope_order: int = 1
+    #: ... shrunk towards 0 by this factor: the ring's slope is the mean over 18 px
+    #: further out, not the rim's, and a regression of the renderer's true slope at the
+    #: rim on the ring's (dev frames 3000-3099, 140 holes) has a coefficient of 0.57.
+    #: Six dev sets (3000, 5000, 9000, 11000, 13000, 15000, 200 frames each, 1,748 whole
+    #: holes), diameter |error| px median / mean / 90th percentile: no slope 0.0173 /
+    #: 0.0250 / 0.056; shrink 1: 0.0168 / 0.0233 / 0.052; 0.75: 0.0164 / 0.0230 / 0.052;
+    #: 0.5: 0.0162 / 0.0232 / 0.052; 0.4: 0.0164 / 0.0234 / 0.052
+    ring_slope_shrink: float = 0.5
 
 
 @dataclass(frozen=True)
@@ -171,6 +187,29 @@ def _groove_field(
     return field, d_rho
 
 
+def _fourier(c1: np.ndarray, s1: np.ndarray, order: int) -> list[np.ndarray]:
+    """1, cos theta, sin theta, ..., cos(order theta), sin(order theta) from cos and sin
+    of theta (the angle-addition recurrence)."""
+    out, ck, sk = [np.ones_like(c1)], np.ones_like(c1), np.zeros_like(c1)
+    for _ in range(order):
+        ck, sk = ck * c1 - sk * s1, sk * c1 + ck * s1
+        out += [ck, sk]
+    return out
+
+
+def _ring_slope(dx: np.ndarray, dy: np.ndarray, v: np.ndarray, r: float, c1: np.ndarray, s1: np.ndarray,
+                cfg: PhotometricConfig) -> np.ndarray:
+    """The smooth wall's radial slope (DN/px) at the annulus' angles (``c1``, ``s1``), from
+    the ring pixels ``dx``, ``dy`` with their grooves removed (``v``): level (Fourier order
+    ``wall_order``) + (rho - r) slope (order ``ring_slope_order``), least squares."""
+    rho = np.maximum(np.hypot(dx, dy), 1e-9)
+    level = _fourier(dx / rho, dy / rho, max(cfg.wall_order, cfg.ring_slope_order))
+    a = np.stack(level + [b * (rho - r) for b in level[: 2 * cfg.ring_slope_order + 1]], axis=1)
+    m, rhs = _normal(a, a, v)
+    coef = np.linalg.solve(m + 1e-9 * np.eye(a.shape[1]), rhs)[len(level):]
+    return sum(c * b for c, b in zip(coef, _fourier(c1, s1, cfg.ring_slope_order)))
+
+
 def refine_hole(
     image: np.ndarray,
     cx: float,
@@ -203,11 +242,21 @@ def refine_hole(
         wall_px = (d2 > r_clear * r_clear) & (d2 <= r_roi * r_roi)
         if wall_px.sum() < 50:
             return None
-        groove, groove_drho = _groove_field(dxa, dya, va, wall_px, sel, cfg)
+        ring_slope = cfg.ring_slope_order >= 0 and cfg.ring_slope_shrink > 0
+        targets = sel | wall_px if ring_slope else sel
+        groove, groove_drho = _groove_field(dxa, dya, va, wall_px, targets, cfg)
+        if ring_slope:
+            in_sel, in_wall = sel[targets], wall_px[targets]
+            g_wall = groove[in_wall]
+            groove, groove_drho = groove[in_sel], groove_drho[in_sel]
     dx, dy, v = dxa[sel], dya[sel], va[sel]
     n = v.size
     rho0 = np.sqrt(d2[sel])
     c1, s1 = dx / np.maximum(rho0, 1e-9), dy / np.maximum(rho0, 1e-9)
+    if grooves and ring_slope:
+        g = cfg.ring_slope_shrink * _ring_slope(dxa[wall_px], dya[wall_px], va[wall_px] - g_wall, r, c1, s1, cfg)
+        groove = groove + g * (rho0 - r)
+        groove_drho = groove_drho + g
     # Fourier basis in the (fixed) starting angle, by the angle-addition recurrence
     K = cfg.wall_order
     cos_k, sin_k = [np.ones(n)], [np.zeros(n)]
