@@ -144,8 +144,9 @@ def _normal(a: np.ndarray, wa: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, n
 
 def _groove_field(
     dx: np.ndarray, dy: np.ndarray, v: np.ndarray, wall: np.ndarray, targets: np.ndarray, cfg: PhotometricConfig
-) -> tuple[np.ndarray, np.ndarray]:
-    """The honing grooves' intensity (DN, about the smooth wall) at the ``targets`` pixels.
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The honing grooves' intensity (DN, about the smooth wall) at the ``targets`` pixels,
+    its radial derivative there, and the grooves at the ``wall`` pixels (their bins' values).
 
     A groove is straight and keeps its profile along its length, so each family is a
     1-D profile P_k across its direction; the wall pixels (``wall``) around the hole
@@ -184,7 +185,7 @@ def _groove_field(
         ph = np.deg2rad(ang)
         n_dot = (-np.sin(ph) * dx[targets] + np.cos(ph) * dy[targets]) / rho
         d_rho += np.interp(u, centres, np.gradient(p) / step) * n_dot
-    return field, d_rho
+    return field, d_rho, sum(p[i] for p, i in zip(prof, idx_w))
 
 
 def _fourier(c1: np.ndarray, s1: np.ndarray, order: int) -> list[np.ndarray]:
@@ -242,18 +243,12 @@ def refine_hole(
         wall_px = (d2 > r_clear * r_clear) & (d2 <= r_roi * r_roi)
         if wall_px.sum() < 50:
             return None
-        ring_slope = cfg.ring_slope_order >= 0 and cfg.ring_slope_shrink > 0
-        targets = sel | wall_px if ring_slope else sel
-        groove, groove_drho = _groove_field(dxa, dya, va, wall_px, targets, cfg)
-        if ring_slope:
-            in_sel, in_wall = sel[targets], wall_px[targets]
-            g_wall = groove[in_wall]
-            groove, groove_drho = groove[in_sel], groove_drho[in_sel]
+        groove, groove_drho, g_wall = _groove_field(dxa, dya, va, wall_px, sel, cfg)
     dx, dy, v = dxa[sel], dya[sel], va[sel]
     n = v.size
     rho0 = np.sqrt(d2[sel])
     c1, s1 = dx / np.maximum(rho0, 1e-9), dy / np.maximum(rho0, 1e-9)
-    if grooves and ring_slope:
+    if grooves and cfg.ring_slope_order >= 0 and cfg.ring_slope_shrink > 0:
         g = cfg.ring_slope_shrink * _ring_slope(dxa[wall_px], dya[wall_px], va[wall_px] - g_wall, r, c1, s1, cfg)
         groove = groove + g * (rho0 - r)
         groove_drho = groove_drho + g
