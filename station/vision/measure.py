@@ -50,6 +50,11 @@ class MeasureConfig:
     #: (30-80 %); the crossing of deep honing grooves that passed every other test
     #: there measured 0.13.
     min_relative_contrast: float = 0.2
+    #: the smallest measured diameter kept: 90 % of the smallest hole measured (20 px);
+    #: the detector's floor (``detect.min_diameter_px``, 16 px) is lower because a coarse
+    #: radius is rough.  Most texture crossings that passed every other test measured
+    #: 16.1-17.4 px (dev frames 5000-5199: 2 of 2; wide envelope, seeds 1000/7000: 3 of 4)
+    min_diameter_px: float = 18.0
     #: refine whole holes' diameter and centre by a blurred-disc intensity fit with a
     #: honing-groove model (``photometric.py``); on by default since its annulus was
     #: narrowed and its iterations cut; None: the rays only (docs/vision.md)
@@ -201,7 +206,7 @@ def measure_candidate(
     if rms_px > cfg.max_rms_px:
         return None
     diameter = 2.0 * r_true
-    if not (cfg.detect.min_diameter_px <= diameter <= cfg.detect.max_diameter_px):
+    if not (cfg.min_diameter_px <= diameter <= cfg.detect.max_diameter_px):
         return None
     ell = fit_ellipse_direct(pts[fit.inliers]) if not edges.cut_by_border else None
     # heuristic confidence: share of consistent edge points, share of rim seen (full

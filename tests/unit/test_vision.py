@@ -374,6 +374,22 @@ def test_oval_circle_fit_gives_centre_and_mean_radius_of_a_slight_ellipse():
     assert plain.rms_px > 0.1
 
 
+def test_rims_smaller_than_the_hole_envelope_are_refused():
+    """A 17 px dark disc is measured when the floor is lowered, and refused at the
+    default floor (90 % of the smallest hole, 20 px); a 20 px hole is kept."""
+    from station.vision.measure import MeasureConfig
+
+    assert MeasureConfig().min_diameter_px == pytest.approx(18.0)
+    p = FrameParams(width_px=320, height_px=256, groove_depth=0.0, grain=0.01, blotch=0.0, vignetting=0.0,
+                    blur_sigma_px=1.2)
+    small = render_frame(p, [HoleSpec(160.2, 127.7, 17.0)], seed=4)
+    (m,) = measure_holes(small.image, cfg=MeasureConfig(min_diameter_px=16.0))
+    assert m.diameter_px == pytest.approx(17.0, abs=0.1)
+    assert measure_holes(small.image) == []
+    (m,) = measure_holes(render_frame(p, [HoleSpec(160.2, 127.7, 20.0)], seed=4).image)
+    assert m.diameter_px == pytest.approx(20.0, abs=0.1)
+
+
 def test_holes_are_judged_on_their_relative_contrast():
     """A through-hole is dark: a candidate is refused when it is less than
     ``min_relative_contrast`` darker than the wall just outside it (crossing honing

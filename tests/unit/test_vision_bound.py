@@ -34,13 +34,15 @@ def test_matrix_free_fisher_equals_the_dense_computation():
     assert np.abs(f - dense).max() <= 1e-7 * np.abs(dense).max()
 
 
-def test_grain_and_an_unknown_blur_cost_information():
+def test_grain_an_unknown_blur_and_an_unknown_wall_slope_cost_information():
     case = HoleCase(radius_px=20.0, blur_px=1.5, wall_dn=150, hole_dn=60, grain=0.03, gain_e_per_dn=40,
                     read_noise_dn=1.5)
     sensor = diameter_bound_px(case, with_grain=False)
     grain = diameter_bound_px(case)
     known = diameter_bound_px(case, blur_known=True)
     assert sensor < known < grain
+    # a wall slope known from outside the annulus: less to estimate, a tighter bound
+    assert diameter_bound_px(case, slope_order=-1) < 0.97 * grain
     # a hole twice as large has twice the rim: about 1/sqrt(2) of the scatter
     big = diameter_bound_px(HoleCase(**{**case.__dict__, "radius_px": 40.0}), with_grain=False)
     assert 0.55 < big / sensor < 0.85
