@@ -18,10 +18,13 @@ u ~ Phi((R - sqrt(rho^2 + s^2)) / s), whose radius bias is below 0.001 px for a 
 hole at the heaviest blur (checked against the exact non-central chi-square cdf,
 ``test_photometric_disc_model_matches_the_exact_blurred_disc``).  R(theta) = R0 +
 a cos 2theta + b sin 2theta (an oval hole, to first order); W is the wall: a Fourier
-series in theta (per-sector level, vignetting, blotches) plus a radial slope of first
-order in theta; H the far side of the hole, a level with a first-order tilt.  The
-angles are measured from the starting centre and stay fixed, so the wall and hole
-bases are fixed functions of the pixel position and only rho depends on the centre.
+series in theta (per-sector level, vignetting, blotches), the honing grooves read from
+the wall ring beyond the rim, and the smooth wall's radial slope from the same ring (a
+free slope in the annulus and a tilt of H are options, off by default); H the far side
+of the hole, a level.  The wall is cut by the hole before the camera blurs it, which
+adds s_cam^2 / s phi(t) dW/drho to the model (the blur's product rule).  The angles
+are measured from the starting centre and stay fixed, so the wall and hole bases are
+fixed functions of the pixel position and only rho depends on the centre.
 
 Fit: Gauss-Newton with the analytic Jacobian, Huber weights (IRLS) on the residuals
 against a robust (MAD) scale, a handful of iterations from the ray fit's circle.
@@ -89,7 +92,7 @@ class PhotometricConfig:
     #: term's sign flipped 0.0205 / 0.0301, at 0.5x or 2x its size worse than at 1x
     groove_cut_term: bool = True
     #: the smooth wall's radial slope at the rim (blotches, vignetting): B[W (1 - c)]
-    #: for a wall W = W0 + g (rho - R) is W (1 - u) - s_cam^2 g phi(t) / s, a shift of
+    #: for a wall W = W0 + g (rho - R) is W (1 - u) + s_cam^2 g phi(t) / s, a shift of
     #: the edge by s_cam^2 g / (W - H) (0.006 px for 0.25 DN/px at s = 1.2 px and 60 DN
     #: of contrast).  The annulus cannot tell g from R (a free slope costs more than it
     #: gains: docs/vision.md), so g comes from the groove ring, once its grooves are
