@@ -86,7 +86,7 @@ class PhotometricConfig:
     texture_weighting: bool = False
     #: model that the grooves are cut by the hole before the blur: the image is
     #: B[G (1 - c)], not B[G] (1 - B[c]); to first order in the blur they differ by
-    #: s_cam^2 grad B[G] . grad B[c] = s_cam^2 / s phi(t) dG/drho, read from the groove
+    #: s_cam^2 grad B[G] . grad B[1 - c] = s_cam^2 / s phi(t) dG/drho, read from the groove
     #: profiles' derivative.  Dev frames (median / mean |error|, px): 3000-3199 0.0186 /
     #: 0.0271 -> 0.0175 / 0.0262, 9000-9199 0.0211 / 0.0277 -> 0.0183 / 0.0270; with the
     #: term's sign flipped 0.0205 / 0.0301, at 0.5x or 2x its size worse than at 1x
@@ -116,7 +116,6 @@ class PhotometricFit:
     r: float  # mean radius R0 (px)
     blur_px: float  # s: camera blur with the pixel's area
     contrast_dn: float  # median wall level - hole level over the annulus
-    wall_dn: float  # median wall level over the annulus
     rms_dn: float  # robust residual scale
     n_pixels: int
     iterations: int
@@ -255,13 +254,10 @@ def refine_hole(
         g = cfg.ring_slope_shrink * _ring_slope(dxa[wall_px], dya[wall_px], va[wall_px] - g_wall, r, c1, s1, cfg)
         groove = groove + g * (rho0 - r)
         groove_drho = groove_drho + g
-    # Fourier basis in the (fixed) starting angle, by the angle-addition recurrence
+    # Fourier basis in the (fixed) starting angle
     K = cfg.wall_order
-    cos_k, sin_k = [np.ones(n)], [np.zeros(n)]
-    for _ in range(max(K, 2)):
-        ck, sk = cos_k[-1], sin_k[-1]
-        cos_k.append(ck * c1 - sk * s1)
-        sin_k.append(sk * c1 + ck * s1)
+    fb = _fourier(c1, s1, max(K, 2))
+    cos_k, sin_k = [fb[0]] + fb[1::2], [np.zeros(n)] + fb[2::2]
     wall_cols = [cos_k[0]] + [b for k in range(1, K + 1) for b in (cos_k[k], sin_k[k])]
     t_rad = (rho0 - r) / half  # radial coordinate over the annulus, -1..1
     if cfg.wall_slope_order >= 0:
@@ -297,9 +293,9 @@ def refine_hole(
         res = v - (wall + (hole - wall) * u)
         cut = 0.0
         if grooves and cfg.groove_cut_term:
-            # the grooves are cut by the hole before the blur: B[G (1 - c)] differs from
-            # B[G] (1 - B[c]) by s_cam^2 grad B[G] . grad B[c] to first order, and
-            # grad B[c] = -phi(t) / s along the radius
+            # the wall (grooves, slope) is cut by the hole before the blur: B[G (1 - c)]
+            # differs from B[G] (1 - B[c]) by s_cam^2 grad B[G] . grad B[1 - c] to first
+            # order, and grad B[1 - c] = phi(t) / s along the radius
             cut = (s * s - 1.0 / 12.0) / s * groove_drho
             res -= cut * phi
         if scale is None or it <= 2:
@@ -350,6 +346,5 @@ def refine_hole(
             break
     if not (np.isfinite(ox) and np.isfinite(oy) and np.isfinite(r0)) or abs(r0 - r) > 2.0 or np.hypot(ox, oy) > 2.0:
         return None
-    wall_level = bw @ lin[:nw]
-    contrast = median(wall_level - bh @ lin[nw:])
-    return PhotometricFit(cx + ox, cy + oy, r0, s, contrast, median(wall_level), float(scale), n, it)
+    contrast = median(bw @ lin[:nw] - bh @ lin[nw:])
+    return PhotometricFit(cx + ox, cy + oy, r0, s, contrast, float(scale), n, it)
