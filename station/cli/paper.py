@@ -41,14 +41,22 @@ async def _measure(scenario: Path, data: Path, compensated: bool, time_scale: fl
         return await s.inspect(spec, "STANDARD-SAMPLE"), spec
 
 
-def run_paper(scenario: Path | None = None, time_scale: float = 50.0, data: Path | None = None) -> dict:
+def run_paper(scenario: Path | None = None, time_scale: float = 50.0, data: Path | None = None,
+              timeout_s: float | None = None) -> dict:
+    """``timeout_s``: a bound on each of the two inspections; past it the inspection is
+    cancelled and TimeoutError raised, chained to the cancellation's traceback, which
+    names the await it was stuck in."""
     from sim.twins import DEFAULT_SCENARIO
 
     scenario = scenario or DEFAULT_SCENARIO.with_name("paper.toml")
+
+    def measure(where: Path, compensated: bool):
+        return asyncio.run(asyncio.wait_for(_measure(scenario, where, compensated, time_scale), timeout_s))
+
     with tempfile.TemporaryDirectory() as tmp:
         where = data or Path(tmp)
-        before, spec = asyncio.run(_measure(scenario, where / "before", False, time_scale))
-        after, _ = asyncio.run(_measure(scenario, where / "after", True, time_scale))
+        before, spec = measure(where / "before", False)
+        after, _ = measure(where / "after", True)
     rows = {}
     for run, out in (("before", before), ("after", after)):
         for c in out.characteristics:
