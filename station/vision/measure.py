@@ -53,7 +53,8 @@ class MeasureConfig:
     #: the smallest measured diameter kept: 90 % of the smallest hole measured (20 px);
     #: the detector's floor (``detect.min_diameter_px``, 16 px) is lower because a coarse
     #: radius is rough.  Most texture crossings that passed every other test measured
-    #: 16.1-17.4 px (dev frames 5000-5199: 2 of 2; wide envelope, seeds 1000/7000: 3 of 4)
+    #: 16.1-17.4 px (eight station sets of 200 frames: 2 of 3; the wide envelope's 120
+    #: bench frames: 3 of 3)
     min_diameter_px: float = 18.0
     #: refine whole holes' diameter and centre by a blurred-disc intensity fit with a
     #: honing-groove model (``photometric.py``); on by default since its annulus was

@@ -200,17 +200,18 @@ def _fourier(c1: np.ndarray, s1: np.ndarray, order: int) -> list[np.ndarray]:
     return out
 
 
-def _ring_slope(dx: np.ndarray, dy: np.ndarray, v: np.ndarray, r: float, c1: np.ndarray, s1: np.ndarray,
+def _ring_slope(dx: np.ndarray, dy: np.ndarray, v: np.ndarray, r: float, basis: list[np.ndarray],
                 cfg: PhotometricConfig) -> np.ndarray:
-    """The smooth wall's radial slope (DN/px) at the annulus' angles (``c1``, ``s1``), from
-    the ring pixels ``dx``, ``dy`` with their grooves removed (``v``): level (Fourier order
-    ``wall_order``) + (rho - r) slope (order ``ring_slope_order``), least squares."""
+    """The smooth wall's radial slope (DN/px) at the annulus' pixels (``basis``: their
+    ``_fourier`` terms, at least to ``ring_slope_order``), from the ring pixels ``dx``,
+    ``dy`` with their grooves removed (``v``): level (Fourier order ``wall_order``) +
+    (rho - r) slope (order ``ring_slope_order``), least squares."""
     rho = np.maximum(np.hypot(dx, dy), 1e-9)
     level = _fourier(dx / rho, dy / rho, max(cfg.wall_order, cfg.ring_slope_order))
     a = np.stack(level + [b * (rho - r) for b in level[: 2 * cfg.ring_slope_order + 1]], axis=1)
     m, rhs = _normal(a, a, v)
     coef = np.linalg.solve(m + 1e-9 * np.eye(a.shape[1]), rhs)[len(level):]
-    return sum(c * b for c, b in zip(coef, _fourier(c1, s1, cfg.ring_slope_order)))
+    return sum(c * b for c, b in zip(coef, basis))
 
 
 def refine_hole(
@@ -250,13 +251,14 @@ def refine_hole(
     n = v.size
     rho0 = np.sqrt(d2[sel])
     c1, s1 = dx / np.maximum(rho0, 1e-9), dy / np.maximum(rho0, 1e-9)
-    if grooves and cfg.ring_slope_order >= 0 and cfg.ring_slope_shrink > 0:
-        g = cfg.ring_slope_shrink * _ring_slope(dxa[wall_px], dya[wall_px], va[wall_px] - g_wall, r, c1, s1, cfg)
-        groove = groove + g * (rho0 - r)
-        groove_drho = groove_drho + g
     # Fourier basis in the (fixed) starting angle
     K = cfg.wall_order
-    fb = _fourier(c1, s1, max(K, 2))
+    fb = _fourier(c1, s1, max(K, 2, cfg.ring_slope_order))
+    if grooves and cfg.ring_slope_order >= 0 and cfg.ring_slope_shrink > 0:
+        g = cfg.ring_slope_shrink * _ring_slope(dxa[wall_px], dya[wall_px], va[wall_px] - g_wall, r,
+                                                fb[: 2 * cfg.ring_slope_order + 1], cfg)
+        groove = groove + g * (rho0 - r)
+        groove_drho = groove_drho + g
     cos_k, sin_k = [fb[0]] + fb[1::2], [np.zeros(n)] + fb[2::2]
     wall_cols = [cos_k[0]] + [b for k in range(1, K + 1) for b in (cos_k[k], sin_k[k])]
     t_rad = (rho0 - r) / half  # radial coordinate over the annulus, -1..1
