@@ -13,9 +13,12 @@ sim/camera/renderer.py).
 Verdict, after a warm-up (the first ``warmup`` fraction of the inspections: imports,
 caches and SQLite pages fill up):
 
-* descriptors: the least-squares slope over the rest is below ``FD_SLOPE`` per
-  inspection and the range at most ``FD_SLACK`` (a connection of the pollers may still
-  be closing; a leak grows with every inspection); threads: the range at most
+* descriptors: the range at most ``FD_SLACK`` (a connection of the pollers may still
+  be closing), and no growth that keeps coming back: a least-squares slope of
+  ``FD_SLOPE`` or more per inspection counts as a leak only when the count reached a
+  new high at least ``FD_RISES`` times.  A leak rises again and again; a pool that
+  opens one more connection under load steps up once and stays (+2 half-way through
+  12 inspections is a slope of 0.25: seen in a CI run); threads: the range at most
   ``THREAD_SLACK``;
 * memory: the least-squares slope over the rest, in kB per inspection, is below
   ``RSS_SLOPE_KB``, and the net growth over the rest is below ``RSS_GROWTH_MB``.
@@ -40,6 +43,7 @@ from station.bench import served
 PART = "ZDZG-22.2-12.3851"
 FD_SLACK = 4
 FD_SLOPE = 0.25
+FD_RISES = 3
 THREAD_SLACK = 2
 #: a quarter of one leaked 1280 x 1024 frame per inspection; a short soak's slope is
 #: mostly bounded caches filling (70-85 kB per inspection over 12 inspections here)
@@ -122,20 +126,22 @@ class SoakResult:
         growth_mb = float(np.median(rss[-q:]) - np.median(rss[:q])) / 1024.0
         fds = [s["fds"] for s in rest]
         fd_slope = float(np.polyfit(n, np.array(fds, dtype=float), 1)[0])
+        fd_rises = int(sum(fds[i] > max(fds[:i]) for i in range(1, len(fds))))
+        fd_leak = fd_slope >= FD_SLOPE and fd_rises >= FD_RISES
         threads = [s["threads"] for s in rest]
         out = {
             "inspections": len(self.samples), "warmup": self.warmup, "failed": self.failed,
             "rss_mb_first": rest[0]["rss_kb"] / 1024.0, "rss_mb_last": rest[-1]["rss_kb"] / 1024.0,
             "rss_slope_kb_per_inspection": slope, "rss_growth_mb": growth_mb,
-            "fds_min": min(fds), "fds_max": max(fds), "fds_slope_per_inspection": fd_slope, "threads_min": min(threads), "threads_max": max(threads),
+            "fds_min": min(fds), "fds_max": max(fds), "fds_slope_per_inspection": fd_slope, "fds_new_highs": fd_rises, "threads_min": min(threads), "threads_max": max(threads),
             "bars": {"rss_slope_kb": RSS_SLOPE_KB, "rss_growth_mb": RSS_GROWTH_MB, "fd_slack": FD_SLACK,
-                     "fd_slope": FD_SLOPE, "thread_slack": THREAD_SLACK},
+                     "fd_slope": FD_SLOPE, "fd_rises": FD_RISES, "thread_slack": THREAD_SLACK},
         }
         renderer = [s["renderer_rss_kb"] for s in rest if s.get("renderer_rss_kb") is not None]
         if len(renderer) >= 3:
             out["renderer_rss_slope_kb_per_inspection"] = float(np.polyfit(np.arange(len(renderer)), renderer, 1)[0])
         out["ok"] = (not self.failed and slope < RSS_SLOPE_KB and growth_mb < RSS_GROWTH_MB
-                     and max(fds) - min(fds) <= FD_SLACK and fd_slope < FD_SLOPE and max(threads) - min(threads) <= THREAD_SLACK
+                     and max(fds) - min(fds) <= FD_SLACK and not fd_leak and max(threads) - min(threads) <= THREAD_SLACK
                      and out.get("renderer_rss_slope_kb_per_inspection", 0.0) < RSS_SLOPE_KB)
         return out
 

@@ -20,6 +20,21 @@ def test_the_verdict_sees_a_leaked_frame_or_descriptor_per_inspection():
         sample["fds"] += i // 3
     assert not slow.verdict()["ok"]
     assert synthetic(rss_step_kb=RSS_SLOPE_KB / 3).verdict()["ok"]
+    short_leak = synthetic(n=16, warmup=4)  # one every third inspection in a short soak: range 3, slope 0.33
+    for i, sample in enumerate(short_leak.samples):
+        sample["fds"] += max(i - 4, 0) // 3
+    assert not short_leak.verdict()["ok"]
+
+
+def test_the_verdict_lets_a_pool_step_up_once():
+    """+2 descriptors half-way through a 16-inspection soak and flat after (one more
+    pooled connection under load; seen in a CI run): a slope of 0.25, one new high."""
+    step = synthetic(n=16, warmup=4)
+    for sample in step.samples[10:]:
+        sample["fds"] += 2
+    v = step.verdict()
+    assert v["fds_slope_per_inspection"] >= 0.25 and v["fds_new_highs"] == 1
+    assert v["ok"]
 
 
 def test_repeated_inspections_leave_no_growth():
