@@ -1,0 +1,57 @@
+"""``station bench vision``: its statistics (the ratio's bootstrap interval) and one small run."""
+
+import numpy as np
+import pytest
+
+from station.vision.scoring import ratio_of_medians_ci
+
+
+def test_ratio_interval_covers_the_true_ratio_and_narrows_with_more_frames():
+    """Per-frame errors with a known ratio of medians (baseline 5x ours): the interval
+    holds 5 and is narrower for ten times the frames."""
+    rng = np.random.default_rng(3)
+
+    def frames(n):
+        counts = rng.integers(0, 4, n)
+        ours = [list(0.02 * rng.standard_normal(k)) for k in counts]
+        base = [list(0.10 * rng.standard_normal(k)) for k in counts]
+        return base, ours
+
+    lo, hi = ratio_of_medians_ci(*frames(40), draws=1000)
+    lo_big, hi_big = ratio_of_medians_ci(*frames(400), draws=1000)
+    assert lo < 5.0 < hi
+    assert lo_big < 5.0 < hi_big
+    assert (hi_big - lo_big) < 0.5 * (hi - lo)
+
+
+def test_ratio_interval_resamples_whole_frames():
+    """A frame's holes share its condition: one frame with a huge error on every hole
+    is one unit of the resampling, so the interval stays near the clean ratio when it is
+    left out of a draw, and the spread comes from frames, not from single holes."""
+    ours = [[0.01, -0.01], [0.01, 0.01], [0.01]] * 10 + [[1.0] * 30]
+    base = [[0.05, 0.05], [-0.05, 0.05], [0.05]] * 10 + [[0.05] * 30]
+    lo, hi = ratio_of_medians_ci(base, ours, draws=500)
+    # with the bad frame drawn the median of ours may jump to 1.0 (ratio 0.05); without it
+    # the ratio is 5: a per-hole bootstrap would never see 0.05
+    assert lo == pytest.approx(0.05, rel=1e-6) and hi == pytest.approx(5.0, rel=1e-6)
+
+
+def test_ratio_interval_refuses_mismatched_frames():
+    with pytest.raises(ValueError, match="same frames"):
+        ratio_of_medians_ci([[0.1]], [[0.1], [0.2]])
+
+
+def test_bench_run_scores_every_method_on_the_same_frames():
+    from station.bench.vision import run
+
+    calls = []
+    r = run(frames=4, seed=1000, progress=lambda: calls.append(1))
+    assert len(calls) == 4 * 4  # rendering + 3 methods, one call per frame each
+    assert set(r["methods"]) == {"ours", "hough_gradient_alt", "contours_fit_ellipse"}
+    holes = r["whole_holes"]
+    assert holes > 0
+    for m in r["methods"].values():
+        assert m["holes_measured"] + m["misses"] == holes
+    lo, hi = r["diameter_accuracy_ratio_ci95"]
+    assert lo <= r["diameter_accuracy_ratio_vs_better_baseline"] <= hi
+    assert r["better_baseline"]["diameter"] in ("hough_gradient_alt", "contours_fit_ellipse")
