@@ -71,3 +71,39 @@ def test_the_bound_is_what_a_least_squares_fit_reaches_on_rendered_frames():
     bound = diameter_bound_px(case, with_grain=False, slope_order=-1)
     ratio = float(np.std(errs)) / bound
     assert 0.8 < ratio < 1.5, (np.std(errs), bound)
+
+
+def test_attainability_matches_the_closed_form_for_equal_holes():
+    """n holes with the same Gaussian errors: P(worst |d| <= bar) = (2 Phi(bar / sigma) - 1)^n
+    and P(worst centre <= bar) = (1 - exp(-bar^2 / 2 sigma_c^2))^n (Rayleigh)."""
+    from scipy.special import ndtr
+
+    from station.bench.vision_bound import attainability
+
+    n, sd, sc = 300, 0.05, 0.035
+    a = attainability(np.full(n, sd), np.tile(sc**2 * np.eye(2), (n, 1, 1)), draws=4000)
+    p_d = (2 * ndtr(0.15 / sd) - 1) ** n
+    p_c = (1 - np.exp(-0.1**2 / (2 * sc**2))) ** n
+    assert a["p_worst_diameter_within_bar"] == pytest.approx(p_d, abs=0.03)
+    assert a["p_worst_centre_within_bar"] == pytest.approx(p_c, abs=0.03)
+    assert a["expected_holes_over_diameter_bar"] == pytest.approx(n * 2 * ndtr(-3.0), rel=1e-9)
+    assert a["expected_holes_over_centre_bar"] == pytest.approx(n * np.exp(-0.1**2 / (2 * sc**2)), rel=0.05)
+    assert a["predicted_median_abs_diameter_err_px"] == pytest.approx(0.6745 * sd, rel=0.03)
+    assert a["predicted_median_centre_err_px"] == pytest.approx(np.sqrt(2 * np.log(2)) * sc, rel=0.03)
+
+
+def test_centre_covariance_comes_from_the_same_fisher_matrix():
+    from station.bench.vision_bound import hole_bound
+
+    case = HoleCase(radius_px=15.0, blur_px=1.2, wall_dn=150, hole_dn=60, grain=0.03, gain_e_per_dn=40,
+                    read_noise_dn=1.5)
+    d_sigma, c_cov = hole_bound(case)
+    assert d_sigma == pytest.approx(diameter_bound_px(case))
+    # a round hole: the same scatter in x and y, no correlation
+    assert c_cov[0, 0] == pytest.approx(c_cov[1, 1], rel=0.1)
+    assert abs(c_cov[0, 1]) < 0.1 * c_cov[0, 0]
+    # N rim points with independent radial errors e: var R = e^2 / N, var cx = 2 e^2 / N,
+    # so sigma_cx = sqrt(2) sigma_R when the blur is known and the noise is white (the
+    # wall's first harmonic, a nuisance, costs the centre a little more)
+    d_white, c_white = hole_bound(case, blur_known=True, with_grain=False)
+    assert np.sqrt(c_white[0, 0]) / (d_white / 2) == pytest.approx(np.sqrt(2), rel=0.12)
