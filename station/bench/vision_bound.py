@@ -253,25 +253,30 @@ def predicted_median_abs(sigmas: np.ndarray, draws: int = 4000, seed: int = 0) -
     return float(np.median(np.median(e, axis=1)))
 
 
+def cases_from_frame(frame) -> list[HoleCase]:
+    """The whole holes of one rendered frame (``sim.camera.render.Frame``) with its condition."""
+    from sim.camera.render import _vignetting_gain
+
+    p = frame.params
+    w, h = p.width_px, p.height_px
+    gain = _vignetting_gain(w, h, (w - 1) / 2, (h - 1) / 2, float(p.vignetting)) if p.vignetting else None
+    out = []
+    for t in frame.holes:
+        if t.partial:
+            continue
+        vg = float(gain[int(round(t.y_px)), int(round(t.x_px))]) if gain is not None else 1.0
+        out.append(HoleCase(radius_px=t.diameter_px / 2, blur_px=p.blur_sigma_px, wall_dn=p.wall_level_dn,
+                            hole_dn=p.hole_level_dn, grain=p.grain, gain_e_per_dn=p.gain_e_per_dn,
+                            read_noise_dn=p.read_noise_dn, vignetting_gain=vg,
+                            frac_x=t.x_px - round(t.x_px), frac_y=t.y_px - round(t.y_px)))
+    return out
+
+
 def cases_from_frames(frames: int, seed: int, envelope: str = "station") -> list[HoleCase]:
     """The whole holes of the vision bench's frames (same seeds, same draw)."""
-    from sim.camera.render import _vignetting_gain, random_frame
+    from sim.camera.render import random_frame
 
-    out = []
-    for i in range(frames):
-        f = random_frame(seed + i, envelope=envelope)
-        p = f.params
-        w, h = p.width_px, p.height_px
-        gain = _vignetting_gain(w, h, (w - 1) / 2, (h - 1) / 2, float(p.vignetting)) if p.vignetting else None
-        for t in f.holes:
-            if t.partial:
-                continue
-            vg = float(gain[int(round(t.y_px)), int(round(t.x_px))]) if gain is not None else 1.0
-            out.append(HoleCase(radius_px=t.diameter_px / 2, blur_px=p.blur_sigma_px, wall_dn=p.wall_level_dn,
-                                hole_dn=p.hole_level_dn, grain=p.grain, gain_e_per_dn=p.gain_e_per_dn,
-                                read_noise_dn=p.read_noise_dn, vignetting_gain=vg,
-                                frac_x=t.x_px - round(t.x_px), frac_y=t.y_px - round(t.y_px)))
-    return out
+    return [c for i in range(frames) for c in cases_from_frame(random_frame(seed + i, envelope=envelope))]
 
 
 VARIANTS = {"blur_free": dict(blur_known=False, with_grain=True),
