@@ -322,7 +322,7 @@ def run(frames: int = 60, seed: int = 1000, envelope: str = "station", progress=
             per_case.append(_case_bounds(case))
             if progress:
                 progress()
-    res, per_hole = {}, {}
+    res, per_hole, per_hole_c = {}, {}, {}
     base = baseline_median_diameter_err(frames, seed, envelope) if baseline else None
     for k in VARIANTS:
         sig = np.array([b[k][0] for b in per_case])
@@ -334,8 +334,11 @@ def run(frames: int = 60, seed: int = 1000, envelope: str = "station", progress=
             # baseline on these frames (the goal is 5x)
             res[k]["best_diameter_ratio_vs_hough_alt"] = base / att["predicted_median_abs_diameter_err_px"]
         per_hole[k] = [round(float(x), 5) for x in sig]
+        per_hole_c[k] = [round(float(np.sqrt(0.5 * np.trace(c))), 5) for c in ccov]
     out = {"frames": frames, "seed": seed, "envelope": envelope, "whole_holes": len(cases), "bounds": res,
            "per_hole_sigma_px": per_hole,
+           # the centre's per-axis standard deviation, sqrt(trace / 2) of its 2 x 2 block
+           "per_hole_centre_sigma_px": per_hole_c,
            "left_out": "honing grooves (taken as known) and blotches (in the wall's Fourier series): the bound "
                        "is optimistic"}
     if base is not None:

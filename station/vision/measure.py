@@ -25,6 +25,7 @@ from station.vision.detect import Candidate, DetectConfig, detect_candidates
 from station.vision.edges import KERNEL_RADIUS_PX, deblurred_radius, gradient, profile_width2, psf_variance, ray_edges
 from station.vision.edges import SMOOTH_SIGMA_PX
 from station.vision.fit import fit_ellipse_direct, median, ransac_circle, robust_circle, taubin_circle
+from station.vision.illumination import Illumination, estimate_illumination
 from station.vision.photometric import PhotometricConfig, refine_hole
 
 
@@ -64,11 +65,20 @@ class MeasureConfig:
     #: 1.0 keeps the rays as without it (the centre is half the rays')
     ray_density_photometric: float = 1.0
     #: a whole hole's centre: the rays' moved this share of the way to the photometric
-    #: fit's (six dev sets, 1,748 whole holes, centre median / 99th percentile / worst /
-    #: count over 0.1 px: 0 (the rays') 0.0243 / 0.112 / 0.197 / 30, 0.5: 0.0212 / 0.089
-    #: / 0.136 / 8, 0.7: 0.0216 / 0.095 / 0.136 / 11, 1 (the fit's) 0.0231 / 0.117 /
-    #: 0.189 / 35)
-    photometric_centre_weight: float = 0.5
+    #: fit's.  Without flat-fielding the fit's centre was biased by the vignetting and the
+    #: blend was best (six dev sets, 1,748 whole holes, centre median / 99th percentile /
+    #: worst / count over 0.1 px: the rays' 0.0243 / 0.112 / 0.197 / 30, 0.5: 0.0212 /
+    #: 0.089 / 0.136 / 8, the fit's 0.0231 / 0.117 / 0.189 / 35).  Flat-fielded, the
+    #: fit's own centre is best: dev 3000 + 9000 (585 holes) median 0.0211 (0.5, not
+    #: flat-fielded) -> 0.0191 (0.5) / 0.0171 (1); dev 5000, 11000, 13000, 15000 (1,201
+    #: holes) 0.0213 -> 0.0189 / 0.0172 (0.85) / 0.0169 (1), 90th percentile 0.049 ->
+    #: 0.039, over 0.1 px 4 -> 2
+    photometric_centre_weight: float = 1.0
+    #: flat-field each hole by the frame's illumination (``illumination.py``: vignetting
+    #: multiplies the hole's level too, and the fit's constant hole level read its
+    #: gradient as a displaced rim) before the photometric fit; grain-only dev frames,
+    #: the fit's centre median 0.0218 -> 0.0164 px (0.0158 with no vignetting at all)
+    flat_field: bool = True
 
 
 @dataclass(frozen=True)
@@ -134,8 +144,12 @@ def measure_candidate(
     cfg: MeasureConfig,
     calibration: CameraCalibration | None = None,
     rng: np.random.Generator | None = None,
+    illumination: Illumination | None = None,
 ) -> HoleMeasurement | None:
-    """Sub-pixel measurement of one candidate, or None when it is not a hole."""
+    """Sub-pixel measurement of one candidate, or None when it is not a hole.
+
+    ``illumination``: the frame's illumination field; the photometric fit flat-fields the
+    hole by its local gradient (none: as if the illumination were flat)."""
     rng = rng if rng is not None else np.random.default_rng(0)
     r0 = cand.radius_px
     # pass 1: wide search (the coarse radius is good to ~1 coarse pixel for whole
@@ -191,7 +205,8 @@ def measure_candidate(
     if whole and cfg.photometric is not None and np.isfinite(psf2):
         # the image's own blur: the rays' width less our smoothing and bilinear sampling
         blur = float(np.sqrt(max(psf2 - SMOOTH_SIGMA_PX**2 - 1.0 / 6.0, 0.09)))
-        ph = refine_hole(image, cx, cy, r_true, blur, cfg.photometric)
+        grad = illumination.relative_gradient(cx, cy) if illumination is not None else None
+        ph = refine_hole(image, cx, cy, r_true, blur, cfg.photometric, illumination_grad=grad)
         if ph is not None:
             # the radius from the intensities (it uses the textureless hole side and
             # the groove model); the centre half-way between the rays' and the fit's:
@@ -279,8 +294,11 @@ def measure_holes(
         mm_per_px = calibration.mm_per_px
     rng = np.random.default_rng(0)  # fixed: the same frame always gives the same result
     found: list[HoleMeasurement] = []
-    for cand in detect_candidates(image, cfg.detect):
-        m = measure_candidate(image, cand, cfg, calibration, rng)
+    candidates = detect_candidates(image, cfg.detect)
+    illumination = (estimate_illumination(image)
+                    if candidates and cfg.flat_field and cfg.photometric is not None else None)
+    for cand in candidates:
+        m = measure_candidate(image, cand, cfg, calibration, rng, illumination)
         if m is None:
             continue
         # two candidates (a hole split by a deep groove) may converge on one hole

@@ -221,6 +221,7 @@ def refine_hole(
     r: float,
     blur_px: float,
     cfg: PhotometricConfig = PhotometricConfig(),
+    illumination_grad: tuple[float, float] | None = None,
 ) -> PhotometricFit | None:
     """Fit the blurred-disc model around a whole hole's rim; None when it fails."""
     h, w = image.shape
@@ -240,6 +241,8 @@ def refine_hole(
     dya = np.broadcast_to(yy[:, None], (y1 - y0, x1 - x0)).ravel()
     d2 = dxa * dxa + dya * dya
     va = image[y0:y1, x0:x1].ravel().astype(np.float64)
+    if illumination_grad is not None:
+        va = va / (1.0 + illumination_grad[0] * dxa + illumination_grad[1] * dya)
     sel = (d2 >= r_in * r_in) & (d2 <= r_out * r_out)
     groove = 0.0
     if grooves:
