@@ -62,7 +62,7 @@ class MeasureConfig:
     #: narrowed and its iterations cut; None: the rays only (docs/vision.md)
     photometric: PhotometricConfig | None = PhotometricConfig()
     #: rays per px of rim on holes clear of the border when the photometric fit is on;
-    #: 1.0 keeps the rays as without it (the centre is half the rays')
+    #: 1.0 keeps the rays as without it (they start the fit, and give cut holes' centres)
     ray_density_photometric: float = 1.0
     #: a whole hole's centre: the rays' moved this share of the way to the photometric
     #: fit's.  Without flat-fielding the fit's centre was biased by the vignetting and the
@@ -209,11 +209,8 @@ def measure_candidate(
         ph = refine_hole(image, cx, cy, r_true, blur, cfg.photometric, illumination_grad=grad)
         if ph is not None:
             # the radius from the intensities (it uses the textureless hole side and
-            # the groove model); the centre half-way between the rays' and the fit's:
-            # their errors are partly independent (dev frames 3000-3199 / 9000-9199,
-            # whole holes: centre median 0.025 / 0.023 px from the rays, 0.023 / 0.022
-            # from the fit, 0.023 / 0.020 for the mean; worst 0.18 / 0.15, 0.14 / 0.14,
-            # 0.13 / 0.14; errors > 0.1 px 9 / 7, 2 / 8, 2 / 1; weights 0.35-0.65 alike)
+            # the groove model); the centre moved ``photometric_centre_weight`` of the
+            # way to the fit's (all of it since the hole is flat-fielded: see the setting)
             r_true = ph.r
             shift = cfg.photometric_centre_weight * np.array([ph.cx - cx, ph.cy - cy])
             cx, cy = cx + shift[0], cy + shift[1]

@@ -223,7 +223,11 @@ def refine_hole(
     cfg: PhotometricConfig = PhotometricConfig(),
     illumination_grad: tuple[float, float] | None = None,
 ) -> PhotometricFit | None:
-    """Fit the blurred-disc model around a whole hole's rim; None when it fails."""
+    """Fit the blurred-disc model around a whole hole's rim; None when it fails.
+
+    ``illumination_grad``: the frame illumination's relative gradient (per px) at the
+    hole (``illumination.Illumination.relative_gradient``); the hole's pixels are divided
+    by 1 + g . (x - (cx, cy)) first, so that the model sees reflectance only."""
     h, w = image.shape
     s = float(np.clip(blur_px, 0.4, 4.0))
     half = cfg.k_sigma * s + cfg.pad_px
