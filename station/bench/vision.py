@@ -119,12 +119,12 @@ def run(frames: int = 400, seed: int = 1000, envelope: str = "station", photomet
         results[name] = {**total.summary(), "median_ms_per_frame": 1000 * statistics.median(times),
                          "median_cpu_ms_per_frame": 1000 * statistics.median(cpu)}
     o = results["ours"]
-    base = [results[k] for k in METHODS if k != "ours"]
-    best_c = min(b["median_centre_err_px"] or np.inf for b in base)
-    best_d = min(b["median_diameter_err_px"] or np.inf for b in base)
     # the better baseline per quantity, and how far this frame set's ratio can be trusted
-    better_c = min((k for k in METHODS if k != "ours"), key=lambda k: results[k]["median_centre_err_px"] or np.inf)
-    better_d = min((k for k in METHODS if k != "ours"), key=lambda k: results[k]["median_diameter_err_px"] or np.inf)
+    baselines = [k for k in METHODS if k != "ours"]
+    better_c = min(baselines, key=lambda k: results[k]["median_centre_err_px"] or np.inf)
+    better_d = min(baselines, key=lambda k: results[k]["median_diameter_err_px"] or np.inf)
+    best_c = results[better_c]["median_centre_err_px"] or np.inf
+    best_d = results[better_d]["median_diameter_err_px"] or np.inf
     ci_c = ratio_of_medians_ci([s.centre_err_px for s in per_frame[better_c]],
                                [s.centre_err_px for s in per_frame["ours"]])
     ci_d = ratio_of_medians_ci([s.diameter_err_px for s in per_frame[better_d]],

@@ -29,7 +29,8 @@ the wall's Fourier series).  An estimator's median |error| above the bound's is 
 room that is left; a goal below the bound cannot be met by any unbiased estimator.
 
 The predicted median |diameter error| over the bench's holes is the median over Monte
-Carlo draws of the median of |N(0, sigma_i)| over the holes (the holes' bounds differ).
+Carlo draws of the median of |N(0, sigma_i)| over the holes (the holes' bounds differ;
+``attainability``).
 
 The same draws answer the issue's worst-case goals (every centre within 0.1 px, every
 diameter within 0.15 px): ``attainability`` gives the probability that an estimator with
@@ -232,8 +233,6 @@ def attainability(d_sigma: np.ndarray, centre_cov: np.ndarray, worst_diameter_px
     z = rng.standard_normal((draws, n, 2))
     c = np.hypot(*np.einsum("hij,dhj->dhi", chol, z).transpose(2, 0, 1))
     # exact per-hole tail probabilities for the expected counts (the centre by its draws)
-    from scipy.special import ndtr
-
     p_d = 2 * ndtr(-worst_diameter_px / np.maximum(d_sigma, 1e-12))
     return {
         "predicted_median_abs_diameter_err_px": float(np.median(np.median(d, axis=1))),
@@ -244,13 +243,6 @@ def attainability(d_sigma: np.ndarray, centre_cov: np.ndarray, worst_diameter_px
         "expected_holes_over_centre_bar": float(np.mean((c > worst_centre_px).sum(axis=1))),
         "bars_px": {"worst_diameter": worst_diameter_px, "worst_centre": worst_centre_px},
     }
-
-
-def predicted_median_abs(sigmas: np.ndarray, draws: int = 4000, seed: int = 0) -> float:
-    """Median over draws of the median |N(0, sigma_i)| over the holes."""
-    rng = np.random.default_rng(seed)
-    e = np.abs(rng.standard_normal((draws, len(sigmas))) * sigmas)
-    return float(np.median(np.median(e, axis=1)))
 
 
 def cases_from_frame(frame) -> list[HoleCase]:

@@ -10,8 +10,8 @@ side: a centre error.  On rendered frames with grain only (dev seeds 3000-3199 a
 (0.0198 px on both), since a gain gradient across the rim is partly confounded with a
 centre shift.  So the gradient comes from outside the fit: the whole frame.
 
-Model: the frame, area-averaged to 1/16 scale (holes, grooves and grain average out or
-become outliers), fitted by a quadratic in x and y with Huber weights (the dark holes
+Model: every 4th pixel of the frame, area-averaged to 1/32 scale (holes, grooves and
+grain average out or become outliers), fitted by a quadratic in x and y with Huber weights (the dark holes
 are outliers).  A quadratic holds the r^2 law of vignetting exactly and the fall-off of
 a ring light to first order; the wall's blotches (cells of ~64 px) enter only through
 their frame-wide trend.  The photometric fit divides each hole's pixels by the field's

@@ -54,8 +54,8 @@ def ratio_of_medians_ci(
     ``baseline`` and ``ours`` hold one list of errors per frame (the same frames, in the
     same order): frames are resampled as units, because the holes of one frame share its
     blur, contrast and texture.  Percentile interval at ``level``.  A 40-frame bench has
-    only ~60 holes, and the ratio of two medians of such samples scatters by +/-15-20 %
-    from one frame set to another: this says how far one run's ratio can be trusted.
+    only ~60 holes: its diameter ratio ranged 3.3x-7.8x over five seeds, and one run's
+    interval was 2.45-6.11x; this says how far one run's ratio can be trusted.
     """
     if len(baseline) != len(ours):
         raise ValueError(f"{len(baseline)} baseline frames but {len(ours)} of ours: the same frames are needed")

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from sim.camera.render import FrameParams, HoleSpec, render_frame
-from station.bench.vision_bound import HoleCase, _Geometry, diameter_bound_px, fisher, predicted_median_abs
+from station.bench.vision_bound import HoleCase, _Geometry, attainability, diameter_bound_px, fisher
 from station.vision.photometric import PhotometricConfig, refine_hole
 
 
@@ -49,7 +49,8 @@ def test_grain_an_unknown_blur_and_an_unknown_wall_slope_cost_information():
 
 
 def test_predicted_median_of_equal_sigmas_is_the_half_normal_median():
-    assert predicted_median_abs(np.full(201, 0.02), draws=2000) == pytest.approx(0.6745 * 0.02, rel=0.03)
+    a = attainability(np.full(201, 0.02), np.tile(0.02**2 * np.eye(2), (201, 1, 1)), draws=2000)
+    assert a["predicted_median_abs_diameter_err_px"] == pytest.approx(0.6745 * 0.02, rel=0.03)
 
 
 def test_the_bound_is_what_a_least_squares_fit_reaches_on_rendered_frames():
@@ -77,8 +78,6 @@ def test_attainability_matches_the_closed_form_for_equal_holes():
     """n holes with the same Gaussian errors: P(worst |d| <= bar) = (2 Phi(bar / sigma) - 1)^n
     and P(worst centre <= bar) = (1 - exp(-bar^2 / 2 sigma_c^2))^n (Rayleigh)."""
     from scipy.special import ndtr
-
-    from station.bench.vision_bound import attainability
 
     n, sd, sc = 300, 0.05, 0.035
     a = attainability(np.full(n, sd), np.tile(sc**2 * np.eye(2), (n, 1, 1)), draws=4000)
