@@ -298,8 +298,9 @@ class ModbusServoAxis(_ServoAxis):
         task, self._heartbeat_task = self._heartbeat_task, None
         if task is not None:
             task.cancel()
+            # bounded: closing must not wait on a heartbeat stuck in a transport call
             with contextlib.suppress(asyncio.CancelledError, Exception):
-                await task
+                await asyncio.wait_for(task, 5.0)
         self._drop_client()
 
     # ------------------------------------------------------------------ commands

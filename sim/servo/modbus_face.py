@@ -32,6 +32,9 @@ from sim.servo.physics import ServoAxisPhysics
 
 log = logging.getLogger(__name__)
 
+#: how long one server may take to shut down before the twin gives up on it
+SHUTDOWN_TIMEOUT_S = 5.0
+
 #: registers the master may write (everything else is read-only)
 _WRITABLE = {
     rm.CONTROL_WORD,
@@ -223,6 +226,10 @@ class ModbusDriveTwin:
         servers, self._servers = self._servers, []
         for server in servers:
             try:
-                await server.shutdown()
+                # bounded: a connection whose handler is still sleeping in an injected
+                # delay must not hold the station's shutdown (a CI teardown once hung 300 s)
+                await asyncio.wait_for(server.shutdown(), SHUTDOWN_TIMEOUT_S)
+            except TimeoutError:
+                log.warning("drive %s: a server did not stop within %.0f s", self.name, SHUTDOWN_TIMEOUT_S)
             except Exception:  # noqa: BLE001 - shutting down: report, never raise
                 log.exception("drive %s: error while stopping a server", self.name)
