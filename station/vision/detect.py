@@ -37,11 +37,15 @@ class DetectConfig:
     #: capped so that a strongly textured wall cannot hide a 40 %-contrast hole; the
     #: fine stage rejects what a lower threshold lets through (no closed, round rim)
     k_sigma: float = 4.0
-    max_threshold: float = 0.3
+    max_threshold: float = 0.2
     min_fill: float = 0.45  # area / bounding-box area; a disc has pi/4 = 0.785
-    #: second threshold above the first (relative darkness): holes are >= 0.4 dark,
-    #: grooves averaged over 4x4 px < 0.2, so +0.2 keeps the hole and drops the groove
-    split_step: float = 0.2
+    #: a component that fails the shape tests (a hole merged with grooves or a blotch)
+    #: is searched again at thresholds this much higher, step by step, until what is
+    #: left passes or vanishes: a groove's darkness ends below a hole's, wherever the two
+    #: lie (one fixed step of 0.2 overshot the darkness of holes of 30-40 % contrast)
+    split_step: float = 0.05
+    #: ... up to this relative darkness
+    split_max: float = 0.95
 
 
 @dataclass(frozen=True)
@@ -89,16 +93,22 @@ def detect_candidates(image: np.ndarray, cfg: DetectConfig = DetectConfig()) -> 
     med = median(sample)
     spread = 1.4826 * median(np.abs(sample - med))  # MAD -> sigma for Gaussian data
     threshold = med + min(max(cfg.k_sigma * spread, cfg.min_darkness), cfg.max_threshold)
-    # a second, higher threshold separates a dark hole from a groove that touches it
-    # (merged, the pair fails the shape tests).  The higher level's mask lies inside the
-    # lower one's, so it is only searched inside the components that failed; what both
-    # levels find is kept once
+    # higher thresholds separate a dark hole from a groove that touches it (merged, the
+    # pair fails the shape tests).  A higher level's mask lies inside the lower one's, so
+    # it is only searched inside the components that failed, each level inside the
+    # previous level's failures; what two levels find is kept once
     out, failed = _components(darkness, threshold, cfg)
-    for x0, y0, x1, y1 in failed:
-        sub, _ = _components(darkness, threshold + cfg.split_step, cfg, (x0, y0, x1, y1))
-        for cand in sub:
-            if not any(np.hypot(cand.x_px - o.x_px, cand.y_px - o.y_px) < max(o.radius_px, 8.0) for o in out):
-                out.append(cand)
+    level = threshold
+    while failed and level + cfg.split_step <= cfg.split_max:
+        level += cfg.split_step
+        still: list[tuple[int, int, int, int]] = []
+        for x0, y0, x1, y1 in failed:
+            sub, sub_failed = _components(darkness, level, cfg, (x0, y0, x1, y1))
+            still += sub_failed
+            for cand in sub:
+                if not any(np.hypot(cand.x_px - o.x_px, cand.y_px - o.y_px) < max(o.radius_px, 8.0) for o in out):
+                    out.append(cand)
+        failed = still
     return out
 
 

@@ -119,6 +119,10 @@ class PhotometricFit:
     rms_dn: float  # robust residual scale
     n_pixels: int
     iterations: int
+    #: False when the model ran away from the rays' circle (radius or centre more than
+    #: 2 px off, or not finite): the pixels around this rim are not a blurred disc.  The
+    #: other fields then hold the start, not a fit
+    converged: bool = True
 
 
 def disc_fraction(rho: np.ndarray, radius: float | np.ndarray, s: float) -> np.ndarray:
@@ -223,7 +227,8 @@ def refine_hole(
     cfg: PhotometricConfig = PhotometricConfig(),
     illumination_grad: tuple[float, float] | None = None,
 ) -> PhotometricFit | None:
-    """Fit the blurred-disc model around a whole hole's rim; None when it fails.
+    """Fit the blurred-disc model around a whole hole's rim; None when it cannot run (too
+    few wall pixels, a singular system), ``converged=False`` when the model runs away.
 
     ``illumination_grad``: the frame illumination's relative gradient (per px) at the
     hole (``illumination.Illumination.relative_gradient``); the hole's pixels are divided
@@ -354,6 +359,6 @@ def refine_hole(
         if max(abs(step[0]), abs(step[1]), abs(step[2])) < 1e-3 and it >= 2:
             break
     if not (np.isfinite(ox) and np.isfinite(oy) and np.isfinite(r0)) or abs(r0 - r) > 2.0 or np.hypot(ox, oy) > 2.0:
-        return None
+        return PhotometricFit(cx, cy, r, float(blur_px), float("nan"), float(scale), n, it, converged=False)
     contrast = median(bw @ lin[:nw] - bh @ lin[nw:])
     return PhotometricFit(cx + ox, cy + oy, r0, s, contrast, float(scale), n, it)
