@@ -4,10 +4,11 @@ Why this way: the fine stage is accurate but needs a start within a few pixels; 
 coarse stage must be fast (a 1280x1024 frame in about a millisecond) and must not be
 fooled by the honed texture, vignetting or low contrast.  So it works on a 4x
 area-downsampled frame (holes of 20-100 px become 5-25 px, honing grooves of 1-3 px
-are averaged away), divides by a local background made by a grey-level closing larger
-than the largest hole (vignetting and blotches cancel), thresholds the relative
-darkness against the frame's own robust spread, removes thin structures by an opening,
-and keeps connected components whose area, fill and darkness look like a hole.
+are averaged away), divides by a local background, the median over a window twice the
+largest hole (vignetting and blotches cancel), thresholds the relative darkness against
+the frame's own robust spread, removes thin structures by an opening, and keeps
+connected components whose area, fill and darkness look like a hole; a component that
+fails (a hole merged with dark grooves) is searched again at rising thresholds.
 """
 
 from __future__ import annotations
@@ -34,8 +35,10 @@ class DetectConfig:
     #: honing grooves averaged over 4x4 px darken by < 10 %.
     min_darkness: float = 0.15
     #: threshold in robust standard deviations of the frame's darkness (texture + noise),
-    #: capped so that a strongly textured wall cannot hide a 40 %-contrast hole; the
-    #: fine stage rejects what a lower threshold lets through (no closed, round rim)
+    #: capped so that a strongly textured wall cannot hide a low-contrast hole: on
+    #: 13-15 % grooves a 30 %-contrast hole's coarse darkness is 0.22-0.28 (the grooves
+    #: darken the median background), under the earlier cap of 0.3.  The fine stage
+    #: rejects what the lower cap lets through (no closed, round rim; no blurred disc)
     k_sigma: float = 4.0
     max_threshold: float = 0.2
     min_fill: float = 0.45  # area / bounding-box area; a disc has pi/4 = 0.785
