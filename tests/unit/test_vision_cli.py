@@ -90,3 +90,39 @@ def test_calibrate_writes_a_calibration_that_measure_uses(tmp_path, frame_png):
     cv2.imwrite(str(small), np.full((100, 100), 128, np.uint8))
     result = runner.invoke(app, ["vision", "measure", str(small), "--calibration", str(out)])
     assert result.exit_code != 0 and "calibration is for" in result.stderr
+
+
+@pytest.mark.parametrize("layout", ["lsb12", "msb12"])
+def test_16_bit_frames_are_scaled_by_the_bits_they_use(tmp_path, frame_png, layout):
+    """12-bit data in a 16-bit PNG, at the bottom of the range (max <= 4095) or at the
+    top: both read back as the 8-bit frame and measure the same holes.  A fixed shift by
+    8 made the bottom-aligned frame 0-15 DN, with no hole in it."""
+    from station.vision import measure_holes
+    from station.vision.imageio import read_grey
+
+    _, f = frame_png
+    rng = np.random.default_rng(1)
+    twelve = f.image.astype(np.uint16) * 16 + rng.integers(0, 16, f.image.shape, dtype=np.uint16)
+    data = twelve if layout == "lsb12" else twelve << 4
+    path = tmp_path / f"{layout}.png"
+    cv2.imwrite(str(path), data)
+    back = read_grey(path)
+    assert back.dtype == np.uint8
+    np.testing.assert_array_equal(back, f.image)
+    if layout == "lsb12":
+        assert (data >> 8).max() < 16  # what the fixed shift by 8 gave
+    ref = [(m.x_px, m.y_px, m.diameter_px) for m in measure_holes(f.image)]
+    got = [(m.x_px, m.y_px, m.diameter_px) for m in measure_holes(data)]  # arrays too
+    assert len(ref) == 3 and got == ref
+    result = runner.invoke(app, ["vision", "measure", str(path), "--json"])
+    assert result.exit_code == 0, result.output
+    assert len(json.loads(result.stdout)["holes"]) == 3
+
+
+def test_a_float_image_is_refused_with_its_type(tmp_path):
+    from station.vision.imageio import ImageReadError, read_grey
+
+    path = tmp_path / "float.tiff"
+    cv2.imwrite(str(path), np.full((64, 64), 0.5, np.float32))
+    with pytest.raises(ImageReadError, match="float32"):
+        read_grey(path)
