@@ -72,3 +72,20 @@ def test_the_disc_fit_reports_a_run_away_instead_of_a_fit():
     assert (fit.cx, fit.cy, fit.r) == (100.0, 100.0, 13.0)
     fit = refine_hole(img, 100.0, 100.0, 15.5, 1.5)
     assert fit.converged and fit.r == pytest.approx(16.0, abs=0.05)
+
+
+def test_the_roughest_walls_without_holes_give_no_phantoms():
+    """Walls rougher than the station envelope (15 % grooves, strong grain and blotches,
+    50 % vignetting, 5 e-/DN) and no hole at all: nothing is found.  Two of these frames
+    give a phantom when whole candidates are kept whatever the disc fit does."""
+    from sim.camera.render import random_params
+
+    found, found_unchecked = 0, 0
+    for i in range(24, 40):
+        rng = np.random.default_rng(700 + i)
+        p = random_params(rng, groove_depth=0.15, grain=0.05, blotch=0.06, vignetting=0.5, gain_e_per_dn=5.0)
+        image = render_frame(p, [], seed=i).image
+        found += len(measure_holes(image))
+        found_unchecked += len(measure_holes(image, cfg=MeasureConfig(reject_unfitted_whole=False)))
+    assert found == 0
+    assert found_unchecked >= 2
