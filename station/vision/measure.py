@@ -81,10 +81,10 @@ class MeasureConfig:
     #: the fit's centre median 0.0218 -> 0.0164 px (0.0158 with no vignetting at all)
     flat_field: bool = True
     #: drop a whole candidate whose pixels the blurred-disc model cannot fit (it runs
-    #: more than 2 px away from the rays' circle).  Every true whole hole of 800
-    #: wide-envelope and 400 station-envelope dev frames (seeds 3000-3399; 5000-5199,
-    #: 11000-11199: 1,192 holes) was fitted; each of the 11 crossings of dark honing
-    #: grooves that reached the fit there ran away
+    #: more than 2 px away from the rays' circle).  On 400 wide-envelope and 400
+    #: station-envelope dev frames (seeds 3000-3399; 5000-5199, 11000-11199), with the
+    #: confidence floor off, every true whole hole converged (1,195) and each of the 11
+    #: other candidates that reached the fit (crossings of dark honing grooves) ran away
     reject_unfitted_whole: bool = True
 
 
