@@ -86,6 +86,12 @@ class MeasureConfig:
     #: confidence floor off, every true whole hole converged (1,195) and each of the 11
     #: other candidates that reached the fit (crossings of dark honing grooves) ran away
     reject_unfitted_whole: bool = True
+    #: the wide ray search starts at this share of the coarse radius for a candidate cut
+    #: by the border (0.5 otherwise): its centroid lies inside the frame, up to ~0.4 r
+    #: from a centre on the border, so the rim's nearest part can be closer than 0.5 r.
+    #: Cut holes found (400 frames each): station 1000 195 -> 196, 20000 203 -> 203,
+    #: wide 1000 190 -> 194 of 202; whole holes unchanged
+    wide_inner_border: float = 0.15
 
 
 @dataclass(frozen=True)
@@ -161,7 +167,8 @@ def measure_candidate(
     r0 = cand.radius_px
     # pass 1: wide search (the coarse radius is good to ~1 coarse pixel for whole
     # holes; for cut holes the centroid is pulled inwards, hence the wide window)
-    wide = _fine(image, cand.x_px, cand.y_px, 0.5 * r0, 1.6 * r0 + 4, 72, step_px=1.0)
+    inner = cfg.wide_inner_border if cand.touches_border else 0.5
+    wide = _fine(image, cand.x_px, cand.y_px, inner * r0, 1.6 * r0 + 4, 72, step_px=1.0)
     if len(wide.points) < cfg.min_valid_rays // 2:
         return None
     inl = ransac_circle(wide.points, 1.0, rng)
