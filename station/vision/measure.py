@@ -92,6 +92,13 @@ class MeasureConfig:
     #: Cut holes found (400 frames each): station 1000 195 -> 196, 20000 203 -> 203,
     #: wide 1000 190 -> 194 of 202; whole holes unchanged
     wide_inner_border: float = 0.15
+    #: a whole hole's diameter uncertainty (``HoleMeasurement.diameter_u_px``) is the
+    #: photometric fit's white-noise standard deviation times this factor: the texture
+    #: is correlated noise the theory does not see.  Chosen so that +/- 2 u holds 95 % of
+    #: the errors on dev frames (seeds 3000-3199 + 9000-9199: 1.58; 5000-5199 +
+    #: 11000-11199: 1.42); on fresh frames +/- 2 u then holds 95.2 % (station seeds
+    #: 20000-20399, 608 holes) and 98.2 % (wide envelope, seeds 1000-1399)
+    uncertainty_factor: float = 1.5
 
 
 @dataclass(frozen=True)
@@ -110,6 +117,10 @@ class HoleMeasurement:
     minor_px: float | None = None
     angle_deg: float | None = None
     diameter_mm: float | None = None
+    #: standard uncertainty (k = 1) of the diameter from this frame alone, whole holes
+    #: with a photometric fit only (``MeasureConfig.uncertainty_factor``)
+    diameter_u_px: float | None = None
+    diameter_u_mm: float | None = None
 
     def to_dict(self) -> dict:
         d = asdict(self)
@@ -216,6 +227,7 @@ def measure_candidate(
     psf2 = psf_variance(sigma_px**2, r)
     r_true = deblurred_radius(r, float(np.sqrt(psf2)))
     shift = np.zeros(2)
+    diameter_u = None
     if whole and cfg.photometric is not None and np.isfinite(psf2):
         # the image's own blur: the rays' width less our smoothing and bilinear sampling
         blur = float(np.sqrt(max(psf2 - SMOOTH_SIGMA_PX**2 - 1.0 / 6.0, 0.09)))
@@ -228,6 +240,8 @@ def measure_candidate(
             # the groove model); the centre moved ``photometric_centre_weight`` of the
             # way to the fit's (all of it since the hole is flat-fielded: see the setting)
             r_true = ph.r
+            if np.isfinite(ph.r_sd):
+                diameter_u = cfg.uncertainty_factor * 2.0 * ph.r_sd
             shift = cfg.photometric_centre_weight * np.array([ph.cx - cx, ph.cy - cy])
             cx, cy = cx + shift[0], cy + shift[1]
     pts = edges.points + shift + (r_true - r) * edges.directions
@@ -265,6 +279,7 @@ def measure_candidate(
         major_px=2 * ell[2] if ell else None,
         minor_px=2 * ell[3] if ell else None,
         angle_deg=ell[4] if ell else None,
+        diameter_u_px=diameter_u,
     )
 
 
@@ -319,6 +334,7 @@ def measure_holes(
         if any(np.hypot(m.x_px - o.x_px, m.y_px - o.y_px) < 0.5 * o.diameter_px / 2 for o in found):
             continue
         if mm_per_px is not None:
-            m = HoleMeasurement(**{**asdict(m), "diameter_mm": m.diameter_px * mm_per_px})
+            m = HoleMeasurement(**{**asdict(m), "diameter_mm": m.diameter_px * mm_per_px,
+                                   "diameter_u_mm": None if m.diameter_u_px is None else m.diameter_u_px * mm_per_px})
         found.append(m)
     return sorted(found, key=lambda m: (m.y_px, m.x_px))

@@ -123,6 +123,10 @@ class PhotometricFit:
     #: 2 px off, or not finite): the pixels around this rim are not a blurred disc.  The
     #: other fields then hold the start, not a fit
     converged: bool = True
+    #: standard deviation of R0 by white-noise theory (the robust residual scale times the
+    #: inverse normal matrix of the last step); the texture makes the real scatter larger
+    #: (``MeasureConfig.uncertainty_factor``).  NaN when not converged
+    r_sd: float = float("nan")
 
 
 def disc_fraction(rho: np.ndarray, radius: float | np.ndarray, s: float) -> np.ndarray:
@@ -361,4 +365,8 @@ def refine_hole(
     if not (np.isfinite(ox) and np.isfinite(oy) and np.isfinite(r0)) or abs(r0 - r) > 2.0 or np.hypot(ox, oy) > 2.0:
         return PhotometricFit(cx, cy, r, float(blur_px), float("nan"), float(scale), n, it, converged=False)
     contrast = median(bw @ lin[:nw] - bh @ lin[nw:])
-    return PhotometricFit(cx + ox, cy + oy, r0, s, contrast, float(scale), n, it)
+    try:
+        r_sd = float(np.sqrt(np.linalg.inv(m)[2, 2])) * float(scale)
+    except np.linalg.LinAlgError:
+        r_sd = float("nan")
+    return PhotometricFit(cx + ox, cy + oy, r0, s, contrast, float(scale), n, it, r_sd=r_sd)
