@@ -366,7 +366,8 @@ def refine_hole(
         return PhotometricFit(cx, cy, r, float(blur_px), float("nan"), float(scale), n, it, converged=False)
     contrast = median(bw @ lin[:nw] - bh @ lin[nw:])
     try:
-        r_sd = float(np.sqrt(np.linalg.inv(m)[2, 2])) * float(scale)
+        var_r = float(np.linalg.inv(m)[2, 2])
     except np.linalg.LinAlgError:
-        r_sd = float("nan")
+        var_r = float("nan")
+    r_sd = float(np.sqrt(var_r)) * float(scale) if var_r > 0 else float("nan")
     return PhotometricFit(cx + ox, cy + oy, r0, s, contrast, float(scale), n, it, r_sd=r_sd)
