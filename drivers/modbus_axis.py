@@ -55,6 +55,10 @@ RESTING_SHORT_POLLS = 10
 LINK_WATCH_S = 0.005
 #: bytes came back but no valid reply was made of them this long after: corrupt
 CORRUPT_REPLY_GRACE_S = 0.05
+#: connection attempts before CommunicationLost: a connect is rare (start, and after a
+#: lost link), and one that timed out may only have met a stalled event loop on a loaded
+#: PC (a clean-clone CI run once lost a session's start to one 0.5 s connect timeout)
+CONNECT_ATTEMPTS = 2
 
 
 class _CorruptReply(Exception):
@@ -150,21 +154,25 @@ class ModbusServoAxis(_ServoAxis):
         if self._client is not None and self._client.connected:
             return self._client
         self._drop_client()
-        if getattr(self._client_factory, "accepts_trace", False):
-            client = self._client_factory(trace_packet=self._trace_packet)
-        else:
-            client = self._client_factory()
-        self._rx_since_send = None
-        try:
-            ok = await asyncio.wait_for(client.connect(), self.timeout_s)
-        except (asyncio.TimeoutError, OSError, ModbusException) as exc:
+        reason = ""
+        for attempt in range(1, CONNECT_ATTEMPTS + 1):
+            if getattr(self._client_factory, "accepts_trace", False):
+                client = self._client_factory(trace_packet=self._trace_packet)
+            else:
+                client = self._client_factory()
+            self._rx_since_send = None
+            try:
+                ok = await asyncio.wait_for(client.connect(), self.timeout_s)
+                reason = "" if ok else "refused, port missing or no answer"
+            except (asyncio.TimeoutError, OSError, ModbusException) as exc:
+                ok, reason = False, (str(exc) or f"no connection within {self.timeout_s} s")
+            if ok:
+                self._client = client
+                return client
             client.close()
-            raise CommunicationLost(f"cannot connect: {exc}", self.name) from None
-        if not ok:
-            client.close()
-            raise CommunicationLost("cannot connect (refused or port missing)", self.name)
-        self._client = client
-        return client
+            if attempt < CONNECT_ATTEMPTS:
+                log.warning("%s: cannot connect (%s); trying once more", self.name, reason)
+        raise CommunicationLost(f"cannot connect ({reason}), {CONNECT_ATTEMPTS} attempts", self.name)
 
     def _trace_packet(self, sending: bool, data: bytes) -> bytes:
         """pymodbus' hook on every frame sent and every chunk received: notes when bytes

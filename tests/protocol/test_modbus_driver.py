@@ -235,3 +235,46 @@ async def test_move_stopped_short_is_move_interrupted_and_reissue_completes(z_ax
     await z_axis.move_to(150.0)
     st = await z_axis.wait_in_position(timeout=30.0)
     assert abs(st.position - 150.0) <= 2e-4
+
+
+def _stalling_factory(axis, stalls: int):
+    """The driver's own client factory, whose first ``stalls`` clients never connect
+    (an event loop held up on a loaded PC, as seen once in CI)."""
+    real, made = axis._client_factory, []
+
+    def factory(trace_packet=None):
+        client = real(trace_packet=trace_packet)
+        made.append(client)
+        if len(made) <= stalls:
+            async def stalled():
+                await asyncio.sleep(30)
+
+            client.connect = stalled
+        return client
+
+    factory.accepts_trace = True
+    axis._client_factory = factory
+    return made
+
+
+async def test_a_connect_that_times_out_is_tried_once_more(twins):
+    axis = make_axis(twins, "Z")
+    made = _stalling_factory(axis, stalls=1)
+    await axis.connect()
+    try:
+        assert len(made) == 2
+        assert (await axis.status()).state is not None  # the second client talks to the twin
+    finally:
+        await axis.close()
+
+
+async def test_two_connects_that_time_out_lose_the_link(twins):
+    axis = make_axis(twins, "Z")
+    made = _stalling_factory(axis, stalls=2)
+    loop = asyncio.get_running_loop()
+    t0 = loop.time()
+    with pytest.raises(CommunicationLost, match="2 attempts"):
+        await axis.connect()
+    assert len(made) == 2
+    assert loop.time() - t0 < 4 * axis.timeout_s
+    await axis.close()
