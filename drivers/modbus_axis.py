@@ -14,7 +14,8 @@ Error policy: every request is bounded by ``timeout_s``; after a timeout or a
 malformed reply the link is closed, so that a late or corrupt answer cannot be taken
 for the next one, and the next call reconnects.  pymodbus' own background
 reconnection is switched off (``reconnect_delay=0``) so that the driver alone
-decides when to reconnect.
+decides when to reconnect.  A connect gets ``CONNECT_ATTEMPTS`` (2) tries of
+``timeout_s`` each before ``CommunicationLost``.
 """
 
 from __future__ import annotations
