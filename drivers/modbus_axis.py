@@ -14,8 +14,8 @@ Error policy: every request is bounded by ``timeout_s``; after a timeout or a
 malformed reply the link is closed, so that a late or corrupt answer cannot be taken
 for the next one, and the next call reconnects.  pymodbus' own background
 reconnection is switched off (``reconnect_delay=0``) so that the driver alone
-decides when to reconnect.  A connect gets ``CONNECT_ATTEMPTS`` (2) tries of
-``timeout_s`` each before ``CommunicationLost``.
+decides when to reconnect.  Repeating a lost connect is the caller's: the sequencer's
+retries while it runs, ``Station.connect`` at start.
 """
 
 from __future__ import annotations
@@ -56,10 +56,6 @@ RESTING_SHORT_POLLS = 10
 LINK_WATCH_S = 0.005
 #: bytes came back but no valid reply was made of them this long after: corrupt
 CORRUPT_REPLY_GRACE_S = 0.05
-#: connection attempts before CommunicationLost: a connect is rare (start, and after a
-#: lost link), and one that timed out may only have met a stalled event loop on a loaded
-#: PC (a clean-clone CI run once lost a session's start to one 0.5 s connect timeout)
-CONNECT_ATTEMPTS = 2
 
 
 class _CorruptReply(Exception):
@@ -155,25 +151,22 @@ class ModbusServoAxis(_ServoAxis):
         if self._client is not None and self._client.connected:
             return self._client
         self._drop_client()
-        reason = ""
-        for attempt in range(1, CONNECT_ATTEMPTS + 1):
-            if getattr(self._client_factory, "accepts_trace", False):
-                client = self._client_factory(trace_packet=self._trace_packet)
-            else:
-                client = self._client_factory()
-            self._rx_since_send = None
-            try:
-                ok = await asyncio.wait_for(client.connect(), self.timeout_s)
-                reason = "" if ok else "refused, port missing or no answer"
-            except (asyncio.TimeoutError, OSError, ModbusException) as exc:
-                ok, reason = False, (str(exc) or f"no connection within {self.timeout_s} s")
-            if ok:
-                self._client = client
-                return client
+        if getattr(self._client_factory, "accepts_trace", False):
+            client = self._client_factory(trace_packet=self._trace_packet)
+        else:
+            client = self._client_factory()
+        self._rx_since_send = None
+        try:
+            ok = await asyncio.wait_for(client.connect(), self.timeout_s)
+        except (asyncio.TimeoutError, OSError, ModbusException) as exc:
             client.close()
-            if attempt < CONNECT_ATTEMPTS:
-                log.warning("%s: cannot connect (%s); trying once more", self.name, reason)
-        raise CommunicationLost(f"cannot connect ({reason}), {CONNECT_ATTEMPTS} attempts", self.name)
+            reason = str(exc) or f"no connection within {self.timeout_s} s"
+            raise CommunicationLost(f"cannot connect: {reason}", self.name) from None
+        if not ok:
+            client.close()
+            raise CommunicationLost("cannot connect (refused or port missing)", self.name)
+        self._client = client
+        return client
 
     def _trace_packet(self, sending: bool, data: bytes) -> bytes:
         """pymodbus' hook on every frame sent and every chunk received: notes when bytes

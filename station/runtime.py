@@ -44,13 +44,21 @@ Config file (TOML), every key optional; the embedded default is a simulated stat
 from __future__ import annotations
 
 import hashlib
+import logging
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from drivers.interfaces import Camera, LinearAxis, PositionEncoder, RotaryAxis
+from drivers.interfaces import Camera, CommunicationLost, DeviceTimeout, LinearAxis, PositionEncoder, RotaryAxis
 from station.kinematics.model import StationModel, load_model
+
+log = logging.getLogger(__name__)
+
+#: tries of each device's connect at start: the sequencer retries a lost link while it
+#: runs, nothing did at start, and a clean-clone CI run once lost a session's start to
+#: one 0.5 s connect timeout (a loop stalled on a loaded machine, most likely)
+CONNECT_ATTEMPTS = 2
 
 
 class ConfigError(ValueError):
@@ -76,12 +84,17 @@ class Station:
     endpoints: dict[str, Any] = field(default_factory=dict)
 
     async def connect(self) -> None:
-        await self.z.connect()
-        await self.c.connect()
-        if self.encoder is not None:
-            await self.encoder.connect()
-        if self.camera is not None:
-            await self.camera.connect()
+        for dev in (self.z, self.c, self.encoder, self.camera):
+            if dev is None:
+                continue
+            for attempt in range(1, CONNECT_ATTEMPTS + 1):
+                try:
+                    await dev.connect()
+                    break
+                except (CommunicationLost, DeviceTimeout) as exc:
+                    if attempt == CONNECT_ATTEMPTS:
+                        raise
+                    log.warning("%s; trying once more", exc)
 
     async def close(self) -> None:
         """Close drivers, then stop the twins; never raises for a link already gone."""

@@ -237,6 +237,7 @@ async def test_move_stopped_short_is_move_interrupted_and_reissue_completes(z_ax
     assert abs(st.position - 150.0) <= 2e-4
 
 
+
 def _stalling_factory(axis, stalls: int):
     """The driver's own client factory, whose first ``stalls`` clients never connect
     (an event loop held up on a loaded PC, as seen once in CI)."""
@@ -257,24 +258,37 @@ def _stalling_factory(axis, stalls: int):
     return made
 
 
-async def test_a_connect_that_times_out_is_tried_once_more(twins):
-    axis = make_axis(twins, "Z")
-    made = _stalling_factory(axis, stalls=1)
-    await axis.connect()
+def _station(z, c):
+    from station.runtime import Station
+
+    return Station(z=z, c=c, encoder=None, model=None, mode="simulated", config_hash="")
+
+
+async def test_a_stalled_connect_says_so_and_the_station_start_tries_once_more(twins):
+    z, c = make_axis(twins, "Z"), make_axis(twins, "C")
+    made = _stalling_factory(z, stalls=1)
+    with pytest.raises(CommunicationLost, match="no connection within"):
+        await z.connect()  # the driver alone: one attempt, a message that says what happened
+    assert len(made) == 1
+    station = _station(z, c)
+    await station.connect()
     try:
         assert len(made) == 2
-        assert (await axis.status()).state is not None  # the second client talks to the twin
+        assert (await z.status()).state is not None  # the second client talks to the twin
     finally:
-        await axis.close()
+        await station.close()
 
 
-async def test_two_connects_that_time_out_lose_the_link(twins):
-    axis = make_axis(twins, "Z")
-    made = _stalling_factory(axis, stalls=2)
+async def test_a_station_start_whose_connects_all_stall_loses_the_link(twins):
+    from station.runtime import CONNECT_ATTEMPTS
+
+    z, c = make_axis(twins, "Z"), make_axis(twins, "C")
+    made = _stalling_factory(z, stalls=CONNECT_ATTEMPTS)
     loop = asyncio.get_running_loop()
     t0 = loop.time()
-    with pytest.raises(CommunicationLost, match="2 attempts"):
-        await axis.connect()
-    assert len(made) == 2
-    assert loop.time() - t0 < 4 * axis.timeout_s
-    await axis.close()
+    with pytest.raises(CommunicationLost):
+        await _station(z, c).connect()
+    assert len(made) == CONNECT_ATTEMPTS
+    assert loop.time() - t0 < (CONNECT_ATTEMPTS + 1) * z.timeout_s
+    await z.close()
+    await c.close()
