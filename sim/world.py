@@ -133,7 +133,18 @@ class World:
         return self.model.part_coordinates(e.actual_point_mm)
 
     def true_point(self, z_mm: float, c_deg: float, direction_z: int = 0, direction_c: int = 0, time_s: float = 0.0) -> TruePoint:
-        ax, an, r = self.true_points([z_mm], [c_deg], direction_z, direction_c, time_s)
+        """The detection point with the drives at motor poses ``z_mm``, ``c_deg`` now.
+
+        The present approach's random errors (``Repeatability``) move the carriage and the
+        table as the grating sees them (``z_offset_mm``, ``c_offset_deg``), so they move
+        the detection point and the part with them: they enter here as a displacement of
+        each axis along itself.  (Evaluating the error curves 0.3 um further along shifts
+        them by their slope times that, far below a nanometre.)  ``true_points`` is the
+        model alone, for any poses, without them.
+        """
+        z_eff = z_mm + self._approach_error["Z"]
+        c_eff = c_deg + self._approach_error["C"]
+        ax, an, r = self.true_points([z_eff], [c_eff], direction_z, direction_c, time_s)
         return TruePoint(float(ax[0]), float(an[0]), float(r[0]), z_mm, c_deg, time_s)
 
     def holes_near(self, point: TruePoint, half_width_mm: float, half_height_mm: float):

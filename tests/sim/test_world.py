@@ -100,3 +100,27 @@ def test_repeatability_is_drawn_once_per_approach():
         assert z.carriage_position() - z.motor_position() == a  # held while the axis rests
         errs.append(a - world.model.motions["Z"].z.evaluate([z.motor_position()], direction=[z.direction])[0] * 1e-3)
     assert np.std(errs) * 1e3 == pytest.approx(0.5, rel=0.2)
+
+
+def test_an_approachs_random_error_moves_the_detection_point_as_the_grating_sees_it():
+    """The per-approach error moves the carriage (what the grating reads); the camera's
+    detection point rides on that carriage and must move with it, or a station that
+    corrects by the grating would take out an error the camera never saw."""
+    w = World(repeatability=Repeatability(z_um=0.3, c_arcsec=0.5, seed=3))
+    z, c = 85.0, 10.0
+    before = w.true_point(z, c)
+    carriage_before = w.z_offset_mm(z, 0, 0.0)
+    w.new_approach("Z")
+    w.new_approach("C")
+    ae_z, ae_c = w.approach_error("Z"), w.approach_error("C")
+    assert abs(ae_z) > 1e-5 and abs(ae_c) > 1e-6
+    after = w.true_point(z, c)
+    # the carriage moved by the approach error; the detection point with it, along the axis
+    assert w.z_offset_mm(z, 0, 0.0) - carriage_before == pytest.approx(ae_z, abs=1e-12)
+    assert after.axial_mm - before.axial_mm == pytest.approx(ae_z, abs=2e-3 * abs(ae_z) + 1e-9)
+    # the table turned by its own error: the part's angle under the point changes by it
+    # (the model's part angle follows the table's, as compensation's c = hole angle shows)
+    assert after.angle_deg - before.angle_deg == pytest.approx(ae_c, abs=0.01 * abs(ae_c))
+    # the model alone (true_points) does not hold them
+    ax, _, _ = w.true_points([z], [c])
+    assert ax[0] == pytest.approx(before.axial_mm, abs=1e-12)
