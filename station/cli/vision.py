@@ -54,11 +54,13 @@ def measure(
         print_json({"image": str(image), "holes": [h.to_dict() for h in holes]})
         return
     table = Table(title=f"{image.name}: {len(holes)} hole(s)")
-    for col in ("x px", "y px", "d px", "u(d) px", "d mm", "partial", "conf", "rms px", "edge DN"):
+    for col in ("x px", "y px", "u(x, y) px", "d px", "u(d) px", "d mm", "partial", "conf", "rms px", "edge DN"):
         table.add_column(col, justify="right")
     for h in holes:
         table.add_row(
-            f"{h.x_px:.3f}", f"{h.y_px:.3f}", f"{h.diameter_px:.3f}",
+            f"{h.x_px:.3f}", f"{h.y_px:.3f}",
+            "-" if h.x_u_px is None else f"{h.x_u_px:.3f}, {h.y_u_px:.3f}",
+            f"{h.diameter_px:.3f}",
             "-" if h.diameter_u_px is None else f"{h.diameter_u_px:.3f}",
             "-" if h.diameter_mm is None else f"{h.diameter_mm:.4f}",
             "yes" if h.partial else "no", f"{h.confidence:.2f}", f"{h.fit_rms_px:.3f}", f"{h.edge_contrast_dn:.0f}",

@@ -80,16 +80,16 @@ class ScanSettings:
     #: the ISO 230-2 residual of the compensated axis; the default station's twin is
     #: its own model, so it is the grating's resolution (0.05 um) rounded up
     model_u_um: float = 0.1
-    #: standard uncertainty of one hole's centre from the vision stage (px), the Type B
-    #: part the frames' scatter cannot show: the camera stays put while it takes a hole's
-    #: frames, so the wall texture that moves the measured rim is the same in all of
-    #: them.  0.05 px is about three times the centre's median error on `station bench vision`
-    #: (0.017 px there): a round, conservative figure for a term no frame measures
+    #: standard uncertainty of one hole's centre (along the axis, y) and diameter from
+    #: the vision stage (px), the Type B part the frames' scatter cannot show: the camera
+    #: stays put while it takes a hole's frames, so the wall texture that moves the
+    #: measured rim is the same in all of them.  Normally the hole's own figures are the
+    #: term (``y_u_px``, ``diameter_u_px`` of the vision stage, averaged over the hole's
+    #: frames; docs/vision.md: +/- 2 u holds about 95 % of the errors on fresh frames).
+    #: These fixed ones stand in where the vision stage gives none (the rays-only
+    #: pipeline): about three and four times the medians of `station bench vision`
+    #: (0.017 px for both), round and conservative
     vision_centre_u_px: float = 0.05
-    #: the same for the diameter, used only where the vision stage gives no uncertainty
-    #: of its own (the rays-only pipeline, a hole without a photometric fit); otherwise
-    #: the hole's own ``diameter_u_px`` (docs/vision.md: +/- 2 u holds 95-98 % of the
-    #: errors on fresh frames) is the term, averaged over the hole's frames
     vision_diameter_u_px: float = 0.07
     #: False runs the station as the paper's "before compensation": commands and the
     #: carriage prediction from the ideal model, the grating's reading taken as where
@@ -114,9 +114,10 @@ class FrameObservation:
     c_cmd_deg: float
     #: host time of the grating's reading (time.monotonic), None without a grating
     time_s: float | None = None
-    #: the vision stage's standard uncertainty of this frame's diameter (px, k = 1), None
-    #: when it gives none
+    #: the vision stage's standard uncertainties of this frame's diameter and of the
+    #: hole's y (px, k = 1), None when it gives none
     diameter_u_px: float | None = None
+    y_u_px: float | None = None
 
 
 @dataclass
@@ -220,7 +221,7 @@ def measure_hole(model: StationModel, hole: HoleTarget, geo: CameraGeometry, set
         result.frames.append(FrameObservation(axial, angle, h.diameter_px * s, h.x_px, h.y_px, h.diameter_px,
                                               float(getattr(h, "confidence", 1.0)), grating, z_cmd, c_cmd,
                                               None if reading is None else float(reading.timestamp),
-                                              getattr(h, "diameter_u_px", None)))
+                                              getattr(h, "diameter_u_px", None), getattr(h, "y_u_px", None)))
         if result.crop is None:
             result.crop = _crop(frame.image, h.x_px, h.y_px, h.diameter_px)
     if not result.frames:
@@ -235,12 +236,12 @@ def combine(result: HoleResult, geo: CameraGeometry, settings: ScanSettings) -> 
     calibration (relative, times the hole's size or offset), the model's residual
     and the vision stage's error common to the hole's frames.
 
-    The diameter's vision term is the hole's own: the mean of its frames'
-    ``diameter_u_px`` when every frame has one, else the fixed
-    ``ScanSettings.vision_diameter_u_px``.  It is not divided by the number of frames
-    (the texture that makes most of it is the same in every frame of the hole), and the
-    sensor noise it also holds is counted again in the frames' scatter: conservative by
-    that much."""
+    The vision terms are the hole's own: the mean of its frames' ``y_u_px`` (position)
+    and ``diameter_u_px`` when every frame has one, else the fixed
+    ``ScanSettings.vision_centre_u_px`` and ``vision_diameter_u_px``.  They are not
+    divided by the number of frames (the texture that makes most of them is the same in
+    every frame of the hole), and the sensor noise they also hold is counted again in
+    the frames' scatter: conservative by that much."""
     ax = np.array([f.axial_mm for f in result.frames])
     dia = np.array([f.diameter_mm for f in result.frames])
     n = len(ax)
@@ -248,8 +249,8 @@ def combine(result: HoleResult, geo: CameraGeometry, settings: ScanSettings) -> 
     s_dia = dia.std(ddof=1) / math.sqrt(n) if n > 1 else 0.0
     cy = geo.centre_px[1]
     offset_mm = abs(np.mean([(cy - f.y_px) * geo.mm_per_px for f in result.frames]))
-    u_vis_c = settings.vision_centre_u_px * geo.mm_per_px
-    u_vis_d = vision_diameter_u_px(result.frames, settings) * geo.mm_per_px
+    u_vis_c = vision_u_px([f.y_u_px for f in result.frames], settings.vision_centre_u_px) * geo.mm_per_px
+    u_vis_d = vision_u_px([f.diameter_u_px for f in result.frames], settings.vision_diameter_u_px) * geo.mm_per_px
     u_ax = math.sqrt(s_ax**2 + (geo.scale_u_rel * offset_mm) ** 2 + (settings.model_u_um * 1e-3) ** 2 + u_vis_c**2)
     u_dia = math.sqrt(s_dia**2 + (geo.scale_u_rel * float(dia.mean())) ** 2 + u_vis_d**2)
     result.position_mm = float(ax.mean())
@@ -259,13 +260,12 @@ def combine(result: HoleResult, geo: CameraGeometry, settings: ScanSettings) -> 
     result.angle_deg = float(np.mean([f.angle_deg for f in result.frames]))
 
 
-def vision_diameter_u_px(frames: list[FrameObservation], settings: ScanSettings) -> float:
-    """The vision stage's standard uncertainty of one hole's diameter (px): the mean of
-    its frames' own figures, or the fixed Type B term when any frame lacks one."""
-    us = [f.diameter_u_px for f in frames]
-    if us and all(u is not None and math.isfinite(u) and u > 0 for u in us):
-        return float(np.mean(us))
-    return settings.vision_diameter_u_px
+def vision_u_px(per_frame: list[float | None], fixed_px: float) -> float:
+    """The vision stage's standard uncertainty of one of a hole's values (px): the mean
+    of its frames' own figures, or the fixed Type B term when any frame lacks one."""
+    if per_frame and all(u is not None and math.isfinite(u) and u > 0 for u in per_frame):
+        return float(np.mean(per_frame))
+    return fixed_px
 
 
 def bore_scan(model: StationModel, holes: list[HoleTarget], geo: CameraGeometry, settings: ScanSettings | None = None):

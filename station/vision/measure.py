@@ -92,12 +92,14 @@ class MeasureConfig:
     #: Cut holes found (400 frames each): station 1000 195 -> 196, 20000 203 -> 203,
     #: wide 1000 190 -> 194 of 202; whole holes unchanged
     wide_inner_border: float = 0.15
-    #: a whole hole's diameter uncertainty (``HoleMeasurement.diameter_u_px``) is the
-    #: photometric fit's white-noise standard deviation times this factor: the texture
-    #: is correlated noise the theory does not see.  Chosen so that +/- 2 u holds 95 % of
-    #: the errors on dev frames (seeds 3000-3199 + 9000-9199: 1.58; 5000-5199 +
-    #: 11000-11199: 1.42); on fresh frames +/- 2 u then holds 95.2 % (station seeds
-    #: 20000-20399, 608 holes) and 98.2 % (wide envelope, seeds 1000-1399)
+    #: a whole hole's diameter and centre uncertainties (``HoleMeasurement.diameter_u_px``,
+    #: ``x_u_px``, ``y_u_px``) are the photometric fit's white-noise standard deviations
+    #: times this factor: the texture is correlated noise the theory does not see.
+    #: Chosen so that +/- 2 u holds 95 % of the errors on dev frames (diameter: seeds
+    #: 3000-3199 + 9000-9199: 1.58; 5000-5199 + 11000-11199: 1.42; centre, x and y
+    #: pooled: 1.50 on both); on fresh frames +/- 2 u then holds 95.2 % of the diameters
+    #: (station seeds 20000-20399, 608 holes) and 98.2 % (wide envelope, seeds
+    #: 1000-1399); the centres' figures are in docs/vision.md
     uncertainty_factor: float = 1.5
 
 
@@ -121,6 +123,9 @@ class HoleMeasurement:
     #: with a photometric fit only (``MeasureConfig.uncertainty_factor``)
     diameter_u_px: float | None = None
     diameter_u_mm: float | None = None
+    #: the same for the centre's x and y (px)
+    x_u_px: float | None = None
+    y_u_px: float | None = None
 
     def to_dict(self) -> dict:
         d = asdict(self)
@@ -227,7 +232,7 @@ def measure_candidate(
     psf2 = psf_variance(sigma_px**2, r)
     r_true = deblurred_radius(r, float(np.sqrt(psf2)))
     shift = np.zeros(2)
-    diameter_u = None
+    diameter_u = x_u = y_u = None
     if whole and cfg.photometric is not None and np.isfinite(psf2):
         # the image's own blur: the rays' width less our smoothing and bilinear sampling
         blur = float(np.sqrt(max(psf2 - SMOOTH_SIGMA_PX**2 - 1.0 / 6.0, 0.09)))
@@ -242,6 +247,9 @@ def measure_candidate(
             r_true = ph.r
             if np.isfinite(ph.r_sd):
                 diameter_u = cfg.uncertainty_factor * 2.0 * ph.r_sd
+            if np.isfinite(ph.cx_sd) and np.isfinite(ph.cy_sd) and cfg.photometric_centre_weight == 1.0:
+                # the centre is the fit's own (a blend with the rays' has no such figure)
+                x_u, y_u = cfg.uncertainty_factor * ph.cx_sd, cfg.uncertainty_factor * ph.cy_sd
             shift = cfg.photometric_centre_weight * np.array([ph.cx - cx, ph.cy - cy])
             cx, cy = cx + shift[0], cy + shift[1]
     pts = edges.points + shift + (r_true - r) * edges.directions
@@ -280,6 +288,8 @@ def measure_candidate(
         minor_px=2 * ell[3] if ell else None,
         angle_deg=ell[4] if ell else None,
         diameter_u_px=diameter_u,
+        x_u_px=x_u,
+        y_u_px=y_u,
     )
 
 

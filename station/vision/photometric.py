@@ -127,6 +127,9 @@ class PhotometricFit:
     #: inverse normal matrix of the last step); the texture makes the real scatter larger
     #: (``MeasureConfig.uncertainty_factor``).  NaN when not converged
     r_sd: float = float("nan")
+    #: the same for the centre's x and y (px)
+    cx_sd: float = float("nan")
+    cy_sd: float = float("nan")
 
 
 def disc_fraction(rho: np.ndarray, radius: float | np.ndarray, s: float) -> np.ndarray:
@@ -366,8 +369,10 @@ def refine_hole(
         return PhotometricFit(cx, cy, r, float(blur_px), float("nan"), float(scale), n, it, converged=False)
     contrast = median(bw @ lin[:nw] - bh @ lin[nw:])
     try:
-        var_r = float(np.linalg.inv(m)[2, 2])
+        var = np.diag(np.linalg.inv(m))[:3]
     except np.linalg.LinAlgError:
-        var_r = float("nan")
-    r_sd = float(np.sqrt(var_r)) * float(scale) if var_r > 0 else float("nan")
-    return PhotometricFit(cx + ox, cy + oy, r0, s, contrast, float(scale), n, it, r_sd=r_sd)
+        var = np.full(3, np.nan)
+    # NaN (not a warning) where the inverse gives no positive variance
+    sd = np.sqrt(np.where(var > 0, var, np.nan)) * float(scale)
+    return PhotometricFit(cx + ox, cy + oy, r0, s, contrast, float(scale), n, it,
+                          r_sd=float(sd[2]), cx_sd=float(sd[0]), cy_sd=float(sd[1]))
