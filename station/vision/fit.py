@@ -117,32 +117,42 @@ def robust_circle(
     w = prior.copy()
     px, py = pts[:, 0], pts[:, 1]
     used_mask = prior > 0
-    jac = np.empty((len(pts), 5 if oval else 3))
+    # the Jacobian's columns are written in place each iteration (few hundred points: the
+    # loop's cost is numpy's per-call overhead, so every call saved counts)
+    jac = np.empty((5 if oval else 3, len(pts)))
+    jac[2] = -1.0
     for it in range(iterations):
         dx, dy = px - cx, py - cy
-        d = np.maximum(np.sqrt(dx * dx + dy * dy), 1e-9)
+        d = np.sqrt(dx * dx + dy * dy)
+        np.maximum(d, 1e-9, out=d)
         res = d - r
+        np.divide(dx, d, out=jac[0])  # the unit radial direction (negated below)
+        np.divide(dy, d, out=jac[1])
         if oval:
             # cos 2theta and sin 2theta of the point's angle, without arctan2
-            c2 = (dx * dx - dy * dy) / (d * d)
-            s2 = 2.0 * dx * dy / (d * d)
-            res = res - (h2[0] * c2 + h2[1] * s2)
+            np.subtract(jac[0] * jac[0], jac[1] * jac[1], out=jac[3])
+            np.multiply(jac[0], jac[1], out=jac[4])
+            jac[4] *= 2.0
+            res -= h2[0] * jac[3] + h2[1] * jac[4]
         if it < 3:  # the scale settles once the gross outliers are out; then keep it
             used = res[used_mask]
             scale = max(MAD_TO_SIGMA * median(np.abs(used - median(used))), min_scale_px)
-        u = res / (TUKEY_C * scale)
-        w = prior * np.where(np.abs(u) < 1, (1 - u * u) ** 2, 0.0)
+        # Tukey's biweight: (1 - u^2)^2 inside |u| < 1, 0 outside
+        t = res * (1.0 / (TUKEY_C * scale))
+        t *= t
+        np.subtract(1.0, t, out=t)
+        np.maximum(t, 0.0, out=t)
+        w = prior * t * t
         if w.sum() < 3:
             break
-        jac[:, 0] = -dx / d
-        jac[:, 1] = -dy / d
-        jac[:, 2] = -1.0
+        jac[0] *= -1.0
+        jac[1] *= -1.0
         if oval:
-            jac[:, 3] = -c2
-            jac[:, 4] = -s2
-        jw = jac.T * w
+            jac[3] *= -1.0
+            jac[4] *= -1.0
+        jw = jac * w
         try:
-            step = np.linalg.solve(jw @ jac, -(jw @ res))
+            step = np.linalg.solve(jw @ jac.T, -(jw @ res))
         except np.linalg.LinAlgError:
             break
         cx, cy, r = cx + step[0], cy + step[1], r + step[2]
