@@ -8,7 +8,7 @@ from typing import Optional
 import typer
 from rich.table import Table
 
-from station.cli.common import fail, out_console, print_json
+from station.cli.common import err_console, fail, out_console, print_json
 
 vision_app = typer.Typer(help="Vision: sub-pixel hole measurement and camera calibration.", no_args_is_help=True)
 
@@ -103,6 +103,37 @@ def calibrate_cmd(
             f"{cal.n_views}/{len(images)} views, RMS {cal.rms_px:.3f} px; fx {k[0, 0]:.1f} fy {k[1, 1]:.1f} "
             f"cx {k[0, 2]:.1f} cy {k[1, 2]:.1f}; k1 {cal.dist_coeffs[0]:.4f} k2 {cal.dist_coeffs[1]:.4f} -> {out}"
         )
+        summary = cal.map_u_summary()
+        if summary is not None:
+            out_console.print(
+                f"the board's corners covered {cal.coverage:.0%} of the frame; the undistortion map's uncertainty "
+                f"(k = 1) is at most {summary['central_80_max_px']:.3f} px over the central 80 % and "
+                f"{summary['frame_max_px']:.3f} px over the whole frame"
+            )
+    for warning in calibration_warnings(cal):
+        err_console.print(f"[yellow]warning:[/] {warning}")
+
+
+#: above this the map's uncertainty somewhere in the frame (px, k = 1) is worth a warning:
+#: it exceeds the hole measurement's own by more than an order of magnitude
+MAP_U_WARN_PX = 0.5
+#: below this share of the frame seen, the calibration extrapolates over most of it
+COVERAGE_WARN = 0.5
+
+
+def calibration_warnings(cal) -> list[str]:
+    """What an operator should know before trusting a calibration everywhere."""
+    out = []
+    summary = cal.map_u_summary()
+    if cal.coverage is not None and cal.coverage < COVERAGE_WARN:
+        out.append(f"the board was seen in only {cal.coverage:.0%} of the frame; take views with it near the "
+                   "corners and edges of the frame, where the distortion is largest")
+    if summary is not None and summary["frame_max_px"] > MAP_U_WARN_PX:
+        out.append(f"the undistortion map is uncertain by up to {summary['frame_max_px']:.2f} px where the board "
+                   "was not seen; holes measured there carry it (HoleMeasurement.map_u_px)")
+    if cal.map_u_x_px is None:
+        out.append("fewer than 4 views: the map's uncertainty cannot be estimated")
+    return out
 
 
 def register(app: typer.Typer) -> None:

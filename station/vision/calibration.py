@@ -28,6 +28,13 @@ SUBPIX_HALF_WINDOW_PX = 5
 SUBPIX_CRITERIA = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 100, 1e-4)
 
 
+#: grid step (px) of the stored map uncertainty; the map's uncertainty is smooth (it
+#: comes from a few lens parameters), so a coarse grid interpolates it closely
+MAP_U_STEP_PX = 64
+#: the frame is split into COVERAGE_CELLS x COVERAGE_CELLS cells for the coverage figure
+COVERAGE_CELLS = 8
+
+
 @dataclass(frozen=True)
 class CameraCalibration:
     camera_matrix: np.ndarray  # 3x3, px
@@ -36,6 +43,13 @@ class CameraCalibration:
     rms_px: float  # RMS reprojection error of the calibration
     mm_per_px: float | None = None  # scale at the bore wall, when known
     n_views: int = 0
+    #: share of the frame's 8 x 8 cells in which the board's corners were seen
+    coverage: float | None = None
+    #: standard uncertainty (px) of the undistorted x and y on a grid of nodes
+    #: ``map_u_nodes`` = (x nodes, y nodes): the jackknife over the views (``calibrate``)
+    map_u_x_px: np.ndarray | None = None
+    map_u_y_px: np.ndarray | None = None
+    map_u_nodes: tuple[np.ndarray, np.ndarray] | None = None
 
     def undistort_px(self, pts_px: np.ndarray) -> np.ndarray:
         """Distorted image points (N, 2) -> ideal pixel coordinates of the same camera matrix."""
@@ -49,13 +63,38 @@ class CameraCalibration:
         )
         return out.reshape(-1, 2)
 
+    def undistort_u_px(self, pts_px: np.ndarray) -> np.ndarray | None:
+        """Standard uncertainty (N, 2) of ``undistort_px`` at image points: how far the
+        calibration's own map may be off there (bilinear in the stored grid), or None
+        when the calibration holds none."""
+        if self.map_u_x_px is None or self.map_u_nodes is None:
+            return None
+        from scipy.interpolate import RegularGridInterpolator
+
+        xs, ys = self.map_u_nodes
+        p = np.asarray(pts_px, dtype=np.float64).reshape(-1, 2)
+        q = np.column_stack([np.clip(p[:, 1], ys[0], ys[-1]), np.clip(p[:, 0], xs[0], xs[-1])])
+        out = [RegularGridInterpolator((ys, xs), g)(q) for g in (self.map_u_x_px, self.map_u_y_px)]
+        return np.column_stack(out)
+
+    def map_u_summary(self) -> dict | None:
+        """The largest map uncertainty (px, the larger of x and y) over the central 80 %
+        of the frame and over all of it; None without a stored map uncertainty."""
+        if self.map_u_x_px is None or self.map_u_nodes is None:
+            return None
+        xs, ys = self.map_u_nodes
+        w, h = self.image_size
+        u = np.maximum(self.map_u_x_px, self.map_u_y_px)
+        inner = u[np.ix_((ys >= 0.1 * h) & (ys <= 0.9 * h), (xs >= 0.1 * w) & (xs <= 0.9 * w))]
+        return {"central_80_max_px": float(inner.max()) if inner.size else float("nan"), "frame_max_px": float(u.max())}
+
     def with_working_distance(self, distance_mm: float) -> "CameraCalibration":
         """Scale at the wall from the working distance: Z / sqrt(fx fy) mm per ideal px."""
         f_px = float(np.sqrt(self.camera_matrix[0, 0] * self.camera_matrix[1, 1]))
         return _replace(self, mm_per_px=distance_mm / f_px)
 
     def to_json(self) -> dict:
-        return {
+        d = {
             "camera_matrix": self.camera_matrix.tolist(),
             "dist_coeffs": self.dist_coeffs.ravel().tolist(),
             "image_size": list(self.image_size),
@@ -64,6 +103,17 @@ class CameraCalibration:
             "n_views": self.n_views,
             "pixel_convention": "centre of pixel (0,0) at (0,0), x right, y down",
         }
+        if self.coverage is not None:
+            d["coverage"] = self.coverage
+        if self.map_u_x_px is not None and self.map_u_nodes is not None:
+            d["map_uncertainty"] = {
+                "method": "jackknife over the views, standard uncertainty (k = 1) of the undistorted point, px",
+                "x_nodes_px": self.map_u_nodes[0].tolist(),
+                "y_nodes_px": self.map_u_nodes[1].tolist(),
+                "u_x_px": np.round(self.map_u_x_px, 5).tolist(),
+                "u_y_px": np.round(self.map_u_y_px, 5).tolist(),
+            }
+        return d
 
     @classmethod
     def from_json(cls, d: dict) -> "CameraCalibration":
@@ -71,8 +121,16 @@ class CameraCalibration:
         dist = np.asarray(d["dist_coeffs"], dtype=np.float64)
         if k.shape != (3, 3) or dist.ndim != 1 or dist.size < 4:
             raise ValueError("camera_matrix must be 3x3 and dist_coeffs hold at least k1, k2, p1, p2")
+        ux = uy = nodes = None
+        mu = d.get("map_uncertainty")  # absent from files written before it existed
+        if mu is not None:
+            nodes = (np.asarray(mu["x_nodes_px"], dtype=np.float64), np.asarray(mu["y_nodes_px"], dtype=np.float64))
+            ux, uy = np.asarray(mu["u_x_px"], dtype=np.float64), np.asarray(mu["u_y_px"], dtype=np.float64)
+            if ux.shape != (nodes[1].size, nodes[0].size) or uy.shape != ux.shape:
+                raise ValueError("map_uncertainty: u_x_px and u_y_px must be len(y_nodes_px) x len(x_nodes_px)")
+        cov = d.get("coverage")
         return cls(k, dist, tuple(d["image_size"]), float(d.get("rms_px", float("nan"))), d.get("mm_per_px"),
-                   int(d.get("n_views", 0)))
+                   int(d.get("n_views", 0)), None if cov is None else float(cov), ux, uy, nodes)
 
     def save(self, path: str | Path) -> None:
         Path(path).write_text(json.dumps(self.to_json(), indent=2) + "\n")
@@ -111,6 +169,22 @@ def find_corners(image: np.ndarray, pattern_size: tuple[int, int]) -> np.ndarray
     return cv2.cornerSubPix(grey, corners, (w, w), (-1, -1), SUBPIX_CRITERIA)
 
 
+def coverage_of(corners_px: np.ndarray, image_size: tuple[int, int], cells: int = COVERAGE_CELLS) -> float:
+    """Share of the frame's ``cells`` x ``cells`` cells holding at least one corner."""
+    w, h = image_size
+    p = np.asarray(corners_px, dtype=np.float64).reshape(-1, 2)
+    ix = np.clip((p[:, 0] + 0.5) * cells // w, 0, cells - 1).astype(int)
+    iy = np.clip((p[:, 1] + 0.5) * cells // h, 0, cells - 1).astype(int)
+    seen = np.zeros((cells, cells), dtype=bool)
+    seen[iy, ix] = True
+    return float(seen.mean())
+
+
+def _solve(obj_pts, img_pts, image_size):
+    rms, k, dist, _, _ = cv2.calibrateCamera(obj_pts, img_pts, image_size, None, None, flags=cv2.CALIB_FIX_K3)
+    return float(rms), k, np.asarray(dist, dtype=np.float64).ravel()[:4]
+
+
 def calibrate(
     images: list[np.ndarray],
     pattern_size: tuple[int, int],
@@ -121,6 +195,12 @@ def calibrate(
 
     k3 is fixed because a short endoscope lens is described by k1, k2 within our
     accuracy and a free k3 trades off against k1/k2 with few views.
+
+    With 4 views or more the result also says how far its undistortion map can be
+    trusted, point by point: the jackknife over the views (calibrate again without each
+    view in turn; the spread of the maps, times (n - 1) / n, is their variance).  Where
+    the board was never seen, the map is extrapolated from the lens model and its
+    uncertainty grows: that is what the grid shows, with ``coverage`` as a summary.
     """
     if not images:
         raise ValueError("no calibration images")
@@ -136,6 +216,22 @@ def calibrate(
             img_pts.append(c.astype(np.float32))
     if len(img_pts) < 3:
         raise ValueError(f"chessboard {pattern_size[0]}x{pattern_size[1]} found in only {len(img_pts)} images; need 3")
-    rms, k, dist, _, _ = cv2.calibrateCamera(obj_pts, img_pts, (w, h), None, None, flags=cv2.CALIB_FIX_K3)
-    cal = CameraCalibration(k, np.asarray(dist, dtype=np.float64).ravel()[:4], (w, h), float(rms), None, len(img_pts))
+    rms, k, dist = _solve(obj_pts, img_pts, (w, h))
+    cov = coverage_of(np.concatenate([c.reshape(-1, 2) for c in img_pts]), (w, h))
+    cal = CameraCalibration(k, dist, (w, h), rms, None, len(img_pts), cov)
+    n = len(img_pts)
+    if n >= 4:
+        xs = np.linspace(0.0, w - 1.0, int(np.ceil((w - 1) / MAP_U_STEP_PX)) + 1)
+        ys = np.linspace(0.0, h - 1.0, int(np.ceil((h - 1) / MAP_U_STEP_PX)) + 1)
+        gx, gy = np.meshgrid(xs, ys)
+        nodes = np.column_stack([gx.ravel(), gy.ravel()])
+        maps = []
+        for i in range(n):
+            keep = [j for j in range(n) if j != i]
+            _, ki, di = _solve([obj_pts[j] for j in keep], [img_pts[j] for j in keep], (w, h))
+            maps.append(CameraCalibration(ki, di, (w, h), float("nan")).undistort_px(nodes))
+        maps = np.asarray(maps)
+        var = (n - 1) / n * ((maps - maps.mean(axis=0)) ** 2).sum(axis=0)
+        u = np.sqrt(var).reshape(len(ys), len(xs), 2)
+        cal = _replace(cal, map_u_x_px=u[..., 0], map_u_y_px=u[..., 1], map_u_nodes=(xs, ys))
     return cal.with_working_distance(working_distance_mm) if working_distance_mm else cal

@@ -132,6 +132,10 @@ class HoleMeasurement:
     #: the same for the centre's x and y (px)
     x_u_px: float | None = None
     y_u_px: float | None = None
+    #: with a calibration that holds its map's uncertainty: that uncertainty at the hole's
+    #: centre (px, k = 1, the larger of x and y), a systematic term of the calibration
+    #: common to every frame, apart from the per-frame ``x_u_px`` / ``y_u_px``
+    map_u_px: float | None = None
 
     def to_dict(self) -> dict:
         d = asdict(self)
@@ -259,7 +263,11 @@ def measure_candidate(
             shift = cfg.photometric_centre_weight * np.array([ph.cx - cx, ph.cy - cy])
             cx, cy = cx + shift[0], cy + shift[1]
     pts = edges.points + shift + (r_true - r) * edges.directions
+    map_u = None
     if calibration is not None:
+        mu = calibration.undistort_u_px(np.array([[cx, cy]]))
+        if mu is not None:
+            map_u = float(mu.max())
         pts = calibration.undistort_px(pts)
         cal = robust_circle(pts[fit.inliers], taubin_circle(pts[fit.inliers]), oval=whole)
         cx, cy, r_true = cal.cx, cal.cy, cal.r
@@ -296,6 +304,7 @@ def measure_candidate(
         diameter_u_px=diameter_u,
         x_u_px=x_u,
         y_u_px=y_u,
+        map_u_px=map_u,
     )
 
 

@@ -92,6 +92,23 @@ def test_calibrate_writes_a_calibration_that_measure_uses(tmp_path, frame_png):
     assert result.exit_code != 0 and "calibration is for" in result.stderr
 
 
+def test_calibrate_tells_where_its_map_can_be_trusted(tmp_path):
+    """The summary names the coverage and the map's uncertainty; views that stayed near
+    the centre draw a warning on stderr (the run still succeeds and writes the file)."""
+    lens = BrownLens(k1=-0.22, k2=0.06)
+    for spread, warned in ((1.0, False), (0.0, True)):
+        paths = []
+        for i, v in enumerate(board_views(lens, n_views=6, seed=3, spread=spread)):
+            paths.append(tmp_path / f"s{spread}_{i}.png")
+            cv2.imwrite(str(paths[-1]), v.image)
+        out = tmp_path / f"cal{spread}.json"
+        result = runner.invoke(app, ["vision", "calibrate", *map(str, paths), "--out", str(out)])
+        assert result.exit_code == 0, result.output
+        assert "covered" in result.stdout and "uncertainty" in result.stdout
+        assert ("warning" in result.stderr) == warned, result.stderr
+        assert "map_uncertainty" in json.loads(out.read_text())
+
+
 @pytest.mark.parametrize("layout", ["lsb12", "msb12"])
 def test_16_bit_frames_are_scaled_by_the_bits_they_use(tmp_path, frame_png, layout):
     """12-bit data in a 16-bit PNG, at the bottom of the range (max <= 4095) or at the
