@@ -20,10 +20,16 @@ class Score:
     phantoms: int = 0  # detections matching no hole at all
     partial_found: int = 0  # cut holes found
     partial_flag_errors: int = 0  # matched holes whose partial flag is wrong
+    #: errors over the method's own standard uncertainty, for whole holes that come with
+    #: one: (measured - true) / u of the diameter, and of the centre's x and y (both listed)
+    diameter_z: list[float] = field(default_factory=list)
+    centre_z: list[float] = field(default_factory=list)
 
     def add(self, other: "Score") -> None:
         self.centre_err_px += other.centre_err_px
         self.diameter_err_px += other.diameter_err_px
+        self.diameter_z += other.diameter_z
+        self.centre_z += other.centre_z
         self.misses += other.misses
         self.phantoms += other.phantoms
         self.partial_found += other.partial_found
@@ -32,7 +38,14 @@ class Score:
     def summary(self) -> dict:
         c = np.asarray(self.centre_err_px)
         d = np.abs(np.asarray(self.diameter_err_px))
-        return {
+        out = {}
+        if self.diameter_z or self.centre_z:
+            # how often the stated uncertainty (k = 2) holds the error: about 95 % if it is right
+            zd, zc = np.abs(self.diameter_z), np.abs(self.centre_z)
+            out = {"diameter_within_2u": float(np.mean(zd <= 2)) if zd.size else None,
+                   "centre_within_2u": float(np.mean(zc <= 2)) if zc.size else None,
+                   "holes_with_u": int(zd.size)}
+        return out | {
             "holes_measured": int(c.size),
             "median_centre_err_px": float(np.median(c)) if c.size else None,
             "worst_centre_err_px": float(c.max()) if c.size else None,
@@ -87,7 +100,10 @@ def _flatten(per_frame: list[list[float]]) -> tuple[np.ndarray, np.ndarray]:
 
 
 def score_frame(truths: list[tuple], detections: list[tuple], check_partial: bool = True) -> Score:
-    """Greedy nearest matching within a quarter diameter (at least 3 px) of a true centre."""
+    """Greedy nearest matching within a quarter diameter (at least 3 px) of a true centre.
+
+    A detection is (x, y, diameter, partial), optionally followed by the standard
+    uncertainties (u_diameter, u_x, u_y) of a whole hole (None where there are none)."""
     s = Score()
     used: set[int] = set()
     det = np.asarray([d[:2] for d in detections], float).reshape(-1, 2)
@@ -108,5 +124,9 @@ def score_frame(truths: list[tuple], detections: list[tuple], check_partial: boo
             continue
         s.centre_err_px.append(float(dist[j]))
         s.diameter_err_px.append(float(detections[j][2] - td))
+        u = tuple(detections[j][4:7])
+        if len(u) == 3 and all(v is not None and v > 0 for v in u):
+            s.diameter_z.append(float((detections[j][2] - td) / u[0]))
+            s.centre_z += [float((detections[j][0] - tx) / u[1]), float((detections[j][1] - ty) / u[2])]
     s.phantoms = len(detections) - len(used)
     return s

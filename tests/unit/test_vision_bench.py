@@ -55,3 +55,28 @@ def test_bench_run_scores_every_method_on_the_same_frames():
     lo, hi = r["diameter_accuracy_ratio_ci95"]
     assert lo <= r["diameter_accuracy_ratio_vs_better_baseline"] <= hi
     assert r["better_baseline"]["diameter"] in ("hough_gradient_alt", "contours_fit_ellipse")
+    # ours states its own uncertainties; the baselines do not
+    assert r["methods"]["ours"]["holes_with_u"] == r["methods"]["ours"]["holes_measured"]
+    assert 0.0 <= r["methods"]["ours"]["diameter_within_2u"] <= 1.0
+    assert "holes_with_u" not in r["methods"]["hough_gradient_alt"]
+
+
+def test_scoring_judges_stated_uncertainties_by_the_errors():
+    from station.vision.scoring import score_frame
+
+    truths = [(100.0, 100.0, 40.0, False), (300.0, 200.0, 30.0, False), (5.0, 50.0, 30.0, True)]
+    dets = [
+        (100.03, 99.98, 40.10, False, 0.04, 0.01, 0.01),  # diameter 2.5 u off, x 3 u, y 2 u
+        (300.00, 200.01, 29.99, False, 0.02, 0.02, 0.02),  # all within 1 u
+        (5.5, 50.0, 29.0, True, None, None, None),  # a cut hole: no uncertainty, not judged
+    ]
+    s = score_frame(truths, dets)
+    assert s.diameter_z == pytest.approx([2.5, -0.5])
+    assert s.centre_z == pytest.approx([3.0, -2.0, 0.0, 0.5])
+    summary = s.summary()
+    assert summary["diameter_within_2u"] == pytest.approx(0.5)
+    assert summary["centre_within_2u"] == pytest.approx(0.75)
+    assert summary["holes_with_u"] == 2
+    # detections without uncertainties leave the figures out
+    plain = score_frame(truths, [d[:4] for d in dets]).summary()
+    assert "diameter_within_2u" not in plain
