@@ -129,8 +129,8 @@ def board_views(
 
         # the room was judged without the lens; barrel distortion pulls the board's far
         # side inwards, so push it out further while it stays in the frame
-        best = placed(0.0) if spread == 0 else None
-        for share in np.arange(0.8, 2.0, 0.1) * spread if spread > 0 else ():
+        best = None
+        for share in [0.0] if spread == 0 else np.arange(0.8, 2.0, 0.1) * spread:
             t = placed(float(share))
             if t is None:
                 break

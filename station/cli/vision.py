@@ -80,7 +80,7 @@ def calibrate_cmd(
     as_json: bool = typer.Option(False, "--json"),
 ) -> None:
     """Intrinsics and distortion from chessboard IMAGES, saved as JSON."""
-    from station.vision.calibration import calibrate
+    from station.vision.calibration import calibrate, calibration_warnings
     from station.vision.imageio import ImageReadError, read_grey
 
     size = _pattern(pattern)
@@ -114,26 +114,6 @@ def calibrate_cmd(
         err_console.print(f"[yellow]warning:[/] {warning}")
 
 
-#: above this the map's uncertainty somewhere in the frame (px, k = 1) is worth a warning:
-#: it exceeds the hole measurement's own by more than an order of magnitude
-MAP_U_WARN_PX = 0.5
-#: below this share of the frame seen, the calibration extrapolates over most of it
-COVERAGE_WARN = 0.5
-
-
-def calibration_warnings(cal) -> list[str]:
-    """What an operator should know before trusting a calibration everywhere."""
-    out = []
-    summary = cal.map_u_summary()
-    if cal.coverage is not None and cal.coverage < COVERAGE_WARN:
-        out.append(f"the board was seen in only {cal.coverage:.0%} of the frame; take views with it near the "
-                   "corners and edges of the frame, where the distortion is largest")
-    if summary is not None and summary["frame_max_px"] > MAP_U_WARN_PX:
-        out.append(f"the undistortion map is uncertain by up to {summary['frame_max_px']:.2f} px where the board "
-                   "was not seen; holes measured there carry it (HoleMeasurement.map_u_px)")
-    if cal.map_u_x_px is None:
-        out.append("fewer than 4 views: the map's uncertainty cannot be estimated")
-    return out
 
 
 def register(app: typer.Typer) -> None:

@@ -235,3 +235,25 @@ def calibrate(
         u = np.sqrt(var).reshape(len(ys), len(xs), 2)
         cal = _replace(cal, map_u_x_px=u[..., 0], map_u_y_px=u[..., 1], map_u_nodes=(xs, ys))
     return cal.with_working_distance(working_distance_mm) if working_distance_mm else cal
+
+
+#: above this the map's uncertainty somewhere in the frame (px, k = 1) is worth a warning:
+#: it exceeds the hole measurement's own by more than an order of magnitude
+MAP_U_WARN_PX = 0.5
+#: below this share of the frame seen, the calibration extrapolates over most of it
+COVERAGE_WARN = 0.5
+
+
+def calibration_warnings(cal: CameraCalibration) -> list[str]:
+    """What an operator should know before trusting a calibration everywhere."""
+    out = []
+    summary = cal.map_u_summary()
+    if cal.coverage is not None and cal.coverage < COVERAGE_WARN:
+        out.append(f"the board was seen in only {cal.coverage:.0%} of the frame; take views with it near the "
+                   "corners and edges of the frame, where the distortion is largest")
+    if summary is not None and summary["frame_max_px"] > MAP_U_WARN_PX:
+        out.append(f"the undistortion map is uncertain by up to {summary['frame_max_px']:.2f} px where the board "
+                   "was not seen; holes measured there carry it (HoleMeasurement.map_u_px)")
+    if cal.map_u_x_px is None:
+        out.append("fewer than 4 views: the map's uncertainty cannot be estimated")
+    return out

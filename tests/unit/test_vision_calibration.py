@@ -95,7 +95,7 @@ def test_the_maps_uncertainty_covers_its_error(calibration):
 def test_views_that_never_reach_the_corners_are_flagged():
     """Views kept near the centre leave the corners to extrapolation: the map errs there
     by pixels (k2 is barely seen), and the calibration reports it instead of hiding it."""
-    from station.cli.vision import calibration_warnings
+    from station.vision.calibration import calibration_warnings
 
     views = board_views(LENS, n_views=10, seed=1, spread=0.0)
     cal = calibrate([v.image for v in views], (9, 7), 0.5)
