@@ -19,8 +19,11 @@ from station.sequencer.engine import Devices, Engine
 
 
 def vision_measure(mm_per_px: float):
-    """The vision stage as the engine calls it: image -> hole measurements."""
-    from station.vision.measure import measure_holes
+    """The vision stage as the engine calls it: image -> hole measurements.  Its compiled
+    kernels are loaded here, before any inspection (``warm_up``)."""
+    from station.vision.measure import measure_holes, warm_up
+
+    warm_up()
 
     def measure(image):
         return measure_holes(image, mm_per_px=mm_per_px)

@@ -28,6 +28,7 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
+from numba import njit
 from scipy.special import i0e, i1e
 
 from station.vision.fit import median
@@ -132,37 +133,92 @@ def ray_edges(
     # one C call samples both gradient channels at every ray point (OpenCV's bilinear
     # weights are quantised to 1/32 px: a random +/-1/64 px per sample, averaging out
     # over the rays, far below the texture's per-ray scatter of ~0.1 px)
-    g = cv2.remap(np.dstack([gx, gy]), px.astype(np.float32), py.astype(np.float32), cv2.INTER_LINEAR)
-    g = g[..., 0] * u[:, 0:1] + g[..., 1] * u[:, 1:2]
-    # the rim is the *innermost* strong rising edge: the hole's interior is uniform, so
-    # scanning outwards the first local maximum of at least half the typical rim
-    # strength is the rim, even where a dark honing groove lies just outside it (whose
-    # far side would otherwise win the global maximum)
-    strong = 0.5 * median(g.max(axis=1))
-    local_max = np.zeros_like(g, dtype=bool)
-    local_max[:, 1:-1] = (g[:, 1:-1] >= g[:, :-2]) & (g[:, 1:-1] > g[:, 2:]) & (g[:, 1:-1] >= strong)
-    k = np.argmax(local_max, axis=1)
-    ok = local_max.any(axis=1) & (k >= 2) & (k <= s.size - 3)
-    rows = np.arange(len(g))
+    g2 = cv2.remap(np.dstack([gx, gy]), px.astype(np.float32), py.astype(np.float32), cv2.INTER_LINEAR)
     # the fit spans the same +/-2 px whatever the step (at least +/-2 samples)
     half = max(2, int(round(FIT_HALF_SAMPLES * STEP_PX / step_px)))
-    ok &= (k >= half) & (k <= s.size - 1 - half)
-    idx = np.clip(k[:, None] + np.arange(-half, half + 1)[None, :], 0, s.size - 1)
-    win = g[rows[:, None], idx]
-    ok &= (win > 0).all(axis=1)
-    lg = np.log(np.where(win > 0, win, 1.0))
-    t = np.arange(-half, half + 1) * step_px
-    b = (lg * t).sum(1) / (t * t).sum()
-    tc = t * t - (t * t).mean()
-    c = (lg * tc).sum(1) / (tc * tc).sum()
-    ok &= c < 0
-    with np.errstate(divide="ignore", invalid="ignore"):
-        offset = np.where(ok, -b / (2 * c), 0.0)
-        sigma2 = np.where(ok, -1.0 / (2 * c), np.nan)
-    ok &= np.abs(offset) <= step_px
+    k, ok, offset, sigma2, peak, win = _ray_peaks(g2, u, half, step_px)
     r_edge = s[k] + offset
     pts = np.stack([centre_xy[0] + u[:, 0] * r_edge, centre_xy[1] + u[:, 1] * r_edge], axis=1)
-    return RayEdges(pts[ok], u[ok], g[rows, k][ok], sigma2[ok], win[ok], step_px, n_rays, int(valid.sum()), cut)
+    return RayEdges(pts[ok], u[ok], peak[ok], sigma2[ok], win[ok], step_px, n_rays, int(valid.sum()), cut)
+
+
+@njit(cache=True)
+def _ray_peaks(g2: np.ndarray, u: np.ndarray, half: int, step_px: float):
+    """Each ray's rim: the discrete peak index k, whether it is usable, the log-parabola's
+    sub-sample offset (px) and squared width, the peak value and the +/-``half`` window.
+
+    ``g2`` (rays, samples, 2) holds the gradient at the ray's samples; ``u`` the rays'
+    unit directions.  The rim is the *innermost* strong rising edge: the hole's interior
+    is uniform, so scanning outwards the first local maximum of at least half the
+    typical rim strength (half the median over the rays of each ray's maximum) is the
+    rim, even where a dark honing groove lies just outside it (whose far side would
+    otherwise win the global maximum).  A least-squares parabola through ln g at the
+    2 half + 1 samples gives the peak and the width; a ray whose window leaves the
+    samples, holds a value <= 0, curves upwards or peaks more than a step away is not
+    usable.  (Compiled: the per-ray work was ~40 numpy calls on small arrays.)
+    """
+    n_rays, n_s = g2.shape[0], g2.shape[1]
+    g = np.empty((n_rays, n_s))
+    row_max = np.empty(n_rays)
+    for i in range(n_rays):
+        m = -np.inf
+        for j in range(n_s):
+            v = g2[i, j, 0] * u[i, 0] + g2[i, j, 1] * u[i, 1]
+            g[i, j] = v
+            if v > m:
+                m = v
+        row_max[i] = m
+    strong = 0.5 * np.median(row_max)
+    nw = 2 * half + 1
+    tt = 0.0
+    tmean = 0.0
+    for q in range(nw):
+        t = (q - half) * step_px
+        tt += t * t
+        tmean += t * t / nw
+    tctc = 0.0
+    for q in range(nw):
+        t = (q - half) * step_px
+        tctc += (t * t - tmean) ** 2
+    k = np.zeros(n_rays, dtype=np.int64)
+    ok = np.zeros(n_rays, dtype=np.bool_)
+    offset = np.zeros(n_rays)
+    sigma2 = np.full(n_rays, np.nan)
+    peak = np.zeros(n_rays)
+    win = np.zeros((n_rays, nw))
+    for i in range(n_rays):
+        ki = 0
+        for j in range(1, n_s - 1):
+            if g[i, j] >= g[i, j - 1] and g[i, j] > g[i, j + 1] and g[i, j] >= strong:
+                ki = j
+                break
+        k[i] = ki
+        peak[i] = g[i, ki]
+        good = ki > 0 and ki >= 2 and ki <= n_s - 3 and ki >= half and ki <= n_s - 1 - half
+        b = 0.0
+        c = 0.0
+        for q in range(nw):
+            jj = min(max(ki + q - half, 0), n_s - 1)
+            w = g[i, jj]
+            win[i, q] = w
+            if w > 0:
+                lw = np.log(w)
+            else:
+                good = False
+                lw = 0.0
+            t = (q - half) * step_px
+            b += lw * t
+            c += lw * (t * t - tmean)
+        b /= tt
+        c /= tctc
+        if good and c < 0:
+            off = -b / (2 * c)
+            sigma2[i] = -1.0 / (2 * c)
+            offset[i] = off
+            ok[i] = abs(off) <= step_px
+        else:
+            ok[i] = False
+    return k, ok, offset, sigma2, peak, win
 
 
 def profile_width2(profiles: np.ndarray, step_px: float) -> float:

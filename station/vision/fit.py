@@ -13,6 +13,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 #: Tukey biweight tuning constant for 95 % efficiency under Gaussian noise
 #: (Holland & Welsch 1977; the usual default in robust regression)
@@ -112,59 +113,16 @@ def robust_circle(
     a few hundredths of a pixel) do not have good points trimmed as outliers.
     """
     cx, cy, r = init if init is not None else taubin_circle(pts)
-    h2 = np.zeros(2)  # second-harmonic amplitudes (cos, sin)
-    prior = np.ones(len(pts)) if weights is None else weights
-    w = prior.copy()
-    px, py = pts[:, 0], pts[:, 1]
-    used_mask = prior > 0
-    # the Jacobian's columns are written in place each iteration (few hundred points: the
-    # loop's cost is numpy's per-call overhead, so every call saved counts)
-    jac = np.empty((5 if oval else 3, len(pts)))
-    jac[2] = -1.0
-    for it in range(iterations):
-        dx, dy = px - cx, py - cy
-        d = np.sqrt(dx * dx + dy * dy)
-        np.maximum(d, 1e-9, out=d)
-        res = d - r
-        np.divide(dx, d, out=jac[0])  # the unit radial direction (negated below)
-        np.divide(dy, d, out=jac[1])
-        if oval:
-            # cos 2theta and sin 2theta of the point's angle, without arctan2
-            np.subtract(jac[0] * jac[0], jac[1] * jac[1], out=jac[3])
-            np.multiply(jac[0], jac[1], out=jac[4])
-            jac[4] *= 2.0
-            res -= h2[0] * jac[3] + h2[1] * jac[4]
-        if it < 3:  # the scale settles once the gross outliers are out; then keep it
-            used = res[used_mask]
-            scale = max(MAD_TO_SIGMA * median(np.abs(used - median(used))), min_scale_px)
-        # Tukey's biweight: (1 - u^2)^2 inside |u| < 1, 0 outside
-        t = res * (1.0 / (TUKEY_C * scale))
-        t *= t
-        np.subtract(1.0, t, out=t)
-        np.maximum(t, 0.0, out=t)
-        w = prior * t * t
-        if w.sum() < 3:
-            break
-        jac[0] *= -1.0
-        jac[1] *= -1.0
-        if oval:
-            jac[3] *= -1.0
-            jac[4] *= -1.0
-        jw = jac * w
-        try:
-            step = np.linalg.solve(jw @ jac.T, -(jw @ res))
-        except np.linalg.LinAlgError:
-            break
-        cx, cy, r = cx + step[0], cy + step[1], r + step[2]
-        if oval:
-            h2 = h2 + step[3:]
-        if np.abs(step).max() < 1e-4:  # 1e-4 px: two orders below the accuracy sought
-            break
+    prior = np.ones(len(pts)) if weights is None else np.asarray(weights, dtype=np.float64)
+    px = np.ascontiguousarray(pts[:, 0], dtype=np.float64)
+    py = np.ascontiguousarray(pts[:, 1], dtype=np.float64)
+    cx, cy, r, h0, h1, w = _irls_circle(px, py, prior, float(cx), float(cy), float(r), float(min_scale_px),
+                                        int(iterations), bool(oval))
     dx, dy = px - cx, py - cy
     d = np.maximum(np.sqrt(dx * dx + dy * dy), 1e-9)
     res = d - r
     if oval:
-        res = res - (h2[0] * (dx * dx - dy * dy) + h2[1] * 2.0 * dx * dy) / (d * d)
+        res = res - (h0 * (dx * dx - dy * dy) + h1 * 2.0 * dx * dy) / (d * d)
     inl = w > 0
     rms = float(np.sqrt((w * res**2).sum() / max(w.sum(), 1e-9)))
     return CircleFit(float(cx), float(cy), float(r), rms, inl)
@@ -216,3 +174,119 @@ def fit_ellipse_direct(pts: np.ndarray) -> tuple[float, float, float, float, flo
     if ax2 > ax1:
         angle += np.pi / 2
     return (float(cx * s + m[0]), float(cy * s + m[1]), float(major * s), float(minor * s), float(np.rad2deg(angle) % 180))
+
+
+@njit(cache=True)
+def solve_small(m: np.ndarray, v: np.ndarray):
+    """Gaussian elimination with partial pivoting for the fits' 3x3 / 5x5 normal
+    equations; (solution, False) when the matrix is singular."""
+    k = v.size
+    a = m.copy()
+    b = v.copy()
+    for col in range(k):
+        p = col
+        for row in range(col + 1, k):
+            if abs(a[row, col]) > abs(a[p, col]):
+                p = row
+        if a[p, col] == 0.0 or not np.isfinite(a[p, col]):
+            return b, False
+        if p != col:
+            for j in range(k):
+                a[col, j], a[p, j] = a[p, j], a[col, j]
+            b[col], b[p] = b[p], b[col]
+        for row in range(col + 1, k):
+            f = a[row, col] / a[col, col]
+            for j in range(col, k):
+                a[row, j] -= f * a[col, j]
+            b[row] -= f * b[col]
+    x = np.zeros(k)
+    for row in range(k - 1, -1, -1):
+        acc = b[row]
+        for j in range(row + 1, k):
+            acc -= a[row, j] * x[j]
+        x[row] = acc / a[row, row]
+    return x, True
+
+
+@njit(cache=True)
+def _irls_circle(px, py, prior, cx, cy, r, min_scale_px, iterations, oval):
+    """The IRLS loop of ``robust_circle`` (Gauss-Newton steps on the orthogonal distances
+    with Tukey's biweight times the prior weights; the robust scale re-estimated in the
+    first three iterations).  Returns cx, cy, r, the second-harmonic amplitudes and the
+    last weights.  (Compiled: a few hundred points per fit, where numpy's per-call
+    overhead was most of the time.)"""
+    n = px.size
+    k = 5 if oval else 3
+    h0 = 0.0
+    h1 = 0.0
+    w = prior.copy()
+    res = np.empty(n)
+    jac = np.empty((n, 5))
+    n_used = 0
+    for i in range(n):
+        if prior[i] > 0:
+            n_used += 1
+    used = np.empty(n_used)
+    scale = min_scale_px
+    for it in range(iterations):
+        for i in range(n):
+            dx = px[i] - cx
+            dy = py[i] - cy
+            d = max(np.sqrt(dx * dx + dy * dy), 1e-9)
+            ux = dx / d
+            uy = dy / d
+            e = d - r
+            jac[i, 0] = -ux
+            jac[i, 1] = -uy
+            jac[i, 2] = -1.0
+            if oval:
+                c2 = ux * ux - uy * uy
+                s2 = 2.0 * ux * uy
+                e -= h0 * c2 + h1 * s2
+                jac[i, 3] = -c2
+                jac[i, 4] = -s2
+            res[i] = e
+        if it < 3:  # the scale settles once the gross outliers are out; then keep it
+            j = 0
+            for i in range(n):
+                if prior[i] > 0:
+                    used[j] = res[i]
+                    j += 1
+            med = np.median(used)
+            scale = max(MAD_TO_SIGMA * np.median(np.abs(used - med)), min_scale_px)
+        m = np.zeros((k, k))
+        v = np.zeros(k)
+        wsum = 0.0
+        for i in range(n):
+            t = res[i] / (TUKEY_C * scale)
+            t = 1.0 - t * t
+            wi = prior[i] * t * t if t > 0 else 0.0
+            w[i] = wi
+            wsum += wi
+            if wi == 0.0:
+                continue
+            for a in range(k):
+                wa = wi * jac[i, a]
+                v[a] += wa * res[i]
+                for b in range(a, k):
+                    m[a, b] += wa * jac[i, b]
+        if wsum < 3:
+            break
+        for a in range(k):
+            for b in range(a):
+                m[a, b] = m[b, a]
+        step, solved = solve_small(m, -v)
+        if not solved:
+            break
+        cx += step[0]
+        cy += step[1]
+        r += step[2]
+        if oval:
+            h0 += step[3]
+            h1 += step[4]
+        big = 0.0
+        for a in range(k):
+            big = max(big, abs(step[a]))
+        if big < 1e-4:  # 1e-4 px: two orders below the accuracy sought
+            break
+    return cx, cy, r, h0, h1, w

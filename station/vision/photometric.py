@@ -35,9 +35,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 from scipy.special import ndtr
 
-from station.vision.fit import median
+from station.vision.fit import solve_small, median
 
 #: 1 / sqrt(2 pi)
 _INV_SQRT_2PI = 0.3989422804014327
@@ -167,38 +168,89 @@ def _groove_field(
     few pixels fall) after a quadratic smooth level is removed.  The rim's own pixels
     never enter: the profiles there are read from the same lines further out.
     """
-    xw, yw = dx[wall], dy[wall]
-    scale = max(float(np.abs(xw).max()), float(np.abs(yw).max()), 1.0)
-    a = np.stack([np.ones_like(xw), xw / scale, yw / scale, (xw / scale) ** 2, xw * yw / scale**2, (yw / scale) ** 2], 1)
-    m, rhs = _normal(a, a, v[wall])
-    coef = np.linalg.solve(m + 1e-9 * np.eye(6), rhs)
-    y = v[wall] - a @ coef
-    step = cfg.groove_bin_px
+    angles = np.deg2rad(np.asarray(cfg.groove_angles_deg, dtype=np.float64))
+    return _groove_kernel(dx[wall], dy[wall], v[wall], dx[targets], dy[targets], angles, float(cfg.groove_bin_px))
+
+
+@njit(cache=True)
+def _groove_kernel(xw, yw, vw, xt, yt, angles, step):
+    """``_groove_field``'s work on the wall pixels (xw, yw, vw) and the targets (xt, yt).
+    (Compiled: about twenty numpy calls on a few thousand pixels each.)"""
+    nw, nt, nf = xw.size, xt.size, angles.size
+    scale = 1.0
+    for i in range(nw):
+        scale = max(scale, abs(xw[i]), abs(yw[i]))
+    # the smooth level: a quadratic in x and y, least squares
+    m = np.zeros((6, 6))
+    rhs = np.zeros(6)
+    basis = np.empty(6)
+    for i in range(nw):
+        x, y = xw[i] / scale, yw[i] / scale
+        basis[0], basis[1], basis[2], basis[3], basis[4], basis[5] = 1.0, x, y, x * x, x * y, y * y
+        for a in range(6):
+            rhs[a] += basis[a] * vw[i]
+            for b in range(a, 6):
+                m[a, b] += basis[a] * basis[b]
+    for a in range(6):
+        m[a, a] += 1e-9
+        for b in range(a):
+            m[a, b] = m[b, a]
+    coef, _ = solve_small(m, rhs)
+    resid = np.empty(nw)
+    for i in range(nw):
+        x, y = xw[i] / scale, yw[i] / scale
+        resid[i] = vw[i] - (coef[0] + coef[1] * x + coef[2] * y + coef[3] * x * x + coef[4] * x * y + coef[5] * y * y)
+    # each family's 1-D profile across its direction, by backfitting bin means (two
+    # pseudo-counts shrink sparse bins towards 0)
     u_max = 1.5 * scale
     nb = int(2 * u_max / step) + 2
-    idx_w, u_t = [], []
-    for ang in cfg.groove_angles_deg:
-        ph = np.deg2rad(ang)
-        sn, cs = np.sin(ph), np.cos(ph)
-        idx_w.append(np.clip(((-sn * xw + cs * yw + u_max) / step).astype(np.intp), 0, nb - 1))
-        u_t.append((-sn * dx[targets] + cs * dy[targets] + u_max) / step - 0.5)
-    counts = [np.bincount(i, minlength=nb) + 2.0 for i in idx_w]
-    prof = [np.zeros(nb) for _ in idx_w]
-    for _ in range(3 if len(idx_w) > 1 else 1):
-        for k, i in enumerate(idx_w):
-            other = sum(prof[j][idx_w[j]] for j in range(len(idx_w)) if j != k)
-            prof[k] = np.bincount(i, weights=y - other, minlength=nb) / counts[k]
-    centres = np.arange(nb, dtype=np.float64)
-    field = sum(np.interp(u, centres, p) for u, p in zip(u_t, prof))
-    # the field's derivative along the radius from the hole's centre: sum over the
-    # families of P_k'(u_k) (n_k . rho_hat), n_k the family's normal
-    rho = np.maximum(np.hypot(dx[targets], dy[targets]), 1e-9)
-    d_rho = np.zeros(len(rho))
-    for ang, u, p in zip(cfg.groove_angles_deg, u_t, prof):
-        ph = np.deg2rad(ang)
-        n_dot = (-np.sin(ph) * dx[targets] + np.cos(ph) * dy[targets]) / rho
-        d_rho += np.interp(u, centres, np.gradient(p) / step) * n_dot
-    return field, d_rho, sum(p[i] for p, i in zip(prof, idx_w))
+    idx = np.empty((nf, nw), dtype=np.int64)
+    counts = np.full((nf, nb), 2.0)
+    for f in range(nf):
+        sn, cs = np.sin(angles[f]), np.cos(angles[f])
+        for i in range(nw):
+            j = int((-sn * xw[i] + cs * yw[i] + u_max) / step)  # truncation, as numpy's astype
+            j = min(max(j, 0), nb - 1)
+            idx[f, i] = j
+            counts[f, j] += 1.0
+    prof = np.zeros((nf, nb))
+    sums = np.empty(nb)
+    for _ in range(3 if nf > 1 else 1):
+        for f in range(nf):
+            sums[:] = 0.0
+            for i in range(nw):
+                other = 0.0
+                for g in range(nf):
+                    if g != f:
+                        other += prof[g, idx[g, i]]
+                sums[idx[f, i]] += resid[i] - other
+            for j in range(nb):
+                prof[f, j] = sums[j] / counts[f, j]
+    # read back at the targets: the field and its derivative along the radius
+    centres = np.arange(nb).astype(np.float64)
+    field = np.zeros(nt)
+    d_rho = np.zeros(nt)
+    slope = np.empty(nb)
+    for f in range(nf):
+        sn, cs = np.sin(angles[f]), np.cos(angles[f])
+        p = prof[f]
+        slope[0] = (p[1] - p[0]) / step  # np.gradient: one-sided at the ends
+        slope[nb - 1] = (p[nb - 1] - p[nb - 2]) / step
+        for j in range(1, nb - 1):
+            slope[j] = 0.5 * (p[j + 1] - p[j - 1]) / step
+        ut = np.empty(nt)
+        for i in range(nt):
+            ut[i] = (-sn * xt[i] + cs * yt[i] + u_max) / step - 0.5
+        field += np.interp(ut, centres, p)
+        ds = np.interp(ut, centres, slope)
+        for i in range(nt):
+            rho = max(np.sqrt(xt[i] * xt[i] + yt[i] * yt[i]), 1e-9)
+            d_rho[i] += ds[i] * (-sn * xt[i] + cs * yt[i]) / rho
+    g_wall = np.zeros(nw)
+    for f in range(nf):
+        for i in range(nw):
+            g_wall[i] += prof[f, idx[f, i]]
+    return field, d_rho, g_wall
 
 
 def _fourier(c1: np.ndarray, s1: np.ndarray, order: int) -> list[np.ndarray]:

@@ -430,3 +430,11 @@ def test_holes_are_judged_on_their_relative_contrast():
         assert measure_holes(f.image, cfg=MeasureConfig(min_relative_contrast=contrast + 0.05)) == []
     (m,) = measure_holes(f.image)  # the 30 % hole at the default bar
     assert m.diameter_px == pytest.approx(24.0, abs=0.1)
+
+
+def test_warm_up_measures_its_synthetic_hole():
+    """The station loads the compiled kernels before its first inspection by measuring a
+    synthetic hole: it must find exactly that hole, or the warm-up exercised nothing."""
+    from station.vision.measure import warm_up
+
+    assert warm_up() == 1
