@@ -38,7 +38,7 @@ import numpy as np
 from numba import njit
 from scipy.special import ndtr
 
-from station.vision.fit import solve_small, median
+from station.vision.fit import median, solve_small
 
 #: 1 / sqrt(2 pi)
 _INV_SQRT_2PI = 0.3989422804014327
