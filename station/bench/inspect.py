@@ -16,7 +16,6 @@ import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
 import typer
 
 from station.cli.common import err_console, out_console, print_json

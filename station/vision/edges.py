@@ -31,7 +31,6 @@ import numpy as np
 from numba import njit
 from scipy.special import i0e, i1e
 
-from station.vision.fit import median
 
 #: smoothing of the derivative-of-Gaussian filter (px): suppresses sensor noise while
 #: adding only sigma^2 = 1 px^2 to the edge width, which the blur correction removes
