@@ -177,6 +177,19 @@ def fit_ellipse_direct(pts: np.ndarray) -> tuple[float, float, float, float, flo
 
 
 @njit(cache=True)
+def gradient_1d(p: np.ndarray) -> np.ndarray:
+    """``np.gradient`` of a 1-D array with unit spacing (central differences inside,
+    one-sided at the ends), for the compiled kernels (numba has no np.gradient)."""
+    n = p.size
+    out = np.empty(n)
+    out[0] = p[1] - p[0]
+    out[n - 1] = p[n - 1] - p[n - 2]
+    for j in range(1, n - 1):
+        out[j] = 0.5 * (p[j + 1] - p[j - 1])
+    return out
+
+
+@njit(cache=True)
 def solve_small(m: np.ndarray, v: np.ndarray):
     """Gaussian elimination with partial pivoting for the fits' 3x3 / 5x5 normal
     equations; (solution, False) when the matrix is singular."""

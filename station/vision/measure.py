@@ -16,6 +16,7 @@ camera matrix, so that mm follow from one scale.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -25,7 +26,7 @@ from station.vision.calibration import CameraCalibration
 from station.vision.detect import Candidate, DetectConfig, detect_candidates
 from station.vision.edges import KERNEL_RADIUS_PX, deblurred_radius, gradient, profile_width2, psf_variance, ray_edges
 from station.vision.edges import SMOOTH_SIGMA_PX
-from station.vision.fit import fit_ellipse_direct, median, ransac_circle, robust_circle, taubin_circle
+from station.vision.fit import fit_ellipse_direct, gradient_1d, median, ransac_circle, robust_circle, taubin_circle
 from station.vision.illumination import Illumination, estimate_illumination
 from station.vision.imageio import to_8bit
 from station.vision.photometric import PhotometricConfig, refine_hole
@@ -173,11 +174,7 @@ def _profile_weights_kernel(sigma2, profiles, peak):
     tmpl = np.empty(m)
     for j in range(m):
         tmpl[j] = np.median(prof[:, j])
-    grad = np.empty(m)  # np.gradient: central inside, one-sided at the ends
-    grad[0] = tmpl[1] - tmpl[0]
-    grad[m - 1] = tmpl[m - 1] - tmpl[m - 2]
-    for j in range(1, m - 1):
-        grad[j] = 0.5 * (tmpl[j + 1] - tmpl[j - 1])
+    grad = gradient_1d(tmpl)
     g00 = g01 = g11 = 0.0
     for j in range(m):
         g00 += tmpl[j] * tmpl[j]
@@ -404,21 +401,13 @@ def measure_holes(
     return sorted(found, key=lambda m: (m.y_px, m.x_px))
 
 
-_WARM: list[int] = []
-
-
+@functools.cache
 def warm_up() -> int:
     """Load (or, the first time after an install or a code change, compile) the vision
     stage's compiled kernels by measuring a small synthetic hole, so that the first
     frame of the first inspection does not pay for it (loading: ~0.2 s; compiling:
     ~5 s, once, cached next to the code).  Once per process; returns the number of
     holes found (1)."""
-    if not _WARM:
-        _WARM.append(_measure_synthetic_hole())
-    return _WARM[0]
-
-
-def _measure_synthetic_hole() -> int:
     n = 160
     yy, xx = np.mgrid[0:n, 0:n].astype(np.float64)
     inside = np.hypot(xx - 80.3, yy - 79.6) < 22.0

@@ -38,7 +38,7 @@ import numpy as np
 from numba import njit
 from scipy.special import ndtr
 
-from station.vision.fit import median, solve_small
+from station.vision.fit import gradient_1d, median, solve_small
 
 #: 1 / sqrt(2 pi)
 _INV_SQRT_2PI = 0.3989422804014327
@@ -230,14 +230,10 @@ def _groove_kernel(xw, yw, vw, xt, yt, angles, step):
     centres = np.arange(nb).astype(np.float64)
     field = np.zeros(nt)
     d_rho = np.zeros(nt)
-    slope = np.empty(nb)
     for f in range(nf):
         sn, cs = np.sin(angles[f]), np.cos(angles[f])
         p = prof[f]
-        slope[0] = (p[1] - p[0]) / step  # np.gradient: one-sided at the ends
-        slope[nb - 1] = (p[nb - 1] - p[nb - 2]) / step
-        for j in range(1, nb - 1):
-            slope[j] = 0.5 * (p[j + 1] - p[j - 1]) / step
+        slope = gradient_1d(p) / step
         ut = np.empty(nt)
         for i in range(nt):
             ut[i] = (-sn * xt[i] + cs * yt[i] + u_max) / step - 0.5
