@@ -72,7 +72,8 @@ class ScanSettings:
     search_step_fov: float = 0.6
     search_rings: int = 2
     #: a detection below this confidence is not taken for a hole (the vision stage
-    #: scores real holes >= 0.3 even at low contrast and heavy blur: docs/vision.md)
+    #: scores real whole holes >= 0.77 on the station envelope's dev frames, and 4 of 610
+    #: below 0.3 on the wide envelope's 13-15 % grooves: docs/vision.md, Confidence)
     min_confidence: float = 0.3
     #: re-centre when the hole is further than this from the frame centre (px)
     recentre_px: float = 5.0

@@ -47,6 +47,11 @@ class MeasureConfig:
     #: >= 0.3 (low contrast, heavy blur) and most texture candidates <= 0.1 (not all:
     #: see min_relative_contrast)
     min_confidence: float = 0.15
+    #: a whole hole with a photometric fit is judged by its own diameter uncertainty
+    #: (``diameter_u_px``) against this (px; the worst-case diameter bar), not by the
+    #: rays' scatter: on heavy grooves the rays scatter by 0.3-0.5 px RMS around a rim
+    #: the fit measures to 0.05-0.15 px (None: the rays' scatter for every hole)
+    confidence_u_ref_px: float | None = 0.15
     #: a hole must be this much darker than the wall just outside its rim ((wall -
     #: inside) / wall, medians of the pixels clear of the rim's blur).  A through-hole
     #: is dark: dev frames 3000-3199 and 9000-9199 (585 whole, 185 cut holes) measure
@@ -317,10 +322,13 @@ def measure_candidate(
         return None
     ell = fit_ellipse_direct(pts[fit.inliers]) if not edges.cut_by_border else None
     # heuristic confidence: share of consistent edge points, share of rim seen (full
-    # weight from half the rim), and fit quality against a 0.25 px residual scale
-    confidence = float(
-        inlier_fraction * min(1.0, 2.0 * coverage) / (1.0 + (rms_px / 0.25) ** 2)
-    )
+    # weight from half the rim), and the measurement's quality: a whole hole's own
+    # diameter uncertainty against ``confidence_u_ref_px``, else the rays' scatter
+    # against a 0.25 px residual scale
+    quality = 1.0 / (1.0 + (rms_px / 0.25) ** 2)
+    if diameter_u is not None and cfg.confidence_u_ref_px:
+        quality = max(quality, 1.0 / (1.0 + (diameter_u / cfg.confidence_u_ref_px) ** 2))
+    confidence = float(inlier_fraction * min(1.0, 2.0 * coverage) * quality)
     if confidence < cfg.min_confidence:
         return None
     return HoleMeasurement(
