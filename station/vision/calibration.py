@@ -15,12 +15,15 @@ fronto-parallel wall at the optical axis); alternatively a feature of known size
 
 from __future__ import annotations
 
+import functools
 import json
 from dataclasses import dataclass
 from pathlib import Path
 
 import cv2
 import numpy as np
+
+from station.vision.imageio import to_8bit, to_grey
 
 #: cornerSubPix: half-size of the search window (px) and stop criteria; 5 px is about a
 #: tenth of a chessboard square at our scale, the usual OpenCV sample choice is (11, 11)
@@ -67,15 +70,24 @@ class CameraCalibration:
         """Standard uncertainty (N, 2) of ``undistort_px`` at image points: how far the
         calibration's own map may be off there (bilinear in the stored grid), or None
         when the calibration holds none."""
+        interpolators = self._map_u_interpolators
+        if interpolators is None:
+            return None
+        xs, ys = self.map_u_nodes
+        p = np.asarray(pts_px, dtype=np.float64).reshape(-1, 2)
+        q = np.column_stack([np.clip(p[:, 1], ys[0], ys[-1]), np.clip(p[:, 0], xs[0], xs[-1])])
+        return np.column_stack([f(q) for f in interpolators])
+
+    @functools.cached_property
+    def _map_u_interpolators(self):
+        """Bilinear interpolators of the stored map uncertainty (x, y), built once per
+        calibration (``undistort_u_px`` runs once per hole)."""
         if self.map_u_x_px is None or self.map_u_nodes is None:
             return None
         from scipy.interpolate import RegularGridInterpolator
 
         xs, ys = self.map_u_nodes
-        p = np.asarray(pts_px, dtype=np.float64).reshape(-1, 2)
-        q = np.column_stack([np.clip(p[:, 1], ys[0], ys[-1]), np.clip(p[:, 0], xs[0], xs[-1])])
-        out = [RegularGridInterpolator((ys, xs), g)(q) for g in (self.map_u_x_px, self.map_u_y_px)]
-        return np.column_stack(out)
+        return tuple(RegularGridInterpolator((ys, xs), g) for g in (self.map_u_x_px, self.map_u_y_px))
 
     def map_u_summary(self) -> dict | None:
         """The largest map uncertainty (px, the larger of x and y) over the central 80 %
@@ -160,7 +172,7 @@ def board_points_mm(pattern_size: tuple[int, int], square_mm: float) -> np.ndarr
 
 def find_corners(image: np.ndarray, pattern_size: tuple[int, int]) -> np.ndarray | None:
     """Sub-pixel inner corners (N, 1, 2) of a chessboard view, or None if not found."""
-    grey = image if image.ndim == 2 else cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
+    grey = to_8bit(to_grey(image))
     flags = cv2.CALIB_CB_ADAPTIVE_THRESH + cv2.CALIB_CB_NORMALIZE_IMAGE
     found, corners = cv2.findChessboardCorners(grey, pattern_size, flags=flags)
     if not found:

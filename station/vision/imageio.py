@@ -30,6 +30,25 @@ def to_8bit(image: np.ndarray) -> np.ndarray:
     raise ValueError(f"unsupported pixel type {image.dtype} (8- or 16-bit unsigned integers)")
 
 
+def to_grey(image: np.ndarray) -> np.ndarray:
+    """One channel from a grey, BGR or BGRA frame: the mean of the colour channels, rounded,
+    in the frame's own type. The same conversion for files (``read_grey``) and frames handed
+    over in memory (``measure_holes``); under a white ring light the channels see the same
+    geometry, and their mean carries less noise than luminance weights (1/3 of a channel's
+    variance against 0.45)."""
+    if image.ndim == 2:
+        return image
+    if image.ndim != 3:
+        raise ValueError(f"a frame has 2 or 3 dimensions, not {image.ndim}")
+    colour = image[..., :3]
+    if not np.issubdtype(image.dtype, np.integer):
+        return colour.mean(axis=2).astype(image.dtype)
+    # integer mean with rounding, without a float copy of the whole frame
+    total = colour.sum(axis=2, dtype=np.uint32)
+    n = colour.shape[2]
+    return ((total + n // 2) // n).astype(image.dtype)
+
+
 def read_grey(path: str | Path) -> np.ndarray:
     """An 8-bit grey frame from ``path``; 16-bit frames are scaled to 8 bits (``to_8bit``)."""
     p = Path(path)
@@ -42,9 +61,7 @@ def read_grey(path: str | Path) -> np.ndarray:
     image = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
     if image is None:
         raise ImageReadError(f"{p}: not an image (OpenCV cannot decode it)")
-    if image.ndim == 3:
-        image = cv2.cvtColor(image[..., :3], cv2.COLOR_BGR2GRAY)
     try:
-        return to_8bit(image)
+        return to_8bit(to_grey(image))
     except ValueError as exc:
         raise ImageReadError(f"{p}: {exc}") from None

@@ -28,7 +28,7 @@ from station.vision.edges import KERNEL_RADIUS_PX, deblurred_radius, gradient, p
 from station.vision.edges import SMOOTH_SIGMA_PX
 from station.vision.fit import fit_ellipse_direct, gradient_1d, median, ransac_circle, robust_circle, taubin_circle
 from station.vision.illumination import Illumination, estimate_illumination
-from station.vision.imageio import to_8bit
+from station.vision.imageio import to_8bit, to_grey
 from station.vision.photometric import PhotometricConfig, refine_hole
 
 
@@ -385,9 +385,7 @@ def measure_holes(
     The scale comes from ``mm_per_px`` or else from the calibration's own scale; when
     neither is known ``diameter_mm`` stays None.
     """
-    if image.ndim == 3:
-        image = image[..., :3].mean(axis=2).astype(image.dtype)
-    image = to_8bit(image)
+    image = to_8bit(to_grey(image))
     if mm_per_px is None and calibration is not None:
         mm_per_px = calibration.mm_per_px
     rng = np.random.default_rng(0)  # fixed: the same frame always gives the same result

@@ -143,3 +143,24 @@ def test_a_float_image_is_refused_with_its_type(tmp_path):
     cv2.imwrite(str(path), np.full((64, 64), 0.5, np.float32))
     with pytest.raises(ImageReadError, match="float32"):
         read_grey(path)
+
+
+def test_a_colour_frame_reads_the_same_from_a_file_and_from_memory(tmp_path, frame_png):
+    """A BGR frame whose channels differ (a tinted ring light): the file path
+    (``read_grey``) and a frame handed to ``measure_holes`` in memory take the same grey,
+    the mean of the channels, and measure the same holes."""
+    from station.vision import measure_holes
+    from station.vision.imageio import read_grey, to_grey
+
+    _, f = frame_png
+    g = f.image.astype(np.int32)
+    bgr = np.clip(np.stack([g * 0.8, g, g * 1.1 + 3], axis=2), 0, 255).astype(np.uint8)
+    path = tmp_path / "colour.png"
+    cv2.imwrite(str(path), bgr)
+    grey = read_grey(path)
+    expected = (bgr.astype(np.int32).sum(axis=2) + 1) // 3
+    np.testing.assert_array_equal(grey, expected)
+    np.testing.assert_array_equal(to_grey(np.dstack([bgr, np.full(g.shape, 255, np.uint8)])), expected)  # BGRA
+    from_file = [(m.x_px, m.y_px, m.diameter_px) for m in measure_holes(grey)]
+    in_memory = [(m.x_px, m.y_px, m.diameter_px) for m in measure_holes(bgr)]
+    assert len(from_file) == 3 and in_memory == from_file
