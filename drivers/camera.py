@@ -105,7 +105,11 @@ class OpenCVCamera(Camera):
                     raise CommunicationLost("the camera delivered no frame", self.name)
                 raise CommunicationLost("end of video file", self.name)
             if image.ndim == 3:
-                image = cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
+                # the rounded mean of B, G and R: the grey the vision stage takes from a
+                # colour file (station.vision.imageio.to_grey; a driver imports nothing of
+                # ours), so a saved frame and a live one measure alike
+                colour = image[..., :3]
+                image = ((colour.sum(axis=2, dtype=np.uint32) + 1) // 3).astype(image.dtype)
             self._sequence += 1
             return Frame(np.ascontiguousarray(image), stamp, self._sequence)
 

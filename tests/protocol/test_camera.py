@@ -46,6 +46,36 @@ def test_frames_are_grey_numbered_and_in_order(video):
     assert all(b.timestamp >= a.timestamp for a, b in zip(frames, frames[1:]))
 
 
+def test_a_colour_stream_is_grey_by_the_mean_of_its_channels(tmp_path):
+    """A tinted stream (B, G, R at different levels): the driver's grey is the rounded
+    mean of the decoded channels, the conversion the vision stage applies to colour
+    files (station.vision.imageio.to_grey), not luminance weights."""
+    path = tmp_path / "tinted.avi"
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 10.0, (80, 60))
+    frame = np.zeros((60, 80, 3), np.uint8)
+    frame[..., 0], frame[..., 1], frame[..., 2] = 200, 90, 30
+    frame[20:40, 30:50] = (40, 160, 220)
+    writer.write(frame)
+    writer.release()
+    cap = cv2.VideoCapture(str(path))
+    ok, decoded = cap.read()
+    cap.release()
+    assert ok
+
+    async def run():
+        cam = OpenCVCamera(path)
+        try:
+            return await cam.grab()
+        finally:
+            await cam.close()
+
+    grey = asyncio.run(run()).image
+    expected = (decoded.astype(np.int32).sum(axis=2) + 1) // 3
+    np.testing.assert_array_equal(grey, expected)
+    # luminance weights would differ by tens of DN on this tint
+    assert np.abs(cv2.cvtColor(decoded, cv2.COLOR_BGR2GRAY).astype(int) - expected).max() > 20
+
+
 def test_end_of_file_is_typed_and_loop_rewinds(video):
     async def run(loop):
         cam = OpenCVCamera(video, loop=loop)
