@@ -31,15 +31,17 @@ def to_8bit(image: np.ndarray) -> np.ndarray:
 
 
 def to_grey(image: np.ndarray) -> np.ndarray:
-    """One channel from a grey, BGR or BGRA frame: the mean of the colour channels, rounded,
-    in the frame's own type. The same conversion for files (``read_grey``) and frames handed
-    over in memory (``measure_holes``); under a white ring light the channels see the same
-    geometry, and their mean carries less noise than luminance weights (1/3 of a channel's
-    variance against 0.45)."""
+    """One channel from a grey, grey + alpha, BGR or BGRA frame: for colour the mean of B, G
+    and R, rounded, in the frame's own type. The same conversion for files (``read_grey``)
+    and frames handed over in memory (``measure_holes``); under a white ring light the
+    channels see the same geometry, and their mean carries less noise than luminance
+    weights (1/3 of a channel's variance against 0.45)."""
     if image.ndim == 2:
         return image
-    if image.ndim != 3:
-        raise ValueError(f"a frame has 2 or 3 dimensions, not {image.ndim}")
+    if image.ndim != 3 or image.shape[2] not in (1, 2, 3, 4):
+        raise ValueError(f"a frame is grey, grey + alpha, BGR or BGRA, not of shape {image.shape}")
+    if image.shape[2] <= 2:
+        return image[..., 0]  # grey (+ alpha)
     colour = image[..., :3]
     if not np.issubdtype(image.dtype, np.integer):
         return colour.mean(axis=2).astype(image.dtype)

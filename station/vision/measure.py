@@ -43,14 +43,14 @@ class MeasureConfig:
     max_rms_px: float = 1.0
     #: minimum share of the rim that must be measurable (a quarter: 90 deg of arc)
     min_coverage: float = 0.25
-    #: below this a "hole" is a texture crossing: on rendered frames real holes score
-    #: >= 0.3 (low contrast, heavy blur) and most texture candidates <= 0.1 (not all:
-    #: see min_relative_contrast)
+    #: below this a "hole" is a texture crossing: on rendered frames most texture
+    #: candidates score <= 0.1 (not all: see min_relative_contrast), real whole holes
+    #: >= 0.77 on the station envelope and >= 0.21 on the wide one (docs/vision.md)
     min_confidence: float = 0.15
-    #: a whole hole with a photometric fit is judged by its own diameter uncertainty
-    #: (``diameter_u_px``) against this (px; the worst-case diameter bar), not by the
-    #: rays' scatter: on heavy grooves the rays scatter by 0.3-0.5 px RMS around a rim
-    #: the fit measures to 0.05-0.15 px (None: the rays' scatter for every hole)
+    #: a whole hole with a photometric fit is judged by the better of the rays' scatter
+    #: and its own diameter uncertainty (``diameter_u_px``) against this (px; the
+    #: worst-case diameter bar): on heavy grooves the rays scatter by 0.3-0.5 px RMS
+    #: around a rim the fit measures to 0.05-0.15 px (None: the rays' scatter only)
     confidence_u_ref_px: float | None = 0.15
     #: a hole must be this much darker than the wall just outside its rim ((wall -
     #: inside) / wall, medians of the pixels clear of the rim's blur).  A through-hole

@@ -164,3 +164,20 @@ def test_a_colour_frame_reads_the_same_from_a_file_and_from_memory(tmp_path, fra
     from_file = [(m.x_px, m.y_px, m.diameter_px) for m in measure_holes(grey)]
     in_memory = [(m.x_px, m.y_px, m.diameter_px) for m in measure_holes(bgr)]
     assert len(from_file) == 3 and in_memory == from_file
+
+
+def test_grey_with_alpha_reads_its_grey_channel(tmp_path, frame_png):
+    """A grey + alpha PNG (OpenCV decodes it as BGRA) and a grey + alpha array both give
+    the grey channel, not its mean with the alpha."""
+    from PIL import Image
+
+    from station.vision.imageio import read_grey, to_grey
+
+    _, f = frame_png
+    la = np.dstack([f.image, np.full(f.image.shape, 255, np.uint8)])
+    path = tmp_path / "grey_alpha.png"
+    Image.fromarray(la).save(path)  # (h, w, 2) uint8: mode LA
+    np.testing.assert_array_equal(read_grey(path), f.image)
+    np.testing.assert_array_equal(to_grey(la), f.image)
+    with pytest.raises(ValueError, match="shape"):
+        to_grey(np.zeros((4, 4, 5), np.uint8))
