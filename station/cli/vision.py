@@ -114,7 +114,5 @@ def calibrate_cmd(
         err_console.print(f"[yellow]warning:[/] {warning}")
 
 
-
-
 def register(app: typer.Typer) -> None:
     app.add_typer(vision_app, name="vision")

@@ -193,7 +193,7 @@ def _ray_peaks(g2: np.ndarray, u: np.ndarray, half: int, step_px: float):
                 break
         k[i] = ki
         peak[i] = g[i, ki]
-        good = ki > 0 and ki >= 2 and ki <= n_s - 3 and ki >= half and ki <= n_s - 1 - half
+        good = ki >= max(2, half) and ki <= n_s - 1 - max(2, half)
         b = 0.0
         c = 0.0
         for q in range(nw):
@@ -215,8 +215,6 @@ def _ray_peaks(g2: np.ndarray, u: np.ndarray, half: int, step_px: float):
             sigma2[i] = -1.0 / (2 * c)
             offset[i] = off
             ok[i] = abs(off) <= step_px
-        else:
-            ok[i] = False
     return k, ok, offset, sigma2, peak, win
 
 

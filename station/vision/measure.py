@@ -322,9 +322,9 @@ def measure_candidate(
         return None
     ell = fit_ellipse_direct(pts[fit.inliers]) if not edges.cut_by_border else None
     # heuristic confidence: share of consistent edge points, share of rim seen (full
-    # weight from half the rim), and the measurement's quality: a whole hole's own
-    # diameter uncertainty against ``confidence_u_ref_px``, else the rays' scatter
-    # against a 0.25 px residual scale
+    # weight from half the rim), and the measurement's quality: the rays' scatter
+    # against a 0.25 px residual scale or, for a whole hole with a photometric fit, its
+    # own diameter uncertainty against ``confidence_u_ref_px`` if that judges it better
     quality = 1.0 / (1.0 + (rms_px / 0.25) ** 2)
     if diameter_u is not None and cfg.confidence_u_ref_px:
         quality = max(quality, 1.0 / (1.0 + (diameter_u / cfg.confidence_u_ref_px) ** 2))
