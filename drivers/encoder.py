@@ -4,9 +4,11 @@ Protocol: ``drivers.interfaces.encoder_protocol`` (docs/encoder-protocol.md), an
 query/response with an XOR checksum.  A serial line delivers noise, half frames and
 stale bytes, so the reader:
 
-* discards stale input before each query (``reset_input_buffer``); after a timeout,
-  waits until the line has been quiet (the late answer to the timed-out query must not
-  be taken for the next one: the protocol has no sequence number);
+* discards stale input before each query (``reset_input_buffer``); after a timeout it
+  counts the timed-out query's answer as owed and, before the next query, waits until
+  that line has arrived and the line has been quiet, or until the late-reply horizon
+  (the late answer must not be taken for the next query's: the protocol has no
+  sequence number, so only an answer later than the horizon can still be misread);
 * collects bytes until CR LF or a deadline; in a line with noise before a frame it
   finds the frame by its start letter (resync); a line that holds no valid frame is a
   :class:`ProtocolError` (checksum or layout), no line at all a :class:`DeviceTimeout`;
@@ -111,10 +113,13 @@ class SerialGratingEncoder(PositionEncoder):
         self._owns_transport = transport is None
         self._lock = threading.Lock()
         self.identity: str | None = None
-        #: a query timed out: its answer may still be on its way, and the protocol has no
-        #: sequence number to tell it from the next query's. Before the next query the
-        #: line must be quiet for ``quiet_s`` (the whole wait bounded by ``late_reply_s``).
-        self._dirty = False
+        #: answer lines still owed by timed-out queries: each may be on its way, and the
+        #: protocol has no sequence number to tell it from the next query's. Before the
+        #: next query the owed lines must have arrived and the line been quiet for
+        #: ``quiet_s``, or ``late_reply_s`` have passed since the last timed-out query
+        #: was sent (an answer later than that counts as lost).
+        self._owed = 0
+        self._owed_sent = 0.0
         self.quiet_s = 2.0 * self.timeout_s
         self.late_reply_s = 5.0 * self.timeout_s
 
@@ -181,24 +186,29 @@ class SerialGratingEncoder(PositionEncoder):
                 raise DeviceTimeout(f"{what} within {self.timeout_s} s", self.name)
 
     def _wait_quiet(self, t: SerialTransport) -> None:
-        """Discard late answers to timed-out queries until the line has been quiet for
-        ``quiet_s`` (at most ``late_reply_s``): a late answer taken for the next query's
-        would be a reading attributed to the wrong moment."""
+        """Discard late answers to timed-out queries: wait until every owed line has
+        arrived and the line has then been quiet for ``quiet_s``, at most until
+        ``late_reply_s`` after the last timed-out query was sent. A late answer taken
+        for the next query's would be a reading attributed to the wrong moment; a quiet
+        spell alone is not proof, since a slow head answers after any fixed gap."""
+        end = self._owed_sent + self.late_reply_s
         now = time.monotonic()
-        end, quiet_until = now + self.late_reply_s, now + self.quiet_s
-        while now < quiet_until and now < end:
-            if t.read(1):
+        quiet_until = now + self.quiet_s
+        while now < end and (self._owed > 0 or now < quiet_until):
+            chunk = t.read(1)
+            if chunk:
                 waiting = getattr(t, "in_waiting", 0)
                 if waiting:
-                    t.read(min(waiting, 4096))
+                    chunk += t.read(min(waiting, 4096))
+                self._owed -= chunk.count(b"\n")
                 quiet_until = time.monotonic() + self.quiet_s
             now = time.monotonic()
-        self._dirty = False
+        self._owed = 0
 
     def _query_once(self, query: bytes, kind: str) -> tuple[ep.Reply, float]:
         t = self._open_sync()
         try:
-            if self._dirty:
+            if self._owed > 0:
                 self._wait_quiet(t)
             t.reset_input_buffer()
             t_sent = time.monotonic()
@@ -206,7 +216,8 @@ class SerialGratingEncoder(PositionEncoder):
             try:
                 line = self._read_line(t, t_sent + self.timeout_s)
             except DeviceTimeout:
-                self._dirty = True
+                self._owed += 1
+                self._owed_sent = t_sent
                 raise
             t_received = time.monotonic()
         except (serial.SerialException, OSError) as exc:

@@ -72,8 +72,13 @@ async def test_each_fault_gives_its_typed_error_and_the_driver_recovers(enc, hea
     assert (await enc.read()).position_mm == pytest.approx(10.0)
 
 
-async def test_delay_beyond_timeout_is_device_timeout(enc, head):
-    head.faults.activate(FaultKind.DELAY, delay_s=0.25)
+@pytest.mark.parametrize("delay_s", [0.25, 0.35])
+async def test_delay_beyond_timeout_is_device_timeout(enc, head, delay_s):
+    # 0.35 s: the late answer comes after a quiet spell of 2 x timeout, so only the
+    # owed-line rule keeps it from being taken for the retry's answer. The horizon is
+    # set well past the delay: the test checks that rule, not the machine's scheduling.
+    enc.late_reply_s = 1.0
+    head.faults.activate(FaultKind.DELAY, delay_s=delay_s)
     try:
         with pytest.raises(DeviceTimeout):
             await enc.read()
