@@ -185,7 +185,7 @@ class SerialGratingEncoder(PositionEncoder):
                 what = f"partial reply {buf[-ep.MAX_REPLY_BYTES:]!r}" if buf else "no reply"
                 raise DeviceTimeout(f"{what} within {self.timeout_s} s", self.name)
 
-    def _wait_quiet(self, t: SerialTransport) -> None:
+    def _discard_late_answers(self, t: SerialTransport) -> None:
         """Discard late answers to timed-out queries: wait until every owed line has
         arrived and the line has then been quiet for ``quiet_s``, at most until
         ``late_reply_s`` after the last timed-out query was sent. A late answer taken
@@ -209,7 +209,7 @@ class SerialGratingEncoder(PositionEncoder):
         t = self._open_sync()
         try:
             if self._owed > 0:
-                self._wait_quiet(t)
+                self._discard_late_answers(t)
             t.reset_input_buffer()
             t_sent = time.monotonic()
             t.write(query)

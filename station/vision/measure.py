@@ -19,6 +19,7 @@ from __future__ import annotations
 import functools
 from dataclasses import asdict, dataclass
 
+import cv2
 import numpy as np
 from numba import njit
 
@@ -419,7 +420,5 @@ def warm_up() -> int:
     inside = np.hypot(xx - 80.3, yy - 79.6) < 22.0
     rng = np.random.default_rng(0)
     image = np.where(inside, 50.0, 150.0) + rng.normal(0.0, 2.0, (n, n))
-    import cv2
-
     image = cv2.GaussianBlur(image, (0, 0), 1.2)
     return len(measure_holes(np.clip(np.rint(image), 0, 255).astype(np.uint8)))

@@ -237,7 +237,6 @@ async def test_move_stopped_short_is_move_interrupted_and_reissue_completes(z_ax
     assert abs(st.position - 150.0) <= 2e-4
 
 
-
 def _stalling_factory(axis, stalls: int):
     """The driver's own client factory, whose first ``stalls`` clients never connect
     (an event loop held up on a loaded PC, as seen once in CI)."""
