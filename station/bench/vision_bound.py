@@ -236,6 +236,8 @@ def attainability(d_sigma: np.ndarray, centre_cov: np.ndarray, worst_diameter_px
     p_d = 2 * ndtr(-worst_diameter_px / np.maximum(d_sigma, 1e-12))
     return {
         "predicted_median_abs_diameter_err_px": float(np.median(np.median(d, axis=1))),
+        # the tail: the set's 90th percentile of |diameter error|, median over the draws
+        "predicted_p90_abs_diameter_err_px": float(np.median(np.percentile(d, 90, axis=1))),
         "predicted_median_centre_err_px": float(np.median(np.median(c, axis=1))),
         "p_worst_diameter_within_bar": float(np.mean(d.max(axis=1) <= worst_diameter_px)),
         "p_worst_centre_within_bar": float(np.mean(c.max(axis=1) <= worst_centre_px)),
@@ -282,9 +284,10 @@ def _case_bounds(case: HoleCase) -> dict:
     return {k: hole_bound(case, **kw) for k, kw in VARIANTS.items()}
 
 
-def baseline_median_diameter_err(frames: int, seed: int, envelope: str = "station") -> float:
-    """HoughCircles(ALT)'s median |diameter error| on the same frames (the vision bench's
-    better diameter baseline), to turn the bound into the best ratio any estimator reaches."""
+def baseline_diameter_errs(frames: int, seed: int, envelope: str = "station") -> tuple[float, float]:
+    """HoughCircles(ALT)'s median and 90th percentile of |diameter error| on the same
+    frames (the vision bench's better diameter baseline), to turn the bound into the best
+    ratio any estimator reaches."""
     from sim.camera.render import random_frame
     from station.bench.vision import hough_alt
     from station.vision.scoring import Score, score_frame
@@ -293,12 +296,15 @@ def baseline_median_diameter_err(frames: int, seed: int, envelope: str = "statio
     for i in range(frames):
         f = random_frame(seed + i, envelope=envelope)
         total.add(score_frame([(h.x_px, h.y_px, h.diameter_px, h.partial) for h in f.holes], hough_alt(f.image)))
-    return total.summary()["median_diameter_err_px"]
+    summary = total.summary()
+    return summary["median_diameter_err_px"], summary["p90_diameter_err_px"]
 
 
 def run(frames: int = 60, seed: int = 1000, envelope: str = "station", progress=None, jobs: int = 1,
         baseline: bool = False) -> dict:
     cases = cases_from_frames(frames, seed, envelope)
+    if not cases:
+        raise ValueError(f"the {frames} frame(s) from seed {seed} hold no whole hole: take more frames")
     if jobs > 1:
         from concurrent.futures import ProcessPoolExecutor
 
@@ -315,7 +321,7 @@ def run(frames: int = 60, seed: int = 1000, envelope: str = "station", progress=
             if progress:
                 progress()
     res, per_hole, per_hole_c = {}, {}, {}
-    base = baseline_median_diameter_err(frames, seed, envelope) if baseline else None
+    base, base_p90 = baseline_diameter_errs(frames, seed, envelope) if baseline else (None, None)
     for k in VARIANTS:
         sig = np.array([b[k][0] for b in per_case])
         ccov = np.array([b[k][1] for b in per_case]).reshape(-1, 2, 2)
@@ -325,6 +331,9 @@ def run(frames: int = 60, seed: int = 1000, envelope: str = "station", progress=
             # the diameter ratio an efficient unbiased estimator would show against the
             # baseline on these frames (the goal is 5x)
             res[k]["best_diameter_ratio_vs_hough_alt"] = base / att["predicted_median_abs_diameter_err_px"]
+            # and at the 90th percentile: the hard holes (small, blurred, low contrast)
+            # weigh on the tail, where the bound allows less than at the median
+            res[k]["best_diameter_ratio_vs_hough_alt_p90"] = base_p90 / att["predicted_p90_abs_diameter_err_px"]
         per_hole[k] = [round(float(x), 5) for x in sig]
         per_hole_c[k] = [round(float(np.sqrt(0.5 * np.trace(c))), 5) for c in ccov]
     out = {"frames": frames, "seed": seed, "envelope": envelope, "whole_holes": len(cases), "bounds": res,
@@ -335,6 +344,7 @@ def run(frames: int = 60, seed: int = 1000, envelope: str = "station", progress=
                        "is optimistic"}
     if base is not None:
         out["hough_alt_median_diameter_err_px"] = base
+        out["hough_alt_p90_diameter_err_px"] = base_p90
     return out
 
 
@@ -355,6 +365,8 @@ def register(bench_app: typer.Typer) -> None:
         from station.cli.common import out_console, print_json
 
         n = len(cases_from_frames(frames, seed, envelope))
+        if n == 0:
+            raise typer.BadParameter(f"the {frames} frame(s) from seed {seed} hold no whole hole", param_hint="--frames")
         with Progress(console=out_console, transient=True, disable=as_json) as bar:
             task = bar.add_task("Fisher information per hole", total=n)
             r = run(frames, seed, envelope, progress=lambda: bar.advance(task), jobs=jobs, baseline=baseline)
@@ -369,7 +381,7 @@ def register(bench_app: typer.Typer) -> None:
                 f"P(worst d <= {bars['worst_diameter']})", f"P(worst c <= {bars['worst_centre']})",
                 "holes over d / c bar"]
         if baseline:
-            cols.append("best ratio vs Hough ALT")
+            cols += ["best ratio vs Hough ALT", "at the 90th percentile"]
         for c in cols:
             t.add_column(c, justify="right")
         labels = {"blur_free": ("sensor + grain", "fitted"),
@@ -382,12 +394,14 @@ def register(bench_app: typer.Typer) -> None:
                    f"{b['p_worst_diameter_within_bar']:.2f}", f"{b['p_worst_centre_within_bar']:.2f}",
                    f"{b['expected_holes_over_diameter_bar']:.1f} / {b['expected_holes_over_centre_bar']:.1f}"]
             if baseline:
-                row.append(f"{b['best_diameter_ratio_vs_hough_alt']:.2f}x")
+                row += [f"{b['best_diameter_ratio_vs_hough_alt']:.2f}x",
+                        f"{b['best_diameter_ratio_vs_hough_alt_p90']:.2f}x"]
             t.add_row(*row)
         out_console.print(t)
         out_console.print("grooves taken as known and blotches as smooth: the bound is optimistic. P(worst ...): "
                           "the chance that an estimator with errors exactly at the bound keeps every hole within "
                           "the issue's worst-case bar on these frames")
         if baseline:
-            out_console.print(f"Hough ALT's median |diameter error| on these frames: "
-                              f"{r['hough_alt_median_diameter_err_px']:.4f} px")
+            out_console.print(f"Hough ALT's |diameter error| on these frames: median "
+                              f"{r['hough_alt_median_diameter_err_px']:.4f} px, 90th percentile "
+                              f"{r['hough_alt_p90_diameter_err_px']:.4f} px")

@@ -55,6 +55,12 @@ def test_bench_run_scores_every_method_on_the_same_frames():
     lo, hi = r["diameter_accuracy_ratio_ci95"]
     assert lo <= r["diameter_accuracy_ratio_vs_better_baseline"] <= hi
     assert r["better_baseline"]["diameter"] in ("hough_gradient_alt", "contours_fit_ellipse")
+    # the tails' ratios are of the same two methods as the headline's
+    by_stat = r["accuracy_ratios_by_statistic"]
+    assert by_stat["median"]["diameter"] == pytest.approx(r["diameter_accuracy_ratio_vs_better_baseline"])
+    better = r["methods"][r["better_baseline"]["diameter"]]
+    assert by_stat["p90"]["diameter"] == pytest.approx(
+        better["p90_diameter_err_px"] / r["methods"]["ours"]["p90_diameter_err_px"])
     # ours states its own uncertainties; the baselines do not
     assert r["methods"]["ours"]["holes_with_u"] == r["methods"]["ours"]["holes_measured"]
     assert 0.0 <= r["methods"]["ours"]["diameter_within_2u"] <= 1.0
@@ -77,6 +83,9 @@ def test_scoring_judges_stated_uncertainties_by_the_errors():
     assert summary["diameter_within_2u"] == pytest.approx(0.5)
     assert summary["centre_within_2u"] == pytest.approx(0.75)
     assert summary["holes_with_u"] == 2
+    # |diameter errors| 0.10 and 0.01: RMS and the 90th percentile (linear interpolation)
+    assert summary["rms_diameter_err_px"] == pytest.approx(np.sqrt((0.10**2 + 0.01**2) / 2))
+    assert summary["p90_diameter_err_px"] == pytest.approx(0.01 + 0.9 * 0.09)
     # detections without uncertainties leave the figures out
     plain = score_frame(truths, [d[:4] for d in dets]).summary()
     assert "diameter_within_2u" not in plain

@@ -51,6 +51,8 @@ def test_grain_an_unknown_blur_and_an_unknown_wall_slope_cost_information():
 def test_predicted_median_of_equal_sigmas_is_the_half_normal_median():
     a = attainability(np.full(201, 0.02), np.tile(0.02**2 * np.eye(2), (201, 1, 1)), draws=2000)
     assert a["predicted_median_abs_diameter_err_px"] == pytest.approx(0.6745 * 0.02, rel=0.03)
+    # the half-normal's 90th percentile is 1.645 sigma
+    assert a["predicted_p90_abs_diameter_err_px"] == pytest.approx(1.645 * 0.02, rel=0.03)
 
 
 def test_the_bound_is_what_a_least_squares_fit_reaches_on_rendered_frames():
@@ -106,3 +108,24 @@ def test_centre_covariance_comes_from_the_same_fisher_matrix():
     # wall's first harmonic, a nuisance, costs the centre a little more)
     d_white, c_white = hole_bound(case, blur_known=True, with_grain=False)
     assert np.sqrt(c_white[0, 0]) / (d_white / 2) == pytest.approx(np.sqrt(2), rel=0.12)
+
+
+def test_bound_bench_compares_median_and_tail_with_hough_on_the_same_frames():
+    from station.bench.vision_bound import run
+
+    r = run(frames=1, seed=1002, baseline=True)  # one frame, three whole holes
+    assert r["whole_holes"] == 3
+    b = r["bounds"]["blur_free"]
+    assert b["best_diameter_ratio_vs_hough_alt"] == pytest.approx(
+        r["hough_alt_median_diameter_err_px"] / b["predicted_median_abs_diameter_err_px"])
+    assert b["best_diameter_ratio_vs_hough_alt_p90"] == pytest.approx(
+        r["hough_alt_p90_diameter_err_px"] / b["predicted_p90_abs_diameter_err_px"])
+    # the set's 90th percentile of |error| lies above its median
+    assert b["predicted_p90_abs_diameter_err_px"] > b["predicted_median_abs_diameter_err_px"]
+
+
+def test_bound_bench_refuses_frames_without_a_whole_hole():
+    from station.bench.vision_bound import run
+
+    with pytest.raises(ValueError, match="no whole hole"):
+        run(frames=2, seed=1000)
