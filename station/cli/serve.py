@@ -2,16 +2,29 @@
 
 The server owns the station: it opens one session at start (the twins too, in
 simulation) and closes it at shutdown (Ctrl-C, SIGTERM).
+
+A SIGTERM (systemd's stop, ``kill``) that uvicorn shut down for ends the process with
+exit status 0 through the interpreter's normal exit. uvicorn re-raises the signal it
+stopped for once shutdown is done; under the default handler that kills the process
+outright, so no exit handler would run: multiprocessing's finalizers would not release
+the renderer's queues (the resource tracker then warns of "leaked semaphore objects"),
+and a stop that was asked for and done would read as death by a signal.
 """
 
 from __future__ import annotations
 
+import signal
 from pathlib import Path
 from typing import Optional
 
 import typer
 
 from station.cli.common import fail
+
+
+def _exit_cleanly(signum, frame) -> None:
+    """SIGTERM as an orderly exit: the exit handlers run, the status is 0."""
+    raise SystemExit(0)
 
 
 def register(app: typer.Typer) -> None:
@@ -37,9 +50,14 @@ def register(app: typer.Typer) -> None:
             fail("--time-scale must be positive")
         settings = Settings(config=config, scenario=scenario, data_dir=data, db_url=db, time_scale=time_scale,
                             cookie_secure=cookie_secure)
+        # uvicorn takes SIGTERM over while it serves and restores this handler before
+        # re-raising the signal after its graceful shutdown (module docstring)
+        previous = signal.signal(signal.SIGTERM, _exit_cleanly)
         try:
             # open SSE/MJPEG streams end when the runtime closes; this bounds the wait for them
             uvicorn.run(create_app(settings), host=host, port=port, timeout_graceful_shutdown=5,
                         log_level="info")
         except OSError as exc:
             fail(f"cannot listen on {host}:{port}: {exc.strerror or exc}")
+        finally:
+            signal.signal(signal.SIGTERM, previous)
