@@ -366,7 +366,8 @@ def register(bench_app: typer.Typer) -> None:
 
         n = len(cases_from_frames(frames, seed, envelope))
         if n == 0:
-            raise typer.BadParameter(f"the {frames} frame(s) from seed {seed} hold no whole hole", param_hint="--frames")
+            raise typer.BadParameter(f"the {frames} frame(s) from seed {seed} hold no whole hole",
+                                     param_hint="--frames")
         with Progress(console=out_console, transient=True, disable=as_json) as bar:
             task = bar.add_task("Fisher information per hole", total=n)
             r = run(frames, seed, envelope, progress=lambda: bar.advance(task), jobs=jobs, baseline=baseline)
