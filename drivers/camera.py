@@ -20,6 +20,7 @@ import cv2
 import numpy as np
 
 from drivers.interfaces import Camera, CommunicationLost, DeviceTimeout, Frame
+from drivers.interfaces.pixels import to_grey
 
 #: V4L2 exposure: 1 = manual exposure (V4L2_EXPOSURE_MANUAL); OpenCV passes it through as is
 _V4L2_MANUAL_EXPOSURE = 1
@@ -105,11 +106,9 @@ class OpenCVCamera(Camera):
                     raise CommunicationLost("the camera delivered no frame", self.name)
                 raise CommunicationLost("end of video file", self.name)
             if image.ndim == 3:
-                # the rounded mean of B, G and R: the grey the vision stage takes from a
-                # colour file (station.vision.imageio.to_grey; a driver imports nothing of
-                # ours), so a saved frame and a live one measure alike
-                colour = image[..., :3]
-                image = ((colour.sum(axis=2, dtype=np.uint32) + 1) // 3).astype(image.dtype)
+                # the grey the vision stage takes from a colour file, so a saved frame and
+                # a live one measure alike
+                image = to_grey(image)
             self._sequence += 1
             return Frame(np.ascontiguousarray(image), stamp, self._sequence)
 

@@ -7,6 +7,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from drivers.interfaces.pixels import to_grey
+
 
 class ImageReadError(ValueError):
     """A file that is missing, unreadable, or not an image OpenCV can decode."""
@@ -28,27 +30,6 @@ def to_8bit(image: np.ndarray) -> np.ndarray:
         shift = max(int(image.max()).bit_length() - 8, 0)
         return (image >> shift).astype(np.uint8)
     raise ValueError(f"unsupported pixel type {image.dtype} (8- or 16-bit unsigned integers)")
-
-
-def to_grey(image: np.ndarray) -> np.ndarray:
-    """One channel from a grey, grey + alpha, BGR or BGRA frame: for colour the mean of B, G
-    and R, rounded, in the frame's own type. The same conversion for files (``read_grey``)
-    and frames handed over in memory (``measure_holes``); under a white ring light the
-    channels see the same geometry, and their mean carries less noise than luminance
-    weights (1/3 of a channel's variance against 0.45)."""
-    if image.ndim == 2:
-        return image
-    if image.ndim != 3 or image.shape[2] not in (1, 2, 3, 4):
-        raise ValueError(f"a frame is grey, grey + alpha, BGR or BGRA, not of shape {image.shape}")
-    if image.shape[2] <= 2:
-        return image[..., 0]  # grey (+ alpha)
-    colour = image[..., :3]
-    if not np.issubdtype(image.dtype, np.integer):
-        return colour.mean(axis=2).astype(image.dtype)
-    # integer mean with rounding, without a float copy of the whole frame
-    total = colour.sum(axis=2, dtype=np.uint32)
-    n = colour.shape[2]
-    return ((total + n // 2) // n).astype(image.dtype)
 
 
 def read_grey(path: str | Path) -> np.ndarray:

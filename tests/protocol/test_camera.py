@@ -49,7 +49,7 @@ def test_frames_are_grey_numbered_and_in_order(video):
 def test_a_colour_stream_is_grey_by_the_mean_of_its_channels(tmp_path):
     """A tinted stream (B, G, R at different levels): the driver's grey is the rounded
     mean of the decoded channels, the conversion the vision stage applies to colour
-    files (station.vision.imageio.to_grey), not luminance weights."""
+    files (drivers.interfaces.pixels.to_grey), not luminance weights."""
     path = tmp_path / "tinted.avi"
     writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 10.0, (80, 60))
     frame = np.zeros((60, 80, 3), np.uint8)
