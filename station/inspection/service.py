@@ -21,7 +21,8 @@ from dataclasses import dataclass, field
 from typing import Any, Callable
 
 from station import __version__
-from station.inspection.scan import CameraGeometry, HoleResult, HoleTarget, ScanSettings, bore_scan
+from station.inspection.scan import (CameraGeometry, HoleResult, HoleTarget, ScanFinding, ScanResult, ScanSettings,
+                                     bore_scan)
 from station.inspection.scanlog import write_scan_log
 from station.kinematics.model import StationModel
 from station.parts.spec import PartSpec
@@ -56,6 +57,9 @@ class InspectionOutcome:
     reason: str = ""
     characteristics: list[CharacteristicOutcome] = field(default_factory=list)
     holes: list[HoleResult] = field(default_factory=list)
+    #: what the scan saw that the spec does not expect (unexpected holes, an ambiguous
+    #: identity) and how the part's angular datum was set
+    findings: list[ScanFinding] = field(default_factory=list)
 
     def to_json(self, with_truth: bool = False) -> dict:
         chars = []
@@ -65,7 +69,8 @@ class InspectionOutcome:
                 d.pop("true_value", None)
             chars.append(d)
         return {"id": self.id, "part_number": self.part_number, "serial": self.serial, "state": self.state,
-                "result": self.result, "reason": self.reason, "characteristics": chars}
+                "result": self.result, "reason": self.reason, "characteristics": chars,
+                "findings": [dict(f.__dict__) for f in self.findings]}
 
 
 #: per store (by id): inspections whose record could not be finished (store failure),
@@ -74,7 +79,21 @@ _UNFINISHED: dict[int, dict[str, str]] = {}
 
 
 def hole_targets(part: PartSpec) -> list[HoleTarget]:
-    return [HoleTarget(h.id, h.position.nominal, h.angle_deg, h.diameter.nominal) for h in part.holes]
+    """The spec's holes with their search zones: the position limits widened by the
+    part's axial placement uncertainty, the drawing's angular band (docs/part-specs.md)."""
+    pad_mm = part.placement.axial_mm
+    return [HoleTarget(h.id, h.position.nominal, h.angle_deg, h.diameter.nominal,
+                       axial_lo_mm=h.position.lower_limit - pad_mm, axial_hi_mm=h.position.upper_limit + pad_mm,
+                       angle_half_deg=h.angle_search_deg,
+                       diameter_lo_mm=h.diameter.lower_limit, diameter_hi_mm=h.diameter.upper_limit,
+                       axial_lo_tol_mm=h.position.lower_limit, axial_hi_tol_mm=h.position.upper_limit)
+            for h in part.holes]
+
+
+def scan_plan(model: StationModel, part: PartSpec, geometry: CameraGeometry, settings: ScanSettings):
+    """The bore scan of ``part`` (a plan returning a ``ScanResult``)."""
+    return bore_scan(model, hole_targets(part), geometry, settings, datum=part.placement.angular_datum,
+                     placement_angle_deg=part.placement.angle_deg)
 
 
 class InspectionService:
@@ -130,13 +149,14 @@ class InspectionService:
         try:
             try:
                 await self.ensure_ready()
-                results: list[HoleResult] = await self.engine.run(
-                    bore_scan(self.model, hole_targets(part), self.geometry, self.settings))
+                scan: ScanResult = await self.engine.run(scan_plan(self.model, part, self.geometry, self.settings))
             except PlanEnded as ended:
                 state = "faulted" if ended.outcome == "faulted" else "aborted"
                 await asyncio.to_thread(self.store.finish, iid, state, None, ended.reason)
                 return InspectionOutcome(iid, part.part_number, serial, state, None, ended.reason)
+            results = scan.holes
             outcome = self._judge(iid, part, serial, results)
+            outcome.findings = scan.findings
             measurements = [Measurement(c.id, c.nominal, c.lower_limit, c.upper_limit, c.measured, c.passed,
                                         uncertainty_k2=c.uncertainty_k2, true_value=c.true_value)
                             for c in outcome.characteristics]

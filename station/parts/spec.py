@@ -31,6 +31,14 @@ PART_NUMBER_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9._-]{0,63}$"
 #: the two characteristics measured on each compensating hole (paper, Table 4)
 CHARACTERISTIC_KINDS = ("diameter", "position")
 
+#: a hole's angular search band when the drawing gives no angular tolerance (deg, +/-):
+#: the drawing does not bound the angle, so the band is as wide as one frame searches
+#: at no extra cost: the 12.8 mm wide frame shows a 0.825 mm hole whole, with 0.2 mm
+#: clearance, within +/-5.8 mm of wall, +/-30 deg on the 22.2 mm bore; 25 deg leaves
+#: room for the part's placement. A hole further round is an unexpected one, not this
+#: hole (docs/part-specs.md, Search zones); a drawing's angle_tol_deg replaces it
+DEFAULT_ANGLE_TOL_DEG = 25.0
+
 
 def _decimal_sum(a: float, b: float) -> float:
     """``a + b`` as the nearest double to the decimal sum of the numbers as written.
@@ -120,8 +128,24 @@ class Hole(_SpecModel):
 
     id: str = Field(pattern=HOLE_ID_PATTERN)
     angle_deg: float = Field(description="nominal angle about the bore axis, [0, 360) deg")
+    #: the drawing's angular tolerance of the hole's place (+/- deg); not a measured
+    #: characteristic, it bounds where the station looks for the hole
+    angle_tol_deg: float | None = Field(default=None, description="angular tolerance of the hole's place, +/- deg")
     diameter: Tolerance
     position: Tolerance
+
+    @property
+    def angle_search_deg(self) -> float:
+        """Half-width of the angular band the hole is looked for in, about its drawing
+        angle (before the part's placement uncertainty is added)."""
+        return self.angle_tol_deg if self.angle_tol_deg is not None else DEFAULT_ANGLE_TOL_DEG
+
+    @field_validator("angle_tol_deg")
+    @classmethod
+    def _angle_tol_range(cls, v: float | None) -> float | None:
+        if v is not None and not 0.0 < v < 180.0:
+            raise ValueError(f"must be in (0, 180) deg (got {v})")
+        return v
 
     @field_validator("angle_deg")
     @classmethod
@@ -136,6 +160,24 @@ class Hole(_SpecModel):
         if not v.lower_limit > 0:
             raise ValueError(f"the lower limit {v.lower_limit:g} mm must be above 0: a hole has a size")
         return v
+
+
+class Placement(_SpecModel):
+    """How well the part's place on the rotary table is known: with the position
+    tolerance it bounds each hole's search zone (docs/part-specs.md, Search zones).
+
+    ``axial_mm``: the uncertainty of the part's axial place beyond the position
+    tolerance (the datum face on the table: a chip under it, the face's flatness),
+    and how far out of tolerance a hole is still measured as that hole rather than
+    reported as an unexpected one.  ``angle_deg``: the uncertainty of the part's angle
+    on the table when an angular fixture places it.  ``angular_datum``: no fixture;
+    the part's angle is set by this hole, found by a survey round the bore at its
+    axial band, and the other holes are looked for at their drawing angles from it
+    (``angle_deg`` is then not used)."""
+
+    axial_mm: float = Field(default=0.5, ge=0.0, le=10.0)
+    angle_deg: float = Field(default=5.0, ge=0.0, le=180.0)
+    angular_datum: str | None = Field(default=None, pattern=HOLE_ID_PATTERN)
 
 
 @dataclass(frozen=True)
@@ -166,6 +208,7 @@ class PartSpec(_SpecModel):
     description: str = ""
     unit: Literal["mm"] = "mm"
     bore: Bore
+    placement: Placement = Field(default_factory=Placement)
     holes: list[Hole] = Field(min_length=1)
 
     @model_validator(mode="after")
@@ -186,6 +229,10 @@ class PartSpec(_SpecModel):
                 problems.append((("holes", i, "position"),
                                  f"the hole spans {lo:g}..{hi:g} mm along the axis, outside the bore "
                                  f"(0..{self.bore.depth_mm:g} mm deep)"))
+        datum = self.placement.angular_datum
+        if datum is not None and datum not in seen:
+            problems.append((("placement", "angular_datum"),
+                             f"{datum!r} is not a hole of this part (holes: {', '.join(seen)})"))
         if problems:
             raise SpecProblems(problems)
         return self
