@@ -95,6 +95,9 @@ def register(app: typer.Typer) -> None:
             out_console.print(result_table(outcome, simulated))
             if outcome.reason:
                 out_console.print(f"reason: {outcome.reason}")
+            for f in outcome.findings:
+                style = "dim" if f.kind == "datum" else "yellow"
+                out_console.print(f"[{style}]{f.kind.replace('_', ' ')}: {f.message}[/]")
             out_console.print(f"[dim]inspection {outcome.id} stored in {data}/[/]")
         if outcome.state != "complete":
             raise typer.Exit(EXIT_ERROR)
