@@ -16,10 +16,13 @@ import subprocess
 import sys
 from pathlib import Path
 
+from dataclasses import replace
+
 import pytest
 
 from sim.world import HoleTruth as H
 from sim.world import PartTruth, Temperature
+from station.effects import ThermalDrift, ThermalExpansion
 from station.inspection.session import open_session
 from station.parts import load_part
 
@@ -109,16 +112,24 @@ def test_parts_unlike_the_drawing(tmp_path):
 
 
 def test_warming_machine_and_part_off_nominal(tmp_path):
-    """A machine warming by 4 degC (tau 60 s) while parts are inspected: the grating
-    follows what the model's thermal terms and the scale do not."""
+    """A machine warming by 4 degC (tau 60 s) while a part off nominal is inspected:
+    the world's Z screw grows (11.5 ppm/K, steel) and its nut drifts 4 um as it
+    warms, which the station's model does not hold; the grating sees the carriage
+    where the heat put it."""
     spec = load_part(PART)
     holes = (H("hole_1", 71.08, 45.0, 0.72), H("hole_2", 85.11, 45.0, 0.69))
 
     async def go():
         outs = []
         async with open_session(time_scale=5.0, data_dir=tmp_path) as s:
-            s.station.world.part = PartTruth(holes=holes)
-            s.station.world.temperature = Temperature(start_c=20.0, rise_c=4.0, tau_s=60.0)
+            world = s.station.world
+            world.part = PartTruth(holes=holes)
+            world.temperature = Temperature(start_c=20.0, rise_c=4.0, tau_s=60.0)
+            mz = world.model.motions_of("Z")
+            warm_z = replace(mz, z=replace(mz.z, effects=mz.z.effects + (ThermalExpansion(coefficient=11.5),
+                                                                         ThermalDrift(amplitude=4.0, tau=60.0))))
+            world.model = replace(world.model, motions={**world.model.motions, "Z": warm_z})
+            assert s.station.model is not world.model  # the station keeps its own belief
             for i in range(2):
                 outs.append(await s.inspect(spec, f"WARM-{i}"))
         return outs
