@@ -68,7 +68,7 @@ def load_scenario(path: str | Path | None = None) -> Scenario:
     """Read a scenario TOML file (default: ``sim/scenarios/default.toml``)."""
     path = Path(path) if path is not None else DEFAULT_SCENARIO
     try:
-        data = tomllib.loads(path.read_text())
+        data = tomllib.loads(path.read_text(encoding="utf-8-sig"))
     except FileNotFoundError:
         raise ScenarioError(f"scenario file not found: {path}") from None
     except tomllib.TOMLDecodeError as exc:

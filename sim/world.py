@@ -216,5 +216,5 @@ def load_world(scenario_path: str | Path | None = None) -> World:
 
         scenario_path = DEFAULT_SCENARIO
     p = Path(scenario_path)
-    data = tomllib.loads(p.read_text())
+    data = tomllib.loads(p.read_text(encoding="utf-8-sig"))
     return world_from_dict(data.get("world", {}), str(p), p.parent)

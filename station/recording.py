@@ -129,7 +129,9 @@ def _number(text: str, path: str, line: int, col: str) -> float:
 
 
 def parse_recording(text: str, source: str = "<text>") -> Recording:
-    """Parse recording text; raise :class:`RecordingError` naming line and column."""
+    """Parse recording text; raise :class:`RecordingError` naming line and column.
+    A UTF-8 byte-order mark (a spreadsheet's export) is dropped."""
+    text = text.removeprefix("\ufeff")
     metadata: dict[str, str] = {}
     lines = text.splitlines()
     i = 0
@@ -218,7 +220,7 @@ def read_text_file(path: str | Path, error: type[LocatedInputError] = LocatedInp
     naming the file (the common first step of every text format the station reads)."""
     p = Path(path)
     try:
-        return p.read_text(encoding="utf-8")
+        return p.read_text(encoding="utf-8-sig")
     except FileNotFoundError:
         raise error(str(p), None, None, "no such file") from None
     except UnicodeDecodeError as exc:

@@ -118,7 +118,7 @@ def load_config(path: str | Path | None) -> tuple[dict[str, Any], str]:
     else:
         p = Path(path)
         try:
-            text = p.read_text()
+            text = p.read_text(encoding="utf-8-sig")
         except OSError as exc:
             raise ConfigError(f"{p}: {exc.strerror}") from None
         source = str(p)

@@ -470,7 +470,7 @@ def _merge(base: dict, over: dict) -> dict:
 
 
 def _default_model_data() -> dict:
-    return tomllib.loads(resources.files("station").joinpath("data/default_station.toml").read_text())
+    return tomllib.loads(resources.files("station").joinpath("data/default_station.toml").read_text(encoding="utf-8-sig"))
 
 
 def model_from_dict(data: dict, source: str = "<dict>", topology: Topology | None = None) -> StationModel:
@@ -533,11 +533,11 @@ def model_from_dict(data: dict, source: str = "<dict>", topology: Topology | Non
 def load_model(path: str | Path | None = None) -> StationModel:
     """Read a station model file; the default is ``station/data/default_station.toml``."""
     if path is None:
-        text = resources.files("station").joinpath("data/default_station.toml").read_text()
+        text = resources.files("station").joinpath("data/default_station.toml").read_text(encoding="utf-8-sig")
         source = "station/data/default_station.toml"
     else:
         try:
-            text = Path(path).read_text()
+            text = Path(path).read_text(encoding="utf-8-sig")
         except OSError as exc:
             raise ModelConfigError(f"{path}: {exc.strerror}") from None
         source = str(path)

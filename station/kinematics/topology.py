@@ -92,10 +92,10 @@ class Topology:
 def load_topology(path: str | Path | None = None) -> Topology:
     """Read a topology file; the default is the station's (``station/data/topology.toml``)."""
     if path is None:
-        text = resources.files("station").joinpath("data/topology.toml").read_text()
+        text = resources.files("station").joinpath("data/topology.toml").read_text(encoding="utf-8-sig")
         source = "station/data/topology.toml"
     else:
-        text = Path(path).read_text()
+        text = Path(path).read_text(encoding="utf-8-sig")
         source = str(path)
     data = tomllib.loads(text)
     bodies = []

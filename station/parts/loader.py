@@ -133,7 +133,9 @@ def _problems_of(exc: ValidationError, text: str, source: str) -> list[Problem]:
 
 
 def parse_part(text: str, source: str = "<text>") -> PartSpec:
-    """Validate TOML text as a part spec; :class:`PartSpecError` lists every problem."""
+    """Validate TOML text as a part spec; :class:`PartSpecError` lists every problem.
+    A UTF-8 byte-order mark (a file saved by a spreadsheet or Notepad) is dropped."""
+    text = text.removeprefix("\ufeff")
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
@@ -149,7 +151,7 @@ def read_part_file(path: str | Path) -> PartSpec:
     """Read and validate a spec file at a path."""
     p = Path(path)
     try:
-        text = p.read_text(encoding="utf-8")
+        text = p.read_text(encoding="utf-8-sig")
     except OSError as exc:
         raise PartSpecError([Problem(str(p), None, "", f"cannot read: {exc.strerror or exc}")]) from None
     except UnicodeDecodeError as exc:
@@ -172,10 +174,10 @@ def builtin_part_numbers() -> list[str]:
 def _read_builtin(part_number: str) -> PartSpec:
     f = _builtin_dir().joinpath(f"{part_number}.toml")
     source = f"station/data/parts/{part_number}.toml"
-    spec = parse_part(f.read_text(encoding="utf-8"), source)
+    spec = parse_part(f.read_text(encoding="utf-8-sig"), source)
     if spec.part_number != part_number:
         # the file name is the look-up key: a mismatch would load the wrong part
-        raise PartSpecError([Problem(source, line_of(f.read_text(encoding="utf-8"), ("part_number",)),
+        raise PartSpecError([Problem(source, line_of(f.read_text(encoding="utf-8-sig"), ("part_number",)),
                                      "part_number", f"{spec.part_number!r} differs from the file name")])
     return spec
 

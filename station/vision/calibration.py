@@ -149,7 +149,7 @@ class CameraCalibration:
 
     @classmethod
     def load(cls, path: str | Path) -> "CameraCalibration":
-        return cls.from_json(json.loads(Path(path).read_text()))
+        return cls.from_json(json.loads(Path(path).read_text(encoding="utf-8-sig")))
 
 
 def _replace(c: CameraCalibration, **kw) -> CameraCalibration:
