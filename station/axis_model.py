@@ -111,7 +111,10 @@ def axis_model_from_dict(data: dict[str, Any], source: str = "<dict>") -> AxisMo
             raise AxisModelError(f"{source}: effects[{i}] {eff.name!r} does not apply to a {kind} axis")
         effects.append(eff)
     extra = {k: v for k, v in data.items() if k not in ("baseline", "effects")}
-    curve = ErrorCurve(kind=kind, target=target, deviation=deviation, effects=tuple(effects))
+    try:
+        curve = ErrorCurve(kind=kind, target=target, deviation=deviation, effects=tuple(effects))
+    except ValueError as exc:  # a rotary baseline over a whole turn that does not close
+        raise AxisModelError(f"{source}: baseline: {exc}") from None
     return AxisModel(name=name, kind=kind, curve=curve, noise_sigma=float(sigma), extra=extra)
 
 

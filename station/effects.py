@@ -332,6 +332,13 @@ def effect_from_dict(d: Mapping[str, Any], where: str = "") -> Effect:
     return cls(**kwargs)
 
 
+#: a rotary table whose span is within this of 360 deg covers a whole turn
+ROTARY_TURN_TOL_DEG = 1e-6
+#: how far the two ends of a whole-turn rotary table may differ (arcsec): the
+#: resolution of a rotary calibrator's reading (0.01 arcsec), not a physical effect
+ROTARY_CLOSE_TOL = 0.01
+
+
 @dataclass(frozen=True)
 class ErrorCurve:
     """One error motion as a function of position: a baseline table, linearly
@@ -354,6 +361,17 @@ class ErrorCurve:
         t = np.asarray(self.target, dtype=float)
         if t.size and np.any(np.diff(t) <= 0):
             raise ValueError("baseline targets must be strictly increasing")
+        if self.kind == "rotary" and t.size > 1 and t[-1] - t[0] >= 360.0 - ROTARY_TURN_TOL_DEG:
+            # A rotary error curve is periodic: 0 and 360 deg are one table position.
+            # A table over a whole turn must close, or it would step silently at the
+            # wrap (issue 18); it is refused, naming both ends (docs/error-model.md).
+            d0, d1 = self.deviation[0], self.deviation[-1]
+            if t[-1] - t[0] > 360.0 + ROTARY_TURN_TOL_DEG:
+                raise ValueError(f"rotary baseline spans {t[0]:g}..{t[-1]:g} deg, more than one turn")
+            if abs(d1 - d0) > ROTARY_CLOSE_TOL:
+                raise ValueError(f"rotary baseline spans a whole turn but does not close: {d0:g} arcsec at "
+                                 f"{t[0]:g} deg, {d1:g} arcsec at {t[-1]:g} deg (the same table position); "
+                                 "give the turn without its last point, or make both ends equal")
 
     @classmethod
     def zero(cls, kind: str = "linear") -> "ErrorCurve":
@@ -374,6 +392,9 @@ class ErrorCurve:
         t = np.asarray(self.target)
         d = np.asarray(self.deviation)
         if self.kind == "rotary":
+            if len(t) > 1 and t[-1] - t[0] >= 360.0 - ROTARY_TURN_TOL_DEG:
+                t, d = t[:-1], d[:-1]  # a closed turn: its last point is its first
+            # periodic: a table over less than a turn is closed linearly across its gap
             return np.interp(np.mod(x, 360.0), t, d, period=360.0) if len(t) > 1 else np.full_like(x, d[0])
         return np.interp(x, t, d)
 

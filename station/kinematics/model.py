@@ -458,7 +458,10 @@ def _curve_from(data: Any, kind: str, where: str) -> ErrorCurve:
             effects.append(effect_from_dict(e, f"{where}.effects[{i}]"))
         except EffectSpecError as exc:
             raise ModelConfigError(str(exc)) from None
-    return ErrorCurve(kind, tuple(target_f), tuple(dev_f), tuple(effects))
+    try:
+        return ErrorCurve(kind, tuple(target_f), tuple(dev_f), tuple(effects))
+    except ValueError as exc:  # a rotary table over a whole turn that does not close
+        raise ModelConfigError(f"{where}: {exc}") from None
 
 
 def _merge(base: dict, over: dict) -> dict:
