@@ -82,6 +82,9 @@ class ModbusServoAxis(_ServoAxis):
         heartbeat_period_s: float = 0.1,
         following_error_limit: float | None = None,
         in_position_window: float | None = None,
+        velocity_limit: float | None = None,
+        acceleration_limit: float | None = None,
+        poll_s: float = DEFAULT_POLL_S,
     ):
         if unit_per_count <= 0:
             raise ValueError("unit_per_count must be positive")
@@ -96,6 +99,14 @@ class ModbusServoAxis(_ServoAxis):
         self.unit_per_count = float(unit_per_count)
         self.default_velocity = float(default_velocity)
         self.default_acceleration = float(default_acceleration)
+        #: what the station may command for a scan (the integrator's limits); the
+        #: defaults when the config names none
+        self.velocity_limit = float(velocity_limit) if velocity_limit is not None else self.default_velocity
+        self.acceleration_limit = (float(acceleration_limit) if acceleration_limit is not None
+                                   else self.default_acceleration)
+        if not (self.velocity_limit > 0 and self.acceleration_limit > 0 and poll_s > 0):
+            raise ValueError("velocity_limit, acceleration_limit and poll_s must be positive")
+        self.poll_s = float(poll_s)
         self.timeout_s = float(timeout_s)
         self.watchdog_timeout_ms = int(watchdog_timeout_ms)
         self.heartbeat_period_s = float(heartbeat_period_s)
@@ -315,16 +326,18 @@ class ModbusServoAxis(_ServoAxis):
         self._control = (self._control | rm.ControlBit.ENABLE) if on else (self._control & ~rm.ControlBit.ENABLE)
         await self.write_registers(rm.CONTROL_WORD, [int(self._control)])
 
-    async def move_to(self, position: float, velocity: float | None = None) -> None:
+    async def move_to(self, position: float, velocity: float | None = None,
+                      acceleration: float | None = None) -> None:
         st = await self.status()
         self._raise_if_fault(st)
         if not st.enabled:
             raise DriverError("move refused: drive not enabled", self.name)
         v = self.default_velocity if velocity is None else float(velocity)
-        if v <= 0:
-            raise ValueError("velocity must be positive")
+        a = self.default_acceleration if acceleration is None else float(acceleration)
+        if not (v > 0 and a > 0):
+            raise ValueError("velocity and acceleration must be positive")
         v_counts = max(1, self.to_counts(v))
-        a_counts = max(1, self.to_counts(self.default_acceleration))
+        a_counts = max(1, self.to_counts(a))
         # target, velocity and acceleration are contiguous (2..9): one FC16 request
         await self.write_registers(
             rm.TARGET_POSITION,
@@ -383,7 +396,8 @@ class ModbusServoAxis(_ServoAxis):
         if st.fault or st.estop:
             raise DriveFault(st.fault_code, rm.FaultCode.describe(st.fault_code), self.name)
 
-    async def wait_in_position(self, timeout: float, poll_s: float = DEFAULT_POLL_S) -> AxisStatus:
+    async def wait_in_position(self, timeout: float, poll_s: float | None = None) -> AxisStatus:
+        poll_s = self.poll_s if poll_s is None else poll_s
         loop = asyncio.get_running_loop()
         deadline = loop.time() + timeout
         resting_short = 0

@@ -25,6 +25,8 @@ Config file (TOML), every key optional; the embedded default is a simulated stat
     unit_per_count = 0.0001
     default_velocity = 20.0
     default_acceleration = 200.0
+    max_velocity = 50.0         # the scan's moves (default: default_velocity)
+    max_acceleration = 500.0    # (default: default_acceleration)
 
     [hardware.C]                # as Z
     [hardware.encoder]
@@ -39,6 +41,8 @@ Config file (TOML), every key optional; the embedded default is a simulated stat
     mm_per_px = 0.010           # scale at the bore wall, from `station vision calibrate`
     exposure = 100.0            # optional, driver units
     gain = 0.0                  # optional
+    exposure_s = 0.008          # optional: the sensor's exposure and readout (s),
+    readout_s = 0.025           # for the cycle time's lower bound
 """
 
 from __future__ import annotations
@@ -50,7 +54,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from drivers.interfaces import Camera, CommunicationLost, DeviceTimeout, LinearAxis, PositionEncoder, RotaryAxis
+from drivers.interfaces import Camera, CameraTiming, CommunicationLost, DeviceTimeout, LinearAxis, PositionEncoder, RotaryAxis
 from station.kinematics.model import StationModel, load_model
 
 log = logging.getLogger(__name__)
@@ -79,6 +83,9 @@ class Station:
     #: the camera's scale at the bore wall and its frame size
     mm_per_px: float = 0.010
     frame_size_px: tuple[int, int] = (1280, 1024)
+    #: how much faster than real time the twins' motion runs; None on hardware (the
+    #: wall clock is the machine's)
+    time_scale: float | None = None
     twins: Any = None  # sim.twins.TwinsThread when simulated
     world: Any = None  # sim.world.World when simulated
     endpoints: dict[str, Any] = field(default_factory=dict)
@@ -141,6 +148,12 @@ def _axis_driver(cls, name: str, spec: dict[str, Any], source: str):
         default_velocity=float(spec.get("default_velocity", 20.0)),
         default_acceleration=float(spec.get("default_acceleration", 200.0)),
     )
+    for key, arg in (("max_velocity", "velocity_limit"), ("max_acceleration", "acceleration_limit")):
+        if key in spec:
+            try:
+                common[arg] = float(spec[key])
+            except (TypeError, ValueError):
+                raise ConfigError(f"{source}: [hardware.{name}] {key} must be a number, not {spec[key]!r}") from None
     if "timeout_s" in spec:
         common["timeout_s"] = float(spec["timeout_s"])
     if transport == "tcp":
@@ -196,6 +209,11 @@ def build_station(config_path: str | Path | None = None, *, scenario: str | Path
             dev = k.get("device", 0)
             size = (int(k.get("width", 1280)), int(k.get("height", 1024)))
             cam = OpenCVCamera(dev, width=size[0], height=size[1], exposure=k.get("exposure"), gain=k.get("gain"))
+            if "exposure_s" in k and "readout_s" in k:
+                try:
+                    cam.timing = CameraTiming(float(k["exposure_s"]), float(k["readout_s"]))
+                except (TypeError, ValueError) as exc:
+                    raise ConfigError(f"{source}: [hardware.camera] exposure_s / readout_s: {exc}") from None
             scale = float(k["mm_per_px"])
         return Station(z, c, enc, model, mode, chash, camera=cam, mm_per_px=scale, frame_size_px=size)
 
@@ -227,6 +245,8 @@ def build_station(config_path: str | Path | None = None, *, scenario: str | Path
             axes[key] = cls.tcp(
                 ep["host"], ep["port"], name=key, device_id=ep["device_id"], unit_per_count=ep["unit_per_count"],
                 default_velocity=ax_scen.config.default_velocity, default_acceleration=ax_scen.config.default_acceleration,
+                # the scan moves at the drive's limits, as an integrator would set them
+                velocity_limit=ax_scen.config.max_velocity, acceleration_limit=ax_scen.config.max_acceleration,
             )
         enc = None
         if "encoder" in endpoints:
@@ -240,5 +260,5 @@ def build_station(config_path: str | Path | None = None, *, scenario: str | Path
         twins.stop()
         raise
     return Station(axes["Z"], axes["C"], enc, model, mode, chash, camera=cam, mm_per_px=optics.mm_per_px,
-                   frame_size_px=(optics.params.width_px, optics.params.height_px),
+                   frame_size_px=(optics.params.width_px, optics.params.height_px), time_scale=scen.time_scale,
                    twins=twins, world=world, endpoints=endpoints)

@@ -17,6 +17,7 @@ Errors are typed so that a caller can decide what to do without parsing messages
 from __future__ import annotations
 
 import abc
+import math
 import enum
 from dataclasses import dataclass, field
 
@@ -132,9 +133,19 @@ class _ServoAxis(abc.ABC):
     async def enable(self, on: bool = True) -> None:
         """Power the motor (or remove power)."""
 
+    #: the velocity and acceleration the station may command (unit/s, unit/s^2): the
+    #: integrator's limits for scanning, within the drive's own; None: not stated
+    velocity_limit: float | None = None
+    acceleration_limit: float | None = None
+    #: how often ``wait_in_position`` asks the drive (s): on average the station sees
+    #: the end of a move half a period late
+    poll_s: float = 0.0
+
     @abc.abstractmethod
-    async def move_to(self, position: float, velocity: float | None = None) -> None:
-        """Start an absolute move; returns once the drive accepted it (see ``wait_in_position``)."""
+    async def move_to(self, position: float, velocity: float | None = None,
+                      acceleration: float | None = None) -> None:
+        """Start an absolute move (velocity and acceleration: the axis' defaults when
+        None); returns once the drive accepted it (see ``wait_in_position``)."""
 
     @abc.abstractmethod
     async def stop(self) -> None:
@@ -245,10 +256,34 @@ class Frame:
     sequence: int
 
 
+@dataclass(frozen=True)
+class CameraTiming:
+    """What one frame costs in time on the sensor: ``exposure_s``, while which the
+    camera must be still, and ``readout_s``, the sensor's transfer of the frame.  A
+    frame on request costs both (``frame_s``); frames in a row overlap the readout of
+    one with the exposure of the next where the sensor can."""
+
+    exposure_s: float
+    readout_s: float
+
+    def __post_init__(self):
+        for name in ("exposure_s", "readout_s"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
+                raise ValueError(f"camera {name} must be a number >= 0, not {v!r}")
+
+    @property
+    def frame_s(self) -> float:
+        return self.exposure_s + self.readout_s
+
+
 class Camera(abc.ABC):
     """A camera delivering grey frames on request."""
 
     name: str = "camera"
+    #: the sensor's timing when known (a twin declares its sensor's; hardware from the
+    #: config), else None
+    timing: CameraTiming | None = None
 
     @abc.abstractmethod
     async def connect(self) -> None: ...

@@ -32,7 +32,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from drivers.interfaces import CommunicationLost, DeviceTimeout, Frame
-from drivers.interfaces import Camera
+from drivers.interfaces import Camera, CameraTiming
 from sim.camera.lens import BrownLens
 from sim.camera.render import FrameParams, HoleSpec
 from sim.camera.renderer import RendererLost, RendererProcess, render_image
@@ -61,6 +61,10 @@ class CameraOptics:
     #: stage is specified for, and the 1280 x 1024 frame sees 12.8 x 10.2 mm of wall
     mm_per_px: float = 0.010
     params: FrameParams = field(default_factory=lambda: FrameParams(lens=ENDOSCOPE_LENS))
+    #: the sensor the twin stands for: an 8 ms exposure (an endoscope's LED light at the
+    #: aperture the depth of field needs) and a 1280 x 1024 global-shutter readout at
+    #: 40 frames/s (25 ms); the machine's time per frame, not the renderer's
+    timing: CameraTiming = field(default_factory=lambda: CameraTiming(exposure_s=0.008, readout_s=0.025))
 
 
 #: a side-view endoscope's lens: moderate barrel distortion (-2.7 % at the frame's
@@ -78,6 +82,7 @@ class CameraTwin(Camera):
         self.z = z_physics
         self.c = c_physics
         self.optics = optics or CameraOptics()
+        self.timing = self.optics.timing
         self.faults = FaultSwitch(CAMERA_FAULTS, name="camera")
         self.grab_timeout_s = grab_timeout_s
         self._rng = np.random.default_rng(seed)

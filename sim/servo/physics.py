@@ -27,7 +27,7 @@ from dataclasses import dataclass
 from typing import Callable
 
 from drivers.interfaces.register_map import FaultCode
-from sim.servo.motion import TrapezoidalMove
+from station.motion import TrapezoidalMove
 from station.effects import ErrorCurve, k_for_kind
 
 #: ``actual_offset(motor_position, direction, time_s) -> deviation`` in the axis unit (mm or deg)

@@ -3,11 +3,14 @@
 For each hole the plan:
 
 1. asks the error model (inverse compensation) for the commanded (z, C) that puts
-   the endoscope's detection point on the hole's nominal place, and approaches it
-   from below and counter-clockwise (direction +1 on both axes, the direction the
-   compensation was solved for, so backlash is always taken up the same way);
-2. coarse search: a frame there; if the hole is not in it, frames at offsets of
-   most of a field of view around the nominal place, nearest first;
+   the endoscope's detection point on each frame's place, and moves both axes there
+   at once, at their limits, arriving from below and counter-clockwise (direction +1
+   on both axes, the direction the compensation was solved for, so backlash is
+   always taken up the same way: an axis already below its target goes straight
+   there, one above it goes past and back);
+2. search: frames covering the hole's search zone (docs/inspection.md, Identity),
+   nearest the expected place first; with an angular datum, a survey round the
+   bore at the datum hole's band first;
 3. re-centres on the hole found (compensated again), so it is measured near the
    optical axis, away from the frame's edges and the lens's distortion;
 4. measurement frames: for each, the grating's reading of Z and the vision result.
@@ -27,12 +30,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any, Generator
+from typing import Any, Generator, Mapping
 
 import numpy as np
 
 from station.kinematics.inverse import compensate
 from station.kinematics.model import StationModel
+from station.motion import AxisLimits, move_time_s
 from station.sequencer import messages as m
 
 
@@ -172,18 +176,60 @@ def _crop(image: np.ndarray, x: float, y: float, d: float) -> np.ndarray:
     return np.ascontiguousarray(image[max(0, yi - half): yi + half + 1, max(0, xi - half): xi + half + 1])
 
 
-def goto(model: StationModel, axial_mm: float, angle_deg: float, settings: ScanSettings):
-    """Move so the detection point is on (axial, angle), approaching from below on both axes.
-    Returns (z_cmd, c_cmd, predicted carriage z) via the generator's return value."""
+#: commanded positions closer than this (mm or deg) are the same command: far below
+#: a drive's count (0.1 um, 0.0001 deg), so a no-move never sends a step backwards
+SAME_POSITION = 1e-6
+
+
+def approach(targets: dict[str, float], settings: ScanSettings, motion: Mapping[str, AxisLimits],
+             axes_at: dict[str, float]):
+    """Move the axes to ``targets`` at once, each arriving in the positive direction
+    (backlash taken up the way compensation was solved for): straight there when the
+    axis is below its target and got where it is moving positive (``axes_at``: where
+    each axis so arrived, updated here; absent: not known), else to ``approach`` below
+    it first.  Moves at the axes' limits (``motion``) when known.  Returns whether
+    anything moved (a plan)."""
+    by = {"Z": settings.approach_z_mm, "C": settings.approach_c_deg}
+    legs: dict[str, list[float]] = {}
+    for ax, q in targets.items():
+        p = axes_at.get(ax)
+        if p is not None and abs(q - p) <= SAME_POSITION:
+            continue
+        legs[ax] = [q] if p is not None and q > p else [q - by[ax], q]
+
+    def kw(ax: str) -> dict:
+        lim = motion.get(ax)
+        return {} if lim is None else {"velocity": lim.velocity, "acceleration": lim.acceleration}
+
+    def first_leg_s(ax: str) -> float:
+        lim, p = motion.get(ax), axes_at.get(ax)
+        return 0.0 if lim is None or p is None else move_time_s(legs[ax][0] - p, lim)
+
+    for ax, leg in legs.items():
+        yield m.Move(ax, leg[0], wait=False, **kw(ax))
+    # the second legs in the order their first legs end, so neither axis idles long
+    for ax in sorted((a for a in legs if len(legs[a]) > 1), key=first_leg_s):
+        yield m.Wait((ax,))
+        yield m.Move(ax, legs[ax][1], wait=False, **kw(ax))
+    if legs:
+        yield m.Wait(tuple(legs))
+    for ax in legs:
+        axes_at[ax] = targets[ax]
+    return bool(legs)
+
+
+def goto(model: StationModel, axial_mm: float, angle_deg: float, settings: ScanSettings,
+         motion: Mapping[str, AxisLimits] | None = None, axes_at: dict[str, float] | None = None):
+    """Move so the detection point is on (axial, angle), approaching from below on both
+    axes (:func:`approach`), and let it settle. Returns (z_cmd, c_cmd, predicted
+    carriage z) via the generator's return value."""
     sol = compensate(model, [axial_mm], [angle_deg], direction_z=+1, direction_c=+1)
     if not sol.converged[0]:
         raise ValueError(f"compensation did not converge for axial {axial_mm} mm, angle {angle_deg} deg")
     z_cmd, c_cmd = float(sol.z_mm[0]), float(sol.c_deg[0])
-    yield m.Move("C", c_cmd - settings.approach_c_deg)
-    yield m.Move("C", c_cmd)
-    yield m.Move("Z", z_cmd - settings.approach_z_mm)
-    yield m.Move("Z", z_cmd)
-    yield m.Settle(settings.settle_s)
+    moved = yield from approach({"C": c_cmd, "Z": z_cmd}, settings, motion or {}, {} if axes_at is None else axes_at)
+    if moved:
+        yield m.Settle(settings.settle_s)
     ezz_um = model.motions_of("Z").z.evaluate([z_cmd], direction=[1])[0]
     return z_cmd, c_cmd, z_cmd + ezz_um * 1e-3
 
@@ -324,8 +370,11 @@ class _BoreScan:
     """The plan's state: where the axes are, what has been seen and assigned."""
 
     def __init__(self, model: StationModel, targets: list[HoleTarget], geo: CameraGeometry, settings: ScanSettings,
-                 datum: str | None, placement_angle_deg: float):
+                 datum: str | None, placement_angle_deg: float, motion: Mapping[str, AxisLimits] | None = None):
         self.model = model
+        self.motion = dict(motion or {})
+        #: where each axis arrived moving positive in this plan (approach's bookkeeping)
+        self.axes_at: dict[str, float] = {}
         self.targets = targets
         self.geo = geo
         self.settings = settings
@@ -404,7 +453,8 @@ class _BoreScan:
         """Move the detection point to (axial, angle); the table goes the short way round
         (an endless axis: the command is the angle's turn nearest the present one)."""
         angle_cmd = self.c_now_deg + wrap_deg(angle_deg - self.c_now_deg)
-        z_cmd, c_cmd, carriage = yield from goto(self.model, axial_mm, angle_cmd, self.settings)
+        z_cmd, c_cmd, carriage = yield from goto(self.model, axial_mm, angle_cmd, self.settings, self.motion,
+                                                 self.axes_at)
         self.c_now_deg = c_cmd
         self.here = ((axial_mm, angle_deg % 360.0), z_cmd, c_cmd, carriage)
         return z_cmd, c_cmd, carriage
@@ -687,15 +737,17 @@ class _BoreScan:
 
 
 def bore_scan(model: StationModel, holes: list[HoleTarget], geo: CameraGeometry, settings: ScanSettings | None = None,
-              *, datum: str | None = None, placement_angle_deg: float = 0.0):
+              *, datum: str | None = None, placement_angle_deg: float = 0.0,
+              motion: Mapping[str, AxisLimits] | None = None):
     """The whole scan (a plan; returns a :class:`ScanResult`): the angular datum first
     when the part has one (``datum``: the hole that sets it), then every hole in order
     of axial position. ``placement_angle_deg``: the part's angular placement
     uncertainty on a fixture, added to each hole's angular zone when no datum hole
-    sets the angle."""
+    sets the angle. ``motion``: the axes' limits ("Z", "C"), at which the plan moves
+    (the drives' defaults when absent)."""
     settings = settings or ScanSettings()
     if not settings.compensated:
         model = model.without_errors()
     if datum is not None and datum not in {t.name for t in holes}:
         raise ValueError(f"angular datum {datum!r} is not one of the holes")
-    return (yield from _BoreScan(model, list(holes), geo, settings, datum, placement_angle_deg).run())
+    return (yield from _BoreScan(model, list(holes), geo, settings, datum, placement_angle_deg, motion).run())

@@ -18,18 +18,20 @@ import hashlib
 import math
 import platform
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any, Callable, Mapping
 
 from station import __version__
 from station.inspection.scan import (CameraGeometry, HoleResult, HoleTarget, ScanFinding, ScanResult, ScanSettings,
                                      bore_scan)
 from station.inspection.scanlog import write_scan_log
 from station.kinematics.model import StationModel
+from station.motion import AxisLimits
 from station.parts.spec import PartSpec
 from drivers.interfaces import DriverError
+from station.sequencer.cycle import cycle_summary, lower_bound, machine_time
 from station.sequencer.engine import Engine, EngineEvent, PlanEnded, State
 from station.store.errors import StoreError
-from station.store.records import Measurement
+from station.store.records import FindingRecord, Measurement
 
 
 @dataclass
@@ -60,6 +62,9 @@ class InspectionOutcome:
     #: what the scan saw that the spec does not expect (unexpected holes, an ambiguous
     #: identity) and how the part's angular datum was set
     findings: list[ScanFinding] = field(default_factory=list)
+    #: machine time of the run and its breakdown, with the plan's lower bound
+    #: (station.sequencer.cycle.cycle_summary); None when not known
+    cycle: dict | None = None
 
     def to_json(self, with_truth: bool = False) -> dict:
         chars = []
@@ -70,7 +75,7 @@ class InspectionOutcome:
             chars.append(d)
         return {"id": self.id, "part_number": self.part_number, "serial": self.serial, "state": self.state,
                 "result": self.result, "reason": self.reason, "characteristics": chars,
-                "findings": [dict(f.__dict__) for f in self.findings]}
+                "findings": [dict(f.__dict__) for f in self.findings], "cycle": self.cycle}
 
 
 #: per store (by id): inspections whose record could not be finished (store failure),
@@ -90,16 +95,44 @@ def hole_targets(part: PartSpec) -> list[HoleTarget]:
             for h in part.holes]
 
 
-def scan_plan(model: StationModel, part: PartSpec, geometry: CameraGeometry, settings: ScanSettings):
+def scan_plan(model: StationModel, part: PartSpec, geometry: CameraGeometry, settings: ScanSettings,
+              motion: Mapping[str, AxisLimits] | None = None):
     """The bore scan of ``part`` (a plan returning a ``ScanResult``)."""
     return bore_scan(model, hole_targets(part), geometry, settings, datum=part.placement.angular_datum,
-                     placement_angle_deg=part.placement.angle_deg)
+                     placement_angle_deg=part.placement.angle_deg, motion=motion)
+
+
+def motion_limits(devices) -> dict[str, AxisLimits]:
+    """The axes' limits as their drivers state them ("Z", "C"; an axis without is left out)."""
+    out = {}
+    for name in ("Z", "C"):
+        ax = devices.axis(name)
+        v, a = getattr(ax, "velocity_limit", None), getattr(ax, "acceleration_limit", None)
+        if isinstance(v, (int, float)) and isinstance(a, (int, float)) and v > 0 and a > 0:
+            out[name] = AxisLimits(float(v), float(a))
+    return out
+
+
+def run_cycle(ledger_steps, devices, settings: ScanSettings, time_scale: float | None) -> dict:
+    """The machine time of a run (with its breakdown) and, when the axes' limits and
+    the camera's timing are known, the lower bound of the same plan and the ratio
+    (station.sequencer.cycle)."""
+    steps = list(ledger_steps)
+    camera = getattr(devices.camera, "timing", None) if devices.camera is not None else None
+    poll = {n: float(getattr(devices.axis(n), "poll_s", 0.0) or 0.0) for n in ("Z", "C")}
+    machine = machine_time(steps, time_scale=time_scale, camera=camera, poll_s=poll)
+    limits = motion_limits(devices)
+    bound = None
+    if camera is not None and set(limits) >= {"Z", "C"}:
+        bound = lower_bound(steps, limits=limits, approach={"Z": settings.approach_z_mm, "C": settings.approach_c_deg},
+                            settle_s=settings.settle_s, camera=camera)
+    return cycle_summary(machine, bound)
 
 
 class InspectionService:
     def __init__(self, engine: Engine, store, model: StationModel, geometry: CameraGeometry,
                  settings: ScanSettings | None = None, *, traceability: dict | None = None,
-                 truth: Callable[[str, str], float | None] | None = None):
+                 truth: Callable[[str, str], float | None] | None = None, time_scale: float | None = None):
         self.engine = engine
         self.store = store
         self.model = model
@@ -108,6 +141,9 @@ class InspectionService:
         self.traceability = traceability or {}
         #: simulation only: (hole id, kind) -> the twin's true value
         self.truth = truth
+        #: simulation only: how much faster than real time the twin's motion runs (the
+        #: machine time is then replayed, station.sequencer.cycle); None: measured
+        self.time_scale = time_scale
 
     async def ensure_ready(self) -> None:
         """Home when needed; after a fault or a released e-stop, reset first. A ready
@@ -149,14 +185,18 @@ class InspectionService:
         try:
             try:
                 await self.ensure_ready()
-                scan: ScanResult = await self.engine.run(scan_plan(self.model, part, self.geometry, self.settings))
+                plan = scan_plan(self.model, part, self.geometry, self.settings, motion_limits(self.engine.devices))
+                scan: ScanResult = await self.engine.run(plan)
             except PlanEnded as ended:
                 state = "faulted" if ended.outcome == "faulted" else "aborted"
-                await asyncio.to_thread(self.store.finish, iid, state, None, ended.reason)
-                return InspectionOutcome(iid, part.part_number, serial, state, None, ended.reason)
+                cycle = self._cycle()
+                await asyncio.to_thread(self.store.finish, iid, state, None, ended.reason,
+                                        **self._cycle_fields(cycle))
+                return InspectionOutcome(iid, part.part_number, serial, state, None, ended.reason, cycle=cycle)
             results = scan.holes
             outcome = self._judge(iid, part, serial, results)
             outcome.findings = scan.findings
+            outcome.cycle = self._cycle()
             measurements = [Measurement(c.id, c.nominal, c.lower_limit, c.upper_limit, c.measured, c.passed,
                                         uncertainty_k2=c.uncertainty_k2, true_value=c.true_value)
                             for c in outcome.characteristics]
@@ -165,7 +205,9 @@ class InspectionService:
                     if r.crop is not None and r.crop.size:
                         await asyncio.to_thread(self.store.add_image, iid, r.name, f"{r.name}", r.crop)
                 await asyncio.to_thread(self.store.finish, iid, "complete", outcome.result, outcome.reason or None,
-                                        measurements=measurements)
+                                        measurements=measurements,
+                                        findings=[FindingRecord.of(f) for f in scan.findings],
+                                        **self._cycle_fields(outcome.cycle))
             except StoreError as exc:
                 return await self._not_stored(iid, part, serial, exc)
             # after the commit: the log is for discovery, the result must not wait on it
@@ -176,6 +218,21 @@ class InspectionService:
             return outcome
         finally:
             self.engine.unsubscribe(log)
+
+    def _cycle(self) -> dict | None:
+        """The last run's machine time (and lower bound); None when it cannot be told
+        (a bug there must not cost the result: the record is the product)."""
+        try:
+            return run_cycle(self.engine.ledger.steps, self.engine.devices, self.settings, self.time_scale)
+        except Exception as exc:  # noqa: BLE001
+            self.engine._emit("note", f"cycle time not computed: {type(exc).__name__}: {exc}")
+            return None
+
+    @staticmethod
+    def _cycle_fields(cycle: dict | None) -> dict:
+        if cycle is None or not math.isfinite(cycle.get("machine_s", math.nan)):
+            return {}
+        return {"machine_s": cycle["machine_s"], "cycle": cycle}
 
     async def _not_stored(self, iid: str, part: PartSpec, serial: str, exc: StoreError) -> InspectionOutcome:
         """The result could not be committed: nothing of it is reported as a result. The

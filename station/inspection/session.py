@@ -57,7 +57,8 @@ class Session:
         if st.twins is not None:
             trace["scenario"] = str(st.twins.station.scenario.source)
         return InspectionService(self.engine, self.store, st.model, geo, self.settings, traceability=trace,
-                                 truth=truth_of(st.world) if st.world is not None else None)
+                                 truth=truth_of(st.world) if st.world is not None else None,
+                                 time_scale=st.time_scale)
 
     async def inspect(self, part: PartSpec, serial: str, **kw) -> InspectionOutcome:
         return await self.service_for(part).inspect(part, serial, **kw)

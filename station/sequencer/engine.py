@@ -36,7 +36,10 @@ from drivers.interfaces import (
     ProtocolError,
     RotaryAxis,
 )
+from drivers.interfaces.register_map import FaultCode
+from station.motion import AxisLimits, move_time_s
 from station.sequencer import messages as m
+from station.sequencer.cycle import CycleLedger, Step
 from station.sequencer.frames import FrameCheck
 
 
@@ -88,8 +91,18 @@ class Devices:
 
 @dataclass
 class Timeouts:
-    move_s: float = 60.0  #: longest move of the stroke at the slowest speed, with margin
+    #: a move whose profile is known gets twice its trapezoid plus ``move_margin_s``
+    #: (a loaded link, a drive's settling), never more than ``move_s``; ``move_s``
+    #: alone when the speed is not known (the longest move of the stroke at the
+    #: slowest speed, with margin)
+    move_s: float = 60.0
+    move_margin_s: float = 5.0
     home_s: float = 120.0
+
+    def for_move(self, distance: float | None, velocity: float | None, acceleration: float | None) -> float:
+        if distance is None or not velocity or not acceleration or velocity <= 0 or acceleration <= 0:
+            return self.move_s
+        return min(self.move_s, 2.0 * move_time_s(distance, AxisLimits(velocity, acceleration)) + self.move_margin_s)
 
 
 @dataclass
@@ -122,6 +135,12 @@ class Engine:
         self.retries_used = 0
         #: black and frozen frames are camera faults, not images to measure
         self.frame_check = FrameCheck()
+        #: the steps of the last run with their wall times (station.sequencer.cycle)
+        self.ledger = CycleLedger()
+        #: per axis: where it was last sent in this run (None: read before its first move)
+        self._at: dict[str, float] = {}
+        #: per axis: the move under way that a Wait collects, and its timeout
+        self._pending: dict[str, tuple[m.Move, float]] = {}
 
     # ------------------------------------------------------------------ events
     def subscribe(self, fn: Callable[[EngineEvent], None]) -> None:
@@ -213,6 +232,9 @@ class Engine:
         self._pause_requested = False
         self._resume.set()
         self.retries_used = 0
+        self.ledger = CycleLedger()
+        self._at = {}
+        self._pending = {}
         self._set(State.RUNNING)
         self._task = asyncio.create_task(self._drive(plan))
         try:
@@ -232,11 +254,14 @@ class Engine:
     async def _drive(self, plan) -> Any:
         result: Any = None
         while True:
+            t0 = time.perf_counter()
             try:
                 msg = plan.send(result)
             except StopIteration as done:
+                self.ledger.add(Step("plan", time.perf_counter() - t0))
                 self._set(State.READY, "plan complete")
                 return done.value
+            self.ledger.add(Step("plan", time.perf_counter() - t0))
             try:
                 result = await self._execute(msg)
             except PlanEnded:
@@ -277,41 +302,101 @@ class Engine:
             self._emit("note", msg.text)
             return None
         if isinstance(msg, m.Settle):
+            t0 = time.perf_counter()
             await self._sleep(msg.seconds)
+            self.ledger.add(Step("settle", time.perf_counter() - t0, seconds=msg.seconds))
             return None
         if isinstance(msg, m.Move):
-            ax = d.axis(msg.axis)
+            await self._start_move(msg)
+            if msg.wait:
+                await self._wait_axes((msg.axis,))
+            return None
+        if isinstance(msg, m.Wait):
+            await self._wait_axes(msg.axes or tuple(self._pending))
+            return None
+        if isinstance(msg, m.ReadAxis):
+            t0 = time.perf_counter()
+            out = await self._with_retries(d.axis(msg.axis).read_position, f"read {msg.axis}")
+            self.ledger.add(Step("read", time.perf_counter() - t0))
+            return out
+        if isinstance(msg, m.ReadEncoder):
+            if d.encoder is None:
+                raise EngineStateError("the plan reads an encoder, but the station has none")
+            t0 = time.perf_counter()
+            out = await self._with_retries(d.encoder.read, "read encoder")
+            self.ledger.add(Step("read", time.perf_counter() - t0))
+            return out
+        if isinstance(msg, m.Capture):
+            if d.camera is None:
+                raise EngineStateError("the plan captures a frame, but the station has no camera")
+            t0 = time.perf_counter()
+            out = await self._with_retries(self._grab_checked, "grab frame")
+            self.ledger.add(Step("frame", time.perf_counter() - t0))
+            return out
+        if isinstance(msg, m.Measure):
+            if d.measure is None:
+                raise EngineStateError("the plan measures, but the station has no vision stage")
+            t0 = time.perf_counter()
+            out = await asyncio.to_thread(d.measure, msg.image)
+            self.ledger.add(Step("vision", time.perf_counter() - t0))
+            return out
+        raise TypeError(f"unknown message {msg!r}")
+
+    @staticmethod
+    async def _send_move(ax, msg: m.Move) -> None:
+        if msg.acceleration is None:
+            await ax.move_to(msg.position, msg.velocity)
+        else:
+            await ax.move_to(msg.position, msg.velocity, acceleration=msg.acceleration)
+
+    async def _start_move(self, msg: m.Move) -> None:
+        """Send a move and note it for its Wait: where from (read once per run), its
+        timeout from the distance and speed, the ledger's entry."""
+        ax = self.devices.axis(msg.axis)
+        if msg.axis in self._pending:
+            # a new move before the last was collected: the drive takes the new target
+            self._pending.pop(msg.axis)
+        start = self._at.get(msg.axis)
+        t0 = time.perf_counter()
+        if start is None:
+            pos = await self._with_retries(ax.read_position, f"read {msg.axis}")
+            start = float(pos) if isinstance(pos, (int, float)) else None
+        await self._with_retries(lambda: self._send_move(ax, msg), f"move {msg.axis}")
+        v = msg.velocity if msg.velocity is not None else getattr(ax, "default_velocity", None)
+        a = msg.acceleration if msg.acceleration is not None else getattr(ax, "default_acceleration", None)
+        v = v if isinstance(v, (int, float)) else None
+        a = a if isinstance(a, (int, float)) else None
+        distance = None if start is None else abs(msg.position - start)
+        self._pending[msg.axis] = (msg, self.timeouts.for_move(distance, v, a))
+        self._at[msg.axis] = float(msg.position)
+        self.ledger.add(Step("move", time.perf_counter() - t0, axis=msg.axis, start=start, target=float(msg.position),
+                             velocity=v, acceleration=a))
+
+    async def _wait_axes(self, axes: tuple[str, ...]) -> None:
+        """Wait for each axis' move in turn; a move found lost or overridden (at rest
+        short of its target, no fault) is sent again within the retry budget."""
+        for name in axes:
+            pending = self._pending.get(name)
+            if pending is None:
+                continue
+            msg, timeout = pending
+            ax = self.devices.axis(name)
+            t0 = time.perf_counter()
             for attempt in range(self.retries + 1):
-                await self._with_retries(lambda: ax.move_to(msg.position, msg.velocity), f"move {msg.axis}")
-                if not msg.wait:
-                    return None
                 try:
-                    status = await ax.wait_in_position(timeout=self.timeouts.move_s)
+                    status = await ax.wait_in_position(timeout=timeout)
                 except MoveInterrupted as exc:
                     # the absolute move is re-issued: a lost or stale command, not the machine
                     if attempt >= self.retries:
                         raise
                     self.retries_used += 1
-                    self._emit("retry", f"move {msg.axis}: {exc} (move re-issued, {attempt + 1} of {self.retries})")
+                    self._emit("retry", f"move {name}: {exc} (move re-issued, {attempt + 1} of {self.retries})")
+                    await self._with_retries(lambda: self._send_move(ax, msg), f"move {name}")
                     continue
-                self._check_estop(status)
-                return None
-            return None
-        if isinstance(msg, m.ReadAxis):
-            return await self._with_retries(d.axis(msg.axis).read_position, f"read {msg.axis}")
-        if isinstance(msg, m.ReadEncoder):
-            if d.encoder is None:
-                raise EngineStateError("the plan reads an encoder, but the station has none")
-            return await self._with_retries(d.encoder.read, "read encoder")
-        if isinstance(msg, m.Capture):
-            if d.camera is None:
-                raise EngineStateError("the plan captures a frame, but the station has no camera")
-            return await self._with_retries(self._grab_checked, "grab frame")
-        if isinstance(msg, m.Measure):
-            if d.measure is None:
-                raise EngineStateError("the plan measures, but the station has no vision stage")
-            return await asyncio.to_thread(d.measure, msg.image)
-        raise TypeError(f"unknown message {msg!r}")
+                break
+            self._pending.pop(name, None)
+            self.ledger.add(Step("wait", time.perf_counter() - t0, axis=name))
+            self._check_estop(status)
 
     async def _grab_checked(self):
         frame = await self.devices.camera.grab()
@@ -348,7 +433,7 @@ class Engine:
 
     def _check_estop(self, status) -> None:
         if getattr(status, "estop", False):
-            raise DriveFault(0x12, "emergency stop", "station")
+            raise DriveFault(int(FaultCode.ESTOP), "emergency stop", "station")
 
     async def _stop_axes(self) -> None:
         """Best effort: every axis gets a stop, whatever the others answer."""
@@ -361,7 +446,7 @@ class Engine:
     async def _fault(self, exc: Exception) -> None:
         await self._stop_axes()
         code = getattr(exc, "code", None)
-        estop = code == 0x12
+        estop = code == FaultCode.ESTOP
         reason = f"{type(exc).__name__}: {exc}"  # the driver's message names the device
         self._emit("fault", reason, error=type(exc).__name__, code=code)
         self._set(State.ESTOPPED if estop else State.FAULTED, reason)

@@ -23,12 +23,24 @@ class Msg:
 @dataclass(frozen=True)
 class Move(Msg):
     """Absolute move of one axis ("Z" mm or "C" deg); returns when the move is
-    started. ``wait`` also waits until it is in position (the common case)."""
+    started. ``wait`` also waits until it is in position (the common case); without
+    it the move runs on while the plan goes on (both axes at once), and a
+    :class:`Wait` collects it. ``velocity``/``acceleration``: the axis' defaults when
+    None."""
 
     axis: str
     position: float
     wait: bool = True
     velocity: float | None = None
+    acceleration: float | None = None
+
+
+@dataclass(frozen=True)
+class Wait(Msg):
+    """Wait until each of ``axes`` has finished the move it was last given (all
+    axes with a move under way when empty)."""
+
+    axes: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)

@@ -22,6 +22,7 @@ from station.store.migrate import upgrade_to_head
 from station.store.records import (
     CharacteristicRecord,
     EventRecord,
+    FindingRecord,
     ImageRecord,
     InspectionRecord,
     InspectionSummary,
@@ -31,7 +32,7 @@ from station.store.records import (
 from station.store.repository import DEFAULT_DATA_DIR, FINISH_STATES, Store
 
 __all__ = [
-    "CharacteristicRecord", "DEFAULT_DATA_DIR", "DuplicateIdempotencyKey", "EventRecord", "FINISH_STATES",
+    "CharacteristicRecord", "DEFAULT_DATA_DIR", "DuplicateIdempotencyKey", "EventRecord", "FINISH_STATES", "FindingRecord",
     "ImageRecord", "InspectionNotFound", "InspectionRecord", "InspectionStateError", "InspectionSummary",
     "Measurement", "Store", "StoreError", "StoreIntegrityError", "StoreLocked", "StoreUnavailable",
     "Traceability", "upgrade_to_head",

@@ -115,10 +115,17 @@ class Inspection(Base):
     traceability: Mapped[dict[str, Any]] = mapped_column(JSONDocument)
     #: chosen by the MES for a retried POST; unique where given (NULLs never collide)
     idempotency_key: Mapped[str | None] = mapped_column(String(KEY_LEN), unique=True)
+    #: machine time of the inspection (s): the plan at the axes' real speeds, camera and
+    #: vision included (docs/inspection.md, Cycle time); None until finished, or unknown
+    machine_s: Mapped[float | None] = mapped_column(Float)
+    #: how ``machine_s`` divides (moves, settle, frames, vision, other, in s) and its basis
+    #: ("measured" on hardware; "modelled" under a twin's time scale)
+    cycle: Mapped[dict[str, Any] | None] = mapped_column(JSONDocument)
 
     characteristics: Mapped[list[CharacteristicResult]] = relationship(
         back_populates="inspection", order_by="CharacteristicResult.id")
     images: Mapped[list[ImageCrop]] = relationship(back_populates="inspection", order_by="ImageCrop.id")
+    findings: Mapped[list[Finding]] = relationship(back_populates="inspection", order_by="Finding.id")
 
     __table_args__ = (
         CheckConstraint(_in("state", STATES), name="state"),
@@ -182,6 +189,35 @@ class ImageCrop(Base):
     inspection: Mapped[Inspection] = relationship(back_populates="images")
 
     __table_args__ = (UniqueConstraint("path"), Index(None, "inspection_id"))
+
+
+#: what a scan may report beside the characteristics (docs/inspection.md, Identity)
+FINDING_KINDS = ("unexpected_hole", "ambiguous_identity", "datum")
+
+
+class Finding(Base):
+    """Something the scan saw that the part spec does not expect (a stray drilling),
+    could not resolve (two holes in one zone), or set (the part's angular datum):
+    where on the part, how large, and the sentence the operator reads."""
+
+    __tablename__ = "finding"
+
+    id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
+    inspection_id: Mapped[str] = mapped_column(ForeignKey("inspection.id"))
+    kind: Mapped[str] = mapped_column(String(32))
+    message: Mapped[str] = mapped_column(Text)
+    #: the spec hole it concerns, if one (``hole_1``)
+    subject: Mapped[str | None] = mapped_column(String(NAME_LEN))
+    #: axial position from the datum face (mm) and angle on the table (deg)
+    axial_mm: Mapped[float | None] = mapped_column(Float)
+    angle_deg: Mapped[float | None] = mapped_column(Float)
+    diameter_mm: Mapped[float | None] = mapped_column(Float)
+    #: expanded uncertainty (k = 2) of the position (mm)
+    u_mm: Mapped[float | None] = mapped_column(Float)
+
+    inspection: Mapped[Inspection] = relationship(back_populates="findings")
+
+    __table_args__ = (CheckConstraint(_in("kind", FINDING_KINDS), name="kind"), Index(None, "inspection_id"))
 
 
 class Event(Base):

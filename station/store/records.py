@@ -135,6 +135,43 @@ class ImageRecord:
 
 
 @dataclass(frozen=True)
+class FindingRecord:
+    """A finding of the scan (``kind``: unexpected_hole, ambiguous_identity, datum),
+    given to the store and read back the same."""
+
+    kind: str
+    message: str
+    subject: str | None = None
+    axial_mm: float | None = None
+    angle_deg: float | None = None
+    diameter_mm: float | None = None
+    #: expanded uncertainty (k = 2) of the position, mm
+    u_mm: float | None = None
+
+    def __post_init__(self) -> None:
+        from station.store.models import FINDING_KINDS
+
+        if self.kind not in FINDING_KINDS:
+            raise ValueError(f"finding kind must be one of {', '.join(FINDING_KINDS)}, not {self.kind!r}")
+        if not isinstance(self.message, str) or not self.message:
+            raise ValueError("a finding needs a message")
+        if self.subject is not None and not 1 <= len(self.subject) <= 64:
+            raise ValueError(f"finding subject must be 1..64 characters, not {self.subject!r}")
+        for name in ("axial_mm", "angle_deg", "diameter_mm", "u_mm"):
+            object.__setattr__(self, name, _finite_or_none(f"finding {name}", getattr(self, name)))
+
+    @classmethod
+    def of(cls, finding: Any) -> FindingRecord:
+        """From anything with the same attributes (the scan's ``ScanFinding``)."""
+        return cls(finding.kind, finding.message, getattr(finding, "subject", None),
+                   getattr(finding, "axial_mm", None), getattr(finding, "angle_deg", None),
+                   getattr(finding, "diameter_mm", None), getattr(finding, "u_mm", None))
+
+    def to_json(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+@dataclass(frozen=True)
 class InspectionSummary:
     """An inspection's header, as lists show it."""
 
@@ -149,6 +186,9 @@ class InspectionSummary:
     finished_at: datetime | None
     traceability: Mapping[str, Any]
     idempotency_key: str | None
+    #: machine time of the inspection (s) and how it divides; None when unknown
+    machine_s: float | None = None
+    cycle: Mapping[str, Any] | None = None
 
     def to_json(self) -> dict[str, Any]:
         return {
@@ -156,15 +196,18 @@ class InspectionSummary:
             "state": self.state, "result": self.result, "reason": self.reason,
             "started_at": _iso(self.started_at), "finished_at": _iso(self.finished_at),
             "traceability": dict(self.traceability), "idempotency_key": self.idempotency_key,
+            "machine_s": self.machine_s, "cycle": None if self.cycle is None else dict(self.cycle),
         }
 
 
 @dataclass(frozen=True)
 class InspectionRecord(InspectionSummary):
-    """An inspection with its characteristic results and image crops, in recording order."""
+    """An inspection with its characteristic results, image crops and the scan's
+    findings, in recording order."""
 
     characteristics: tuple[CharacteristicRecord, ...] = ()
     images: tuple[ImageRecord, ...] = ()
+    findings: tuple[FindingRecord, ...] = ()
 
     def characteristic(self, characteristic_id: str) -> CharacteristicRecord:
         for c in self.characteristics:
@@ -175,7 +218,8 @@ class InspectionRecord(InspectionSummary):
     def to_json(self) -> dict[str, Any]:
         return {**super().to_json(),
                 "characteristics": [c.to_json() for c in self.characteristics],
-                "images": [i.to_json() for i in self.images]}
+                "images": [i.to_json() for i in self.images],
+                "findings": [f.to_json() for f in self.findings]}
 
 
 @dataclass(frozen=True)

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import fcntl
 import json
+import math
 import os
 import threading
 import uuid
@@ -60,6 +61,7 @@ from station.store.models import (
     STATES,
     CharacteristicResult,
     Event,
+    Finding,
     ImageCrop,
     Inspection,
     utcnow,
@@ -67,6 +69,7 @@ from station.store.models import (
 from station.store.records import (
     CharacteristicRecord,
     EventRecord,
+    FindingRecord,
     ImageRecord,
     InspectionRecord,
     InspectionSummary,
@@ -365,9 +368,10 @@ class Store:
         return ImageRecord(subject, str(rel), digest, created)
 
     def finish(self, inspection_id: str, state: str, result: str | None = None, reason: str | None = None, *,
-               measurements: Iterable[Measurement] = ()) -> InspectionRecord:
-        """End a running inspection: the given characteristics, the final state, the
-        verdict and a state event, committed together.
+               measurements: Iterable[Measurement] = (), findings: Iterable[FindingRecord] = (),
+               machine_s: float | None = None, cycle: Mapping[str, Any] | None = None) -> InspectionRecord:
+        """End a running inspection: the given characteristics and findings, the final
+        state, the verdict, the machine time and a state event, committed together.
 
         ``state`` is ``complete`` (``result`` then ``pass`` or ``fail``), ``aborted`` or
         ``faulted`` (no result). A ``pass`` needs at least one characteristic and no
@@ -381,9 +385,21 @@ class Store:
         if state != "complete" and result is not None:
             raise ValueError(f"an inspection that is {state} has no result (got {result!r})")
         items = list(measurements)
+        found = list(findings)
+        for f in found:
+            if not isinstance(f, FindingRecord):
+                raise TypeError(f"expected a FindingRecord, not {type(f).__name__}")
+        if machine_s is not None and (isinstance(machine_s, bool) or not isinstance(machine_s, (int, float))
+                                      or not math.isfinite(machine_s) or machine_s < 0):
+            raise ValueError(f"machine_s must be a finite number >= 0 or None, not {machine_s!r}")
         with self._transaction("finish the inspection") as s:
             insp = self._running(s, inspection_id, "finish")
             self._add_measurements(s, inspection_id, items)
+            for f in found:
+                s.add(Finding(inspection_id=inspection_id, **asdict(f)))
+            if machine_s is not None:
+                insp.machine_s = float(machine_s)
+                insp.cycle = None if cycle is None else dict(cycle)
             s.flush()
             if result == "pass":
                 verdicts = s.scalars(select(CharacteristicResult.passed)
@@ -433,7 +449,8 @@ class Store:
         """An inspection with its characteristics and images; :class:`InspectionNotFound`."""
         with self._transaction("read an inspection", write=False) as s:
             insp = s.scalar(select(Inspection).where(Inspection.id == inspection_id)
-                            .options(selectinload(Inspection.characteristics), selectinload(Inspection.images)))
+                            .options(selectinload(Inspection.characteristics), selectinload(Inspection.images),
+                                     selectinload(Inspection.findings)))
             if insp is None:
                 raise InspectionNotFound(f"no inspection {inspection_id!r}")
             return InspectionRecord(
@@ -442,6 +459,8 @@ class Store:
                     c.characteristic_id, c.unit, c.nominal, c.lower_limit, c.upper_limit, c.measured,
                     c.uncertainty_k2, c.passed, c.true_value) for c in insp.characteristics),
                 images=tuple(ImageRecord(i.subject, i.path, i.sha256, i.created_at) for i in insp.images),
+                findings=tuple(FindingRecord(f.kind, f.message, f.subject, f.axial_mm, f.angle_deg, f.diameter_mm,
+                                             f.u_mm) for f in insp.findings),
             )
 
     def find_by_idempotency_key(self, key: str) -> str | None:
@@ -513,7 +532,8 @@ def _summary_fields(insp: Inspection) -> dict[str, Any]:
     return dict(id=insp.id, part_number=insp.part_number, serial=insp.serial, order_id=insp.order_id,
                 state=insp.state, result=insp.result, reason=insp.reason, started_at=insp.started_at,
                 finished_at=insp.finished_at, traceability=dict(insp.traceability or {}),
-                idempotency_key=insp.idempotency_key)
+                idempotency_key=insp.idempotency_key, machine_s=insp.machine_s,
+                cycle=None if insp.cycle is None else dict(insp.cycle))
 
 
 def _event_record(e: Event) -> EventRecord:

@@ -7,7 +7,7 @@ import math
 import pytest
 
 from drivers.interfaces.register_map import FaultCode
-from sim.servo.motion import TrapezoidalMove
+from station.motion import TrapezoidalMove
 from sim.servo.physics import ServoAxisConfig, ServoAxisPhysics
 
 

@@ -24,9 +24,10 @@ from station.bench.reliability import crash_trials
 KILLS = 8
 
 
-@pytest.mark.timeout(280)
+@pytest.mark.timeout(290)
 def test_sigkill_at_random_points_loses_nothing(tmp_path):
-    rep = crash_trials(KILLS, tmp_path, seed=1234, max_delay_s=6.0)
+    # up to 10 s: an inspection of the standard sample with its datum survey takes about 6 s here
+    rep = crash_trials(KILLS, tmp_path, seed=1234, max_delay_s=10.0)
     assert rep.kills == KILLS
     assert rep.problems == []
     assert rep.lost == [], f"acknowledged results missing: {rep.lost}"

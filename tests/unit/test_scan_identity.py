@@ -37,6 +37,7 @@ class IdealStation:
         self.pos = {"Z": 0.0, "C": c_start_deg}
         self.frames = 0
         self.moves = []
+        self.shots = []  # the axes' positions at each frame
 
     def detections(self, z_mm, c_deg):
         cx, cy = GEO.centre_px
@@ -64,6 +65,7 @@ class IdealStation:
             return SimpleNamespace(position_mm=self.pos["Z"], timestamp=0.0)
         if isinstance(msg, m.Capture):
             self.frames += 1
+            self.shots.append(dict(self.pos))
             # the "image" carries the pose it was taken at (2-D, as a crop slices it)
             return SimpleNamespace(image=np.array([[self.pos["Z"], self.pos["C"]]]))
         if isinstance(msg, m.Measure):
@@ -164,8 +166,10 @@ def test_rotated_part_found_from_its_angular_datum(turn_deg):
     assert_own_values(res, world)
     assert res.datum_deg == pytest.approx(turn_deg, abs=1e-6)
     # the survey goes round once, forward from where the table stood
-    survey = [p for a, p in station.moves if a == "C"][: 2 * 7]
-    assert all(b >= a - 1.0 for a, b in zip(survey, survey[1:]))
+    survey = [shot["C"] for shot in station.shots[:7]]
+    assert survey[0] == pytest.approx(400.0, abs=0.01)
+    assert all(b > a for a, b in zip(survey, survey[1:]))
+    assert survey[-1] - survey[0] < 360.0
 
 
 def test_rotated_part_without_a_datum_is_looked_for_only_within_the_fixture_zone():

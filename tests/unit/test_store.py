@@ -27,6 +27,7 @@ from typer.testing import CliRunner
 from station.cli import app
 from station.parts import load_part
 from station.store import (
+    FindingRecord,
     DuplicateIdempotencyKey,
     InspectionNotFound,
     InspectionStateError,
@@ -175,6 +176,35 @@ def test_results_of_a_finished_inspection_are_final(store, spec):
         Measurement("x", 1.0, 0.5, 1.5, None, True)  # not measured cannot pass
 
 
+def test_findings_and_machine_time_are_committed_with_the_result(store, spec):
+    iid = store.begin_inspection(PART, serial="SN-F")
+    stray = FindingRecord("unexpected_hole", "unexpected hole of 0.600 mm at 78.000 mm, 40.00 deg on the table",
+                          axial_mm=78.0, angle_deg=40.0, diameter_mm=0.6, u_mm=0.003)
+    datum = FindingRecord("datum", "part's angular datum 12.000 deg on the table, set by hole_1", subject="hole_1",
+                          axial_mm=71.03, angle_deg=12.0)
+    cycle = {"machine_s": 7.1, "basis": "modelled", "breakdown": {"moves_s": 5.8}}
+    rec = store.finish(iid, "complete", "pass", measurements=[_m(spec, "hole_1.diameter", 0.7)],
+                       findings=[datum, stray], machine_s=7.1, cycle=cycle)
+    assert rec.findings == (datum, stray)
+    assert rec.machine_s == 7.1 and rec.cycle == cycle
+    assert rec.to_json()["findings"][1]["kind"] == "unexpected_hole"
+    assert store.list_inspections(serial="SN-F")[0].machine_s == 7.1
+    # refused before anything is written: nonsense kinds, times and types
+    bad = store.begin_inspection(PART)
+    with pytest.raises(ValueError, match="finding kind"):
+        FindingRecord("burr", "a burr")
+    with pytest.raises(ValueError, match="finite"):
+        FindingRecord("datum", "d", axial_mm=float("nan"))
+    with pytest.raises(ValueError, match="machine_s"):
+        store.finish(bad, "aborted", machine_s=-1.0)
+    with pytest.raises(TypeError, match="FindingRecord"):
+        store.finish(bad, "aborted", findings=[{"kind": "datum"}])
+    assert store.get(bad).state == "running"
+    # an aborted one keeps its machine time too, and has no findings
+    rec = store.finish(bad, "aborted", reason="stopped", machine_s=2.5, cycle={"machine_s": 2.5})
+    assert (rec.machine_s, rec.findings) == (2.5, ())
+
+
 def test_image_names_cannot_escape_the_folder(store, tmp_path):
     iid = store.begin_inspection(PART)
     crop = np.zeros((8, 8, 3), np.uint8)
@@ -299,7 +329,7 @@ def test_migrated_schema_equals_the_models(tmp_path):
     engine = make_engine(url)
     try:
         with engine.connect() as conn:
-            assert current_revision(conn) == head_revision() == "0002"
+            assert current_revision(conn) == head_revision() == "0003"
             ctx = MigrationContext.configure(conn, opts={"compare_type": True, "compare_server_default": True})
             assert compare_metadata(ctx, Base.metadata) == []
             assert set(inspect(conn).get_table_names()) == set(Base.metadata.tables) | {"alembic_version"}

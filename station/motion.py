@@ -3,6 +3,12 @@
 Separate from the drive (ophyd-async's ``SimMotorMoveLogic`` idea): a small immutable
 object that answers "where, how fast, finished?" for any time, so the drive's state is
 just "which move, started when" and never needs a ticking background task.
+
+One physics, three uses: the drive twin (``sim.servo.physics``) moves by it; the
+sequencer sizes each move's timeout by it; the cycle-time accounting
+(``station.sequencer.cycle``) turns a plan's moves into machine time and its lower
+bound by it.  Rest to rest at the limits, the trapezoid is also the minimum-time move
+(bang-bang in acceleration, capped in speed), so the same formula is the bound.
 """
 
 from __future__ import annotations
@@ -103,3 +109,37 @@ class TrapezoidalMove:
             else:
                 lo = mid
         return hi
+
+
+@dataclass(frozen=True)
+class AxisLimits:
+    """How fast an axis may move (its unit per s and per s^2): the velocity and
+    acceleration the station commands and the minimum-time bound assumes."""
+
+    velocity: float
+    acceleration: float
+
+    def __post_init__(self):
+        for name in ("velocity", "acceleration"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                raise ValueError(f"axis {name} limit must be a positive number, not {v!r}")
+
+
+def move_time_s(distance: float, limits: AxisLimits) -> float:
+    """Duration of a rest-to-rest move of ``distance`` (axis unit) at ``limits``: the
+    trapezoid (triangle when short), which is also the minimum time for that move."""
+    if distance == 0:
+        return 0.0
+    return TrapezoidalMove(0.0, abs(float(distance)), limits.velocity, limits.acceleration).duration
+
+
+def approach_time_s(start: float, target: float, limits: AxisLimits, approach: float) -> float:
+    """Minimum time to arrive at ``target`` moving in the positive direction (the
+    unidirectional approach that takes up backlash the same way every time): straight
+    there when ``target`` is above ``start``; else past it by ``approach`` and back up,
+    two rest-to-rest moves (the reversal stops the axis in between)."""
+    d = target - start
+    if d >= 0:
+        return move_time_s(d, limits)
+    return move_time_s(-d + approach, limits) + move_time_s(approach, limits)
