@@ -57,6 +57,17 @@ def test_good_part_passes_and_is_stored(spec, tmp_path):
         assert len(rec.traceability["model_fingerprint"]) == 16 and rec.traceability["camera_mm_per_px"] == 0.01
         for img in rec.images:
             assert store.image_path(img).is_file()
+        # the part's angular datum, set by hole_1's survey, is a finding of the record
+        assert [(f.kind, f.subject) for f in rec.findings] == [("datum", "hole_1")]
+        # the machine time at the axes' real speeds, not the twin's 50x: at least the
+        # bound of the same plan, and more than the time the run took here on moves
+        cyc = rec.cycle
+        assert rec.machine_s == cyc["machine_s"] == pytest.approx(sum(cyc["breakdown"].values()))
+        assert cyc["basis"] == "modelled"
+        assert cyc["lower_bound_s"] <= rec.machine_s
+        wall_s = (rec.finished_at - rec.started_at).total_seconds()
+        assert cyc["breakdown"]["moves_s"] > wall_s / 2  # the survey alone turns the table a whole turn
+        assert cyc["breakdown"]["frames_s"] == pytest.approx(out.cycle["breakdown"]["frames_s"])
 
 
 def test_part_with_a_hole_out_of_tolerance_fails(spec, tmp_path):
