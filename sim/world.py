@@ -12,19 +12,27 @@ inverts (``station.kinematics``):
 
 Temperature is a function of time (constant, or a warm-up towards a final value),
 because the thermal effects of the vocabulary need it.
+
+The world's model is its own, never the station's (docs/world.md): the scenario names
+it, and the drift physics of ``sim.drift`` (the screw's heat, the shop's air, wear, a
+collision) move the machine on from it as a real one moves on from its last laser
+measurement.
 """
 
 from __future__ import annotations
 
 import math
 import tomllib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from sim.drift import SIX_DOF_KEYS, Drift, drift_from_dict
+from station.effects import Eccentricity
 from station.kinematics.model import StationModel, load_model
+from station.kinematics.parameters import SixDof
 
 
 @dataclass(frozen=True)
@@ -94,11 +102,64 @@ class World:
     part: PartTruth = STANDARD_SAMPLE
     temperature: Temperature = field(default_factory=Temperature)
     repeatability: Repeatability = field(default_factory=Repeatability)
+    drift: Drift = field(default_factory=Drift)
 
     def __post_init__(self):
         self._rng = np.random.default_rng(self.repeatability.seed)
         #: the present approach's random error of each axis (mm, deg)
         self._approach_error = {"Z": 0.0, "C": 0.0}
+        #: each axis' last target (the drift's screw heating and wear count the travel)
+        self._last_target: dict[str, float | None] = {"Z": None, "C": None}
+        self._effective: tuple[tuple, StationModel] | None = None
+        body = self.drift.collision.body
+        try:
+            self.model.topology.by_name(body)
+        except KeyError:
+            raise ValueError(f"world.collision: body {body!r} is not a body of the model's topology") from None
+
+    # -------------------------------------------------------------- drift
+    def effective_model(self, time_s: float) -> StationModel:
+        """The world's model as the drift has left it at ``time_s``: C's runout grown by
+        wear, a collision's step of installation errors."""
+        runout_um = round(self.drift.wear.runout_extra_um(), 4)
+        collided = self.drift.collision.happened(time_s)
+        key = (runout_um, collided, id(self.model))
+        if self._effective is not None and self._effective[0] == key:
+            return self._effective[1]
+        model = self.model
+        if runout_um:
+            mc = model.motions_of("C")
+            # a grown radial runout of the table's bearing, as the model's own eccentricity
+            mc = replace(mc, x=mc.x.with_effects(Eccentricity(amplitude=runout_um, phase=0.0)),
+                         y=mc.y.with_effects(Eccentricity(amplitude=runout_um, phase=math.pi / 2)))
+            model = replace(model, motions={**model.motions, "C": mc})
+        if collided:
+            c = self.drift.collision
+            old = model.static_errors.get(c.body, SixDof())
+            new = SixDof(**{k: getattr(old, k) + c.shift.get(k, 0.0) for k in SIX_DOF_KEYS})
+            model = replace(model, static_errors={**model.static_errors, c.body: new})
+        self._effective = (key, model)
+        return model
+
+    def carriage_drift_mm(self, motor_mm: float, direction: int, time_s: float) -> float:
+        """Where the drift carries Z's carriage beyond the model (mm): the warm screw's
+        growth and the lost motion wear added (half of it each way, as backlash)."""
+        um = self.drift.screw.growth_um(motor_mm, time_s) + direction * self.drift.wear.backlash_extra_um() / 2.0
+        return um * 1e-3
+
+    def on_move(self, axis: str, target: float, time_s: float) -> None:
+        """A move started: the screw takes its heat, wear counts its travel, the
+        repeatability draws the approach's error."""
+        last = self._last_target.get(axis)
+        if axis == "Z" and last is not None:
+            self.drift.screw.on_move(target - last, time_s)
+        self.drift.wear.on_move(axis, target)
+        self._last_target[axis] = target
+        self.new_approach(axis)
+
+    def grating_reading_mm(self, carriage_mm: float, time_s: float) -> float:
+        """What the grating reads with the carriage truly at ``carriage_mm``."""
+        return carriage_mm + self.drift.ambient.grating_error_um(carriage_mm, time_s) * 1e-3
 
     def approach_error(self, axis: str) -> float:
         """The present approach's random error of ``axis`` (mm for Z, deg for C)."""
@@ -114,7 +175,8 @@ class World:
         """Carriage minus motor position of Z: the positioning error motion EZZ."""
         curve = self.model.motions_of("Z").z
         deviation_um = curve.evaluate([motor_mm], [direction], [time_s], self.temperature.at([time_s]))[0]
-        return float(deviation_um) * 1e-3 + self._approach_error["Z"]
+        return float(deviation_um) * 1e-3 + self._approach_error["Z"] + self.carriage_drift_mm(motor_mm, direction,
+                                                                                                time_s)
 
     def c_offset_deg(self, motor_deg: float, direction: int, time_s: float) -> float:
         """Table minus motor angle of C: the angular positioning error ECC."""
@@ -124,13 +186,17 @@ class World:
 
     # -------------------------------------------------------------- the detection point
     def true_points(self, z_mm, c_deg, direction_z=0, direction_c=0, time_s=0.0):
-        """(axial mm, angle deg, radius mm) of the detection point at motor poses, vectorised."""
+        """(axial mm, angle deg, radius mm) of the detection point at motor poses, vectorised:
+        the model (as the drift has left it at the first time given) and the frame's growth."""
         z = np.atleast_1d(np.asarray(z_mm, dtype=float))
         t = np.broadcast_to(np.asarray(time_s, dtype=float), z.shape)
-        e = self.model.errors(
+        model = self.effective_model(float(t.flat[0]) if t.size else 0.0)
+        e = model.errors(
             z, c_deg, direction_z=direction_z, direction_c=direction_c, time_s=t, temperature_c=self.temperature.at(t)
         )
-        return self.model.part_coordinates(e.actual_point_mm)
+        axial, angle, radius = model.part_coordinates(e.actual_point_mm)
+        frame_mm = np.array([self.drift.ambient.frame_shift_um(float(ti)) for ti in t.flat]).reshape(t.shape) * 1e-3
+        return axial + frame_mm, angle, radius
 
     def true_point(self, z_mm: float, c_deg: float, direction_z: int = 0, direction_c: int = 0, time_s: float = 0.0) -> TruePoint:
         """The detection point with the drives at motor poses ``z_mm``, ``c_deg`` now.
@@ -142,7 +208,7 @@ class World:
         them by their slope times that, far below a nanometre.)  ``true_points`` is the
         model alone, for any poses, without them.
         """
-        z_eff = z_mm + self._approach_error["Z"]
+        z_eff = z_mm + self._approach_error["Z"] + self.carriage_drift_mm(z_mm, direction_z, time_s)
         c_eff = c_deg + self._approach_error["C"]
         ax, an, r = self.true_points([z_eff], [c_eff], direction_z, direction_c, time_s)
         return TruePoint(float(ax[0]), float(an[0]), float(r[0]), z_mm, c_deg, time_s)
@@ -150,12 +216,13 @@ class World:
     def holes_near(self, point: TruePoint, half_width_mm: float, half_height_mm: float):
         """Holes in a window around the point, as (hole, tangential mm, axial mm)
         offsets from it, on the unrolled bore wall (tangential = arc length)."""
-        r = self.part.bore_diameter_mm / 2.0
+        scale = self.drift.ambient.part_scale(point.time_s)  # the part at its temperature
+        r = self.part.bore_diameter_mm / 2.0 * scale
         out = []
         for h in self.part.holes:
             dphi = (h.angle_deg - point.angle_deg + 180.0) % 360.0 - 180.0
             du = math.radians(dphi) * r
-            dv = h.axial_mm - point.axial_mm
+            dv = h.axial_mm * scale - point.axial_mm
             if abs(du) <= half_width_mm + h.diameter_mm and abs(dv) <= half_height_mm + h.diameter_mm:
                 out.append((h, du, dv))
         return out
@@ -168,19 +235,40 @@ class World:
         for axis, hook in (("Z", self.z_offset_mm), ("C", self.c_offset_deg)):
             if axis in physics:
                 physics[axis].actual_offset = hook
-                physics[axis].move_listeners.append(lambda target, direction, t, axis=axis: self.new_approach(axis))
+                physics[axis].move_listeners.append(lambda target, direction, t, axis=axis: self.on_move(axis, target, t))
+        encoder = getattr(twins, "encoder", None)
+        if encoder is not None and "Z" in physics:
+            z = physics["Z"]
+
+            def reading_mm() -> float:
+                t = z.now()
+                return self.grating_reading_mm(z.carriage_position(t), t)
+
+            encoder.position_mm = reading_mm
 
 
 def world_from_dict(data: dict[str, Any], source: str = "<dict>", base: Path | None = None) -> World:
     """Build a world from a scenario's ``[world]`` table (all keys optional):
-    ``model`` (a station model TOML, relative to the scenario), ``[world.temperature]``
-    (start_c, rise_c, tau_s), ``[world.repeatability]`` (z_um, c_arcsec, seed) and
-    ``[[world.holes]]`` (name, axial_mm, angle_deg, diameter_mm)."""
+    ``model`` (a model TOML, relative to the scenario; default: the station's shipped
+    model, a world that agrees with it), ``[world.temperature]`` (start_c, rise_c,
+    tau_s), ``[world.repeatability]`` (z_um, c_arcsec, seed), the drift physics
+    (``[world.screw_heating]``, ``[world.ambient]``, ``[world.wear]``,
+    ``[world.collision]``: sim.drift) and ``[[world.holes]]`` (name, axial_mm,
+    angle_deg, diameter_mm)."""
     model_path = data.get("model")
     if model_path is not None:
         p = Path(model_path)
-        if not p.is_absolute() and base is not None:
-            p = base / p
+        if not p.is_absolute():
+            # beside the scenario; else one of the shipped scenarios' models (a copy of
+            # the default scenario elsewhere keeps naming "default_world.toml")
+            shipped = Path(__file__).with_name("scenarios") / p
+            here = base / p if base is not None else p
+            if not here.is_file() and shipped.is_file():
+                here = shipped
+            elif not here.is_file():
+                raise ValueError(f"{source}: [world] model {model_path!r}: no such file beside the scenario "
+                                 f"({here}) nor among the shipped scenarios ({shipped})")
+            p = here
         model = load_model(p)
     else:
         model = load_model()
@@ -205,7 +293,11 @@ def world_from_dict(data: dict[str, Any], source: str = "<dict>", base: Path | N
         holes = tuple(holes)
     part = PartTruth(str(data.get("part_number", STANDARD_SAMPLE.part_number)),
                      float(data.get("bore_diameter_mm", STANDARD_SAMPLE.bore_diameter_mm)), holes)
-    return World(model, part, temperature, repeatability)
+    try:
+        return World(model, part, temperature, repeatability, drift_from_dict(data, source))
+    except ValueError as exc:
+        msg = str(exc)
+        raise ValueError(msg if msg.startswith(source) else f"{source}: {msg}") from None
 
 
 def load_world(scenario_path: str | Path | None = None) -> World:

@@ -9,7 +9,8 @@ Config file (TOML), every key optional; the embedded default is a simulated stat
 
     [station]
     mode = "simulated"          # or "hardware"
-    model = "path/to/model.toml"  # geometric error model (default: built-in)
+    model = "path/to/model.toml"  # the station's geometric error model (default: built-in);
+                                # in simulation never the world's (the scenario has its own)
 
     [simulation]
     scenario = "path/to/scenario.toml"  # default: sim/scenarios/default.toml
@@ -168,9 +169,10 @@ def _axis_driver(cls, name: str, spec: dict[str, Any], source: str):
 
 
 def build_station(config_path: str | Path | None = None, *, scenario: str | Path | None = None,
-                  time_scale: float | None = None) -> Station:
+                  time_scale: float | None = None, model: str | Path | None = None) -> Station:
     """Build (not yet connect) the station the config describes. A simulated station's
-    twins are started here, on 127.0.0.1, and stopped by :meth:`Station.close`."""
+    twins are started here, on 127.0.0.1, and stopped by :meth:`Station.close`.
+    ``model``: the station's model file, instead of the config's."""
     from drivers.encoder import SerialGratingEncoder
     from drivers.modbus_axis import ModbusLinearAxis, ModbusRotaryAxis
 
@@ -185,7 +187,10 @@ def build_station(config_path: str | Path | None = None, *, scenario: str | Path
         q = Path(p)
         return q if q.is_absolute() else base / q
 
-    model = load_model(resolve(st["model"])) if "model" in st else load_model()
+    if model is not None:
+        model = load_model(model)
+    else:
+        model = load_model(resolve(st["model"])) if "model" in st else load_model()
 
     if mode == "hardware":
         hw = data.get("hardware", {})
@@ -229,11 +234,11 @@ def build_station(config_path: str | Path | None = None, *, scenario: str | Path
     ts = time_scale if time_scale is not None else sim_cfg.get("time_scale")
     if ts is not None:
         scen.time_scale = float(ts)
+    # Two models, always (docs/world.md): the world is the scenario's (what the machine
+    # really does), the station's model is the config's (what was measured, some time
+    # ago). Neither is copied into the other: a station told the world's truth would
+    # measure only its own consistency.
     world = load_world(scen_path)
-    if "model" in st:
-        world.model = model
-    else:
-        model = world.model
     twins = TwinsThread(TwinStation(scen))
     endpoints = twins.start()
     try:

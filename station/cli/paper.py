@@ -35,8 +35,15 @@ async def _measure(scenario: Path, data: Path, compensated: bool, time_scale: fl
     from station.inspection.session import open_session
     from station.parts import load_part
 
+    from sim.twins import DEFAULT_SCENARIO
+
     spec = load_part("ZDZG-22.2-12.3851")
-    async with open_session(scenario=scenario, time_scale=time_scale, data_dir=data,
+    PAPER_MODEL = DEFAULT_SCENARIO.with_name("paper_model.toml")  # its laser's Tables 1-3
+    # the paper's station compensated with the model its laser measured, which is all
+    # the paper gives of its machine: the paper's world is that model too
+    # (sim/scenarios/paper_model.toml), so the two coincide here by the paper's data,
+    # not by one being copied into the other
+    async with open_session(scenario=scenario, time_scale=time_scale, data_dir=data, model=PAPER_MODEL,
                             settings=ScanSettings(compensated=compensated)) as s:
         return await s.inspect(spec, "STANDARD-SAMPLE"), spec
 

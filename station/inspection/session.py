@@ -67,13 +67,15 @@ class Session:
 @contextlib.asynccontextmanager
 async def open_session(config: str | Path | None = None, *, scenario: str | Path | None = None,
                        time_scale: float | None = None, data_dir: str | Path = "var", db_url: str | None = None,
-                       settings: ScanSettings | None = None, world=None):
+                       settings: ScanSettings | None = None, world=None, model: str | Path | None = None):
     """Build the station, connect it, open the store (recovering interrupted
-    inspections); close everything on the way out, whatever happened."""
+    inspections); close everything on the way out, whatever happened. ``model``: the
+    station's model file (its belief), instead of the config's; ``world``: a caller's
+    world whose part replaces the scenario's."""
     from station.runtime import build_station
     from station.store import Store
 
-    station = build_station(config, scenario=scenario, time_scale=time_scale)
+    station = build_station(config, scenario=scenario, time_scale=time_scale, model=model)
     store = None
     try:
         if world is not None and station.world is not None:

@@ -30,8 +30,18 @@ def belief():
     return AxisModel(name="Z", kind="linear", curve=load_model().motions_of("Z").z)
 
 
-def test_scan_logs_agree_with_the_model_on_the_default_station(tmp_path):
-    rec = inspect_n(tmp_path, None)
+def matched_scenario(tmp_path: Path) -> Path:
+    """The default scenario with a world that agrees with the station's model: its
+    model is the station's shipped one (no ``model`` key) and its screw stays cool."""
+    text = (REPO / "sim" / "scenarios" / "default.toml").read_text()
+    assert 'model = "default_world.toml"' in text and "enabled = true" in text
+    text = text.replace('model = "default_world.toml"', "").replace("enabled = true", "enabled = false")
+    (tmp_path / "matched.toml").write_text(text)
+    return tmp_path / "matched.toml"
+
+
+def test_scan_logs_agree_with_the_model_where_the_world_does(tmp_path):
+    rec = inspect_n(tmp_path / "var", matched_scenario(tmp_path))
     assert len(rec) == 2 * N and set(rec.run) == set(range(1, N + 1))
     report = discover(belief(), rec).report
     assert report["verdict"] == "no-mismatch", report["effects"]
@@ -45,8 +55,8 @@ def test_scan_logs_reveal_an_error_the_model_lacks(tmp_path):
         'deviation = [0.0, 1.8, 3.9, 6.1, 8.0, 10.2, 12.1, 14.2, 16.1, 18.2, 20.0]\n'
         '[[motions.Z.EZZ.effects]]\nname = "backlash"\nreversal = 1.5\n'
         '[[motions.Z.EZZ.effects]]\nname = "offset"\nvalue = 6.0\n')
-    scen = (REPO / "sim" / "scenarios" / "default.toml").read_text().replace(
-        '# model = "my-station-model.toml"', 'model = "drifted_model.toml"')
+    scen = matched_scenario(tmp_path).read_text().replace("[world]\n", '[world]\nmodel = "drifted_model.toml"\n', 1)
+    assert 'model = "drifted_model.toml"' in scen
     (tmp_path / "scenario.toml").write_text(scen)
     rec = inspect_n(tmp_path / "var", tmp_path / "scenario.toml")
     report = discover(belief(), rec).report
