@@ -4,12 +4,15 @@
 is then (state ``running``); with an ``Idempotency-Key`` header a retried POST answers
 200 with the same inspection and starts nothing. ``GET /inspections/{id}`` is the job
 response: state, verdict and every characteristic with its limits and uncertainty;
-``/qif`` the same as a QIF 3.0 results document.
+``/qif`` the same as a QIF 3.0 results document. Both, and every item of the list,
+carry the machine time (``machine_s``, how it divides in ``cycle``); one inspection
+also its ``findings`` (docs/api.md).
 """
 
 from __future__ import annotations
 
 import contextlib
+import math
 from datetime import datetime
 from typing import Annotated, Literal
 
@@ -48,6 +51,23 @@ def characteristic_json(c) -> dict:
             "pass": c.passed}
 
 
+def finding_json(f) -> dict:
+    return {"kind": f.kind, "message": f.message, "subject": f.subject, "axial_mm": f.axial_mm,
+            "angle_deg": f.angle_deg, "diameter_mm": f.diameter_mm, "u_mm": f.u_mm}
+
+
+def _json_safe(v):
+    """The stored cycle as JSON allows it: a non-finite number (a ratio to a zero lower
+    bound, say) becomes null rather than failing the whole response."""
+    if isinstance(v, float) and not math.isfinite(v):
+        return None
+    if isinstance(v, dict):
+        return {k: _json_safe(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_json_safe(x) for x in v]
+    return v
+
+
 def job_response(rec) -> dict:
     """An inspection record as the API shows it (the twin's truth stays out: simulation
     bookkeeping, not a measurement)."""
@@ -56,11 +76,15 @@ def job_response(rec) -> dict:
         "state": rec.state, "result": rec.result, "reason": rec.reason,
         "started_at": rec.started_at.isoformat(), "finished_at": rec.finished_at and rec.finished_at.isoformat(),
         "traceability": dict(rec.traceability),
+        # the plan's machine time (s) and how it divides; null while running or when unknown
+        "machine_s": _json_safe(rec.machine_s),
+        "cycle": None if rec.cycle is None else _json_safe(dict(rec.cycle)),
         "links": {"self": f"/api/v1/inspections/{rec.id}", "qif": f"/api/v1/inspections/{rec.id}/qif"},
     }
     if hasattr(rec, "characteristics"):
         out["characteristics"] = [characteristic_json(c) for c in rec.characteristics]
         out["images"] = [{"subject": i.subject, "sha256": i.sha256} for i in rec.images]
+        out["findings"] = [finding_json(f) for f in rec.findings]
     return out
 
 
