@@ -29,6 +29,34 @@ everywhere, so order matters to a validator):
   when aborted or interrupted.
 * ``Results/ActualComponentSets``: the inspected part's serial number.
 
+Findings (an unexpected hole, an ambiguous identity, how the datum was set) are QIF
+*noted events*. QIF 3.0 has no results element for "a feature the plan does not
+expect": a measured feature or characteristic must point at a nominal of the plan,
+``NonConformanceDesignator`` belongs to a characteristic measurement, and
+``InspectionTraceability/Errors`` are failures of the measuring process. A
+``NotedEvent`` is what the schema offers for "something that occurred during this
+inspection, worth reporting", and its classification is a ``NotableEvent``: the
+kind of event a plan asks to be reported (``Active`` true). So:
+
+* ``PreInspectionTraceability/NotableEvents``: one ``NotableEvent`` per finding kind
+  present (Description ``<kind>: <what it means>``). It has to live there: the
+  schema's ``NotableEventIdKey`` admits only those as targets of a ``NotableEventId``.
+  ``PreInspectionTraceability`` also requires ``FormalStandardId`` (ISO 14405-1).
+* ``MeasurementResults/InspectionTraceability/NotedEvents``: one ``NotedEvent`` per
+  finding in the record's order (Description ``<kind>: <message> (<where>)``,
+  SequenceNumber 1, 2, ..., NotableEventId = its kind).
+* ``MeasurementResults/InspectionTraceability/Attributes``: the same findings as
+  typed values for a program: ``finding.<n>.kind`` / ``.subject`` (AttributeStr) and
+  ``.axial_mm``, ``.angle_deg``, ``.diameter_mm``, ``.u_mm`` (AttributeD1; U is
+  expanded, k = 2), each only where present; ``<n>`` is the NotedEvent's
+  SequenceNumber. (An event element has nowhere to carry numbers of its own.)
+
+Machine time is left out: QIF 3.0 has no element for a cycle or machine time. The
+wall-clock span is in ``InspectionStart``/``InspectionEnd``; the machine time (the
+plan at the axes' real speeds, modelled under a twin) is a different quantity, and a
+user attribute for it would be read only by programs told about it, which read the
+REST API's ``machine_s`` and ``cycle`` anyway.
+
 Ids: QIF ids are positive integers unique in the document (``QIFReferenceFull``
 references point at them); ``idMax`` must be at least the largest id used.
 """
@@ -82,6 +110,31 @@ def _qif_datetime(t: datetime | None) -> str | None:
     return None if t is None else t.isoformat()
 
 
+#: what each finding kind means (``station.store.models.FINDING_KINDS``), as the
+#: NotableEvent's description; a kind not listed here is described by its name only
+_FINDING_MEANING = {
+    "unexpected_hole": "a hole in the scanned bands that no hole of the part spec claims "
+                       "(a feature the inspection plan does not expect)",
+    "ambiguous_identity": "two holes in one spec hole's search zone: which one is the spec hole is unknown",
+    "datum": "how the part's angular datum on the table was set",
+}
+#: a finding's optional numbers: (field, also the attribute's suffix; how the description says it)
+_FINDING_NUMBERS = (("axial_mm", "axial {:.3f} mm"), ("angle_deg", "angle {:.2f} deg"),
+                    ("diameter_mm", "diameter {:.3f} mm"), ("u_mm", "U {:.4f} mm (k=2)"))
+
+
+def _finding_where(f: Any) -> str:
+    """``axial 73.550 mm, angle 24.00 deg, diameter 0.800 mm, U 0.0021 mm (k=2)``:
+    the numbers a finding has."""
+    return ", ".join(fmt.format(getattr(f, name)) for name, fmt in _FINDING_NUMBERS
+                     if getattr(f, name, None) is not None)
+
+
+def _finding_description(f: Any) -> str:
+    where = _finding_where(f)
+    return f"{f.kind}: {f.message}" + (f" ({where})" if where else "")
+
+
 def inspection_status(record: Any) -> str:
     """The QIF InspectionStatusEnum of an inspection record."""
     if record.state == "complete":
@@ -112,6 +165,20 @@ def qif_document(record: Any, *, software_version: str = "") -> ET.Element:
         _sub(sw, "VendorName", "bore inspection station (open source)")
         _sub(sw, "ApplicationName", "station")
         _sub(sw, "Version", software_version)
+
+    findings = list(getattr(record, "findings", ()))
+    kind_ids: dict[str, str] = {}  # finding kind -> its NotableEvent's id
+    if findings:
+        pre = _sub(root, "PreInspectionTraceability")
+        kinds = list(dict.fromkeys(f.kind for f in findings))  # first-seen order
+        notable = _sub(pre, "NotableEvents", n=len(kinds))
+        for kind in kinds:
+            kind_ids[kind] = ids.next()
+            ev = _sub(notable, "NotableEvent", id=kind_ids[kind])
+            meaning = _FINDING_MEANING.get(kind)
+            _sub(ev, "Description", f"{kind}: {meaning}" if meaning else kind)
+            _sub(ev, "Active", "true")
+        _sub(pre, "FormalStandardId", std_id)
 
     units = _sub(_sub(root, "FileUnits"), "PrimaryUnits")
     lin = _sub(units, "LinearUnit")
@@ -164,6 +231,13 @@ def qif_document(record: Any, *, software_version: str = "") -> ET.Element:
     if record.order_id:
         _sub(trace, "OrderNumber", record.order_id)
     _sub(trace, "ReportNumber", record.id)
+    if findings:
+        noted = _sub(trace, "NotedEvents", n=len(findings))
+        for seq, f in enumerate(findings, start=1):
+            ev = _sub(noted, "NotedEvent", id=ids.next())
+            _sub(ev, "Description", _finding_description(f))
+            _sub(ev, "SequenceNumber", seq)
+            _sub(ev, "NotableEventId", kind_ids[f.kind])
     if record.started_at is not None:
         _sub(trace, "InspectionStart", _qif_datetime(record.started_at))
     if record.finished_at is not None:
@@ -171,6 +245,19 @@ def qif_document(record: Any, *, software_version: str = "") -> ET.Element:
     if software_id is not None:
         used = _sub(_sub(trace, "InspectionSoftwareItems"), "InspectionProgramExecutionSoftware", n=1)
         _sub(used, "Id", software_id)
+    if findings:
+        attrs = []  # (element, name, value)
+        for seq, f in enumerate(findings, start=1):
+            attrs.append(("AttributeStr", f"finding.{seq}.kind", f.kind))
+            if f.subject is not None:
+                attrs.append(("AttributeStr", f"finding.{seq}.subject", f.subject))
+            for name, _ in _FINDING_NUMBERS:
+                v = getattr(f, name, None)
+                if v is not None:
+                    attrs.append(("AttributeD1", f"finding.{seq}.{name}", _decimal(v)))
+        block = _sub(trace, "Attributes", n=len(attrs))
+        for tag, name, value in attrs:
+            _sub(block, tag, name=name, value=value)
     try:
         _sub(mrs, "ThisResultsInstanceQPId", uuid.UUID(record.id))
     except ValueError:

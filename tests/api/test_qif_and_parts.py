@@ -1,5 +1,6 @@
 """Part specs through the API, and QIF 3.0 results validated against the official
-schemas (shared/schemas/qif3) for a passing and a failing inspection."""
+schemas (shared/schemas/qif3) for a passing and a failing inspection, with the scan's
+findings as noted events."""
 
 from __future__ import annotations
 
@@ -116,6 +117,17 @@ def test_qif_document_is_valid_and_carries_every_characteristic(api, qif_schema,
                          namespaces=NS) == f"SN-QIF-{verdict}"
     ids = [int(e.get("id")) for e in root.iter() if e.get("id") is not None]
     assert len(ids) == len(set(ids)) and max(ids) <= int(root.get("idMax"))
+    # the scan's findings as noted events, in the record's order (the standard part's
+    # angular datum is found by a survey: a "datum" finding; TIGHT-1's is not surveyed)
+    events = _noted_events(q.content)
+    assert [(e["kind"], e["subject"]) for e in events] == [(f["kind"], f["subject"]) for f in job["findings"]]
+    for e, f in zip(events, job["findings"]):
+        assert e["description"].startswith(f"{f['kind']}: {f['message']}")
+        for name in ("axial_mm", "angle_deg", "diameter_mm", "u_mm"):
+            assert e[name] == pytest.approx(f[name], abs=1e-9)
+    if part == PART:
+        assert [(e["kind"], e["subject"]) for e in events] == [("datum", "hole_1")]
+        assert "angular datum" in events[0]["description"]
 
 
 def test_qif_of_an_aborted_inspection_is_valid(api, qif_schema):
@@ -131,3 +143,96 @@ def test_qif_of_an_aborted_inspection_is_valid(api, qif_schema):
     qif_schema.validate(q.content)
     root = ET.fromstring(q.content)
     assert root.findtext(".//q:InspectionStatus/q:InspectionStatusEnum", namespaces=NS) == "NOT_MEASURED"
+    # no findings: no noted events, nothing declared for them
+    assert root.find(".//q:NotedEvents", NS) is None and root.find("q:PreInspectionTraceability", NS) is None
+    assert root.find(".//q:InspectionTraceability/q:Attributes", NS) is None
+
+
+def _noted_events(doc: bytes) -> list[dict]:
+    """The document's noted events in sequence order, each with its kind (from the
+    NotableEvent it names), description and the typed attributes of its finding."""
+    root = ET.fromstring(doc)
+    kinds = {}
+    for ev in root.findall("q:PreInspectionTraceability/q:NotableEvents/q:NotableEvent", NS):
+        assert ev.findtext("q:Active", namespaces=NS) == "true"
+        kinds[ev.get("id")] = ev.findtext("q:Description", namespaces=NS).split(":", 1)[0]
+    trace = root.find("q:Results/q:MeasurementResultsSet/q:MeasurementResults/q:InspectionTraceability", NS)
+    attrs = {a.get("name"): a for a in trace.findall("q:Attributes/*", NS)}
+    out = []
+    for ev in trace.findall("q:NotedEvents/q:NotedEvent", NS):
+        seq = ev.findtext("q:SequenceNumber", namespaces=NS)
+        e = {"kind": kinds[ev.findtext("q:NotableEventId", namespaces=NS)], "seq": int(seq),
+             "description": ev.findtext("q:Description", namespaces=NS)}
+        assert attrs[f"finding.{seq}.kind"].get("value") == e["kind"]
+        assert attrs[f"finding.{seq}.kind"].tag == f"{{{NS['q']}}}AttributeStr"
+        subject = attrs.get(f"finding.{seq}.subject")
+        e["subject"] = None if subject is None else subject.get("value")
+        for name in ("axial_mm", "angle_deg", "diameter_mm", "u_mm"):
+            a = attrs.get(f"finding.{seq}.{name}")
+            if a is not None:
+                assert a.tag == f"{{{NS['q']}}}AttributeD1"
+            e[name] = None if a is None else float(a.get("value"))
+        out.append(e)
+    assert [e["seq"] for e in out] == list(range(1, len(out) + 1))
+    return out
+
+
+def test_qif_carries_an_unexpected_hole_and_the_datum_as_noted_events(api, qif_schema):
+    """A stray drilling and the datum survey, stored with a failed inspection: both in
+    the document, each with its kind, message, position, diameter and U; still valid."""
+    from station.store import Measurement, Traceability
+    from station.store.records import FindingRecord
+
+    store = api.runtime.store
+    iid = store.begin_inspection(PART, serial="SN-QIF-STRAY", order_id="PO-Q", traceability=Traceability())
+    stray_msg = ("unexpected hole of 0.800 mm at 73.550 mm, 24.00 deg on the table (4.000 deg from the datum), "
+                 "nearest spec hole hole_1")
+    findings = [
+        FindingRecord("datum", "part's angular datum 20.000 deg on the table, set by hole_1", "hole_1",
+                      71.05, 20.0, 0.70, 0.0021),
+        FindingRecord("unexpected_hole", stray_msg, None, 73.55, 24.0, 0.80, 0.0032),
+    ]
+    measurements = [Measurement("hole_1.diameter", 0.7, 0.575, 0.825, 0.701, True, uncertainty_k2=0.002),
+                    Measurement("hole_2.diameter", 0.7, 0.575, 0.825, None, False)]
+    store.finish(iid, "complete", "fail", "hole_2 not found", measurements=measurements, findings=findings)
+    with api.client("mes") as c:
+        q = c.get(f"/api/v1/inspections/{iid}/qif")
+    assert q.status_code == 200, q.text
+    qif_schema.validate(q.content)
+    events = _noted_events(q.content)
+    assert [e["kind"] for e in events] == ["datum", "unexpected_hole"]
+    datum, stray = events
+    assert datum["subject"] == "hole_1" and stray["subject"] is None
+    assert stray["description"].startswith(f"unexpected_hole: {stray_msg} (")
+    for text in ("axial 73.550 mm", "angle 24.00 deg", "diameter 0.800 mm", "U 0.0032 mm (k=2)"):
+        assert text in stray["description"]
+    assert (stray["axial_mm"], stray["angle_deg"], stray["diameter_mm"], stray["u_mm"]) == (73.55, 24.0, 0.8, 0.0032)
+    assert (datum["axial_mm"], datum["angle_deg"], datum["diameter_mm"], datum["u_mm"]) == (71.05, 20.0, 0.7, 0.0021)
+    root = ET.fromstring(q.content)
+    # the kinds are declared once each, as reportable (Active) notable events
+    notable = root.findall("q:PreInspectionTraceability/q:NotableEvents/q:NotableEvent", NS)
+    assert len(notable) == 2 and root.find("q:PreInspectionTraceability/q:NotableEvents", NS).get("n") == "2"
+    assert "not expect" in notable[1].findtext("q:Description", namespaces=NS)
+    assert root.find(".//q:NotedEvents", NS).get("n") == "2"
+    assert root.findtext(".//q:InspectionStatus/q:InspectionStatusEnum", namespaces=NS) == "FAIL"
+    ids = [int(e.get("id")) for e in root.iter() if e.get("id") is not None]
+    assert len(ids) == len(set(ids)) and max(ids) <= int(root.get("idMax"))
+
+
+def test_a_finding_without_numbers_has_only_its_kind(api, qif_schema):
+    """An ambiguous identity names its spec hole but has no position of its own: no
+    numeric attributes are invented for it."""
+    from station.store import Traceability
+    from station.store.records import FindingRecord
+
+    store = api.runtime.store
+    iid = store.begin_inspection(PART, serial="SN-QIF-AMBIG", traceability=Traceability())
+    store.finish(iid, "faulted", None, "stopped by test",
+                 findings=[FindingRecord("ambiguous_identity", "two holes in hole_2's zone", "hole_2")])
+    with api.client("mes") as c:
+        q = c.get(f"/api/v1/inspections/{iid}/qif")
+    qif_schema.validate(q.content)
+    [e] = _noted_events(q.content)
+    assert (e["kind"], e["subject"], e["description"]) == (
+        "ambiguous_identity", "hole_2", "ambiguous_identity: two holes in hole_2's zone")
+    assert e["axial_mm"] is e["angle_deg"] is e["diameter_mm"] is e["u_mm"] is None
