@@ -11,10 +11,12 @@ would hide a machine that cannot run them.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import re
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Iterator
 
 import httpx
 import pytest
@@ -43,23 +45,30 @@ class Station:
                             timeout=30.0)
 
 
-# module scope, not session: Playwright's sync API keeps an event loop running in the
-# main thread while it is open, and every later test that calls asyncio.run would fail
-@pytest.fixture(scope="module")
-def station(tmp_path_factory) -> Station:
+@contextlib.contextmanager
+def serve_station(data: Path, extra: list[str] | None = None) -> Iterator[Station]:
+    """`station serve` on simulated hardware with its data in ``data`` (``extra``: more
+    arguments, e.g. ``--scenario F``), with a token of every role; stopped on exit."""
     from station.bench import served
     from station.store import Store
     from station.store.tokens import TokenRepository
 
-    data = tmp_path_factory.mktemp("panel-data")
     with Store(data_dir=data) as store:
         repo = TokenRepository(store)
         tokens = {role: repo.create(role, name=f"Test {role.title()}")[1] for role in ROLES}
-    server = served.start(data, time_scale=TIME_SCALE, extra=[], ready_timeout_s=90)
+    server = served.start(data, time_scale=TIME_SCALE, extra=list(extra or []), ready_timeout_s=90)
     try:
         yield Station(server.url, data, tokens)
     finally:
         served.stop(server.proc)
+
+
+# module scope, not session: Playwright's sync API keeps an event loop running in the
+# main thread while it is open, and every later test that calls asyncio.run would fail
+@pytest.fixture(scope="module")
+def station(tmp_path_factory) -> Station:
+    with serve_station(tmp_path_factory.mktemp("panel-data")) as st:
+        yield st
 
 
 @pytest.fixture(scope="module")
@@ -77,21 +86,31 @@ def browser():
             b.close()
 
 
-@pytest.fixture
-def page(browser, station):
-    context = browser.new_context(base_url=station.url, viewport={"width": 1600, "height": 1000})
+@contextlib.contextmanager
+def open_page(browser, url: str):
+    """A page in a fresh browser context on ``url``; ``page.problems`` collects page
+    errors and console errors."""
+    context = browser.new_context(base_url=url, viewport={"width": 1600, "height": 1000})
     pg = context.new_page()
     pg.set_default_timeout(30_000)
     problems: list[str] = []
     pg.on("pageerror", lambda exc: problems.append(f"page error: {exc}"))
-    # the login page asks whether a session exists: its 401 is the expected answer
+    # the login page asks whether a session exists: its 401 is the expected answer; and
+    # Chromium asks each new origin for /favicon.ico, which the panel does not have
     pg.on("console", lambda msg: problems.append(f"console {msg.type}: {msg.text}")
-          if msg.type == "error" and "status of 401" not in msg.text else None)
+          if msg.type == "error" and "status of 401" not in msg.text
+          and not msg.location.get("url", "").endswith("/favicon.ico") else None)
     pg.problems = problems
     try:
         yield pg
     finally:
         context.close()
+
+
+@pytest.fixture
+def page(browser, station):
+    with open_page(browser, station.url) as pg:
+        yield pg
 
 
 def login(page, token: str) -> None:

@@ -57,6 +57,97 @@ function outcomeOf(rec) {
   return { text: rec.state.toUpperCase(), cls: "other" };
 }
 
+/** A titled list (h2 + ul) appended to ``box``, each item's li filled by ``fill(li, item)``;
+ * nothing at all for an empty list. Returns the ul (or null). */
+function appendList(box, title, items, fill, cls = "") {
+  if (!items || !items.length) return null;
+  const h = document.createElement("h2");
+  h.textContent = title;
+  h.className = "list-title";
+  box.appendChild(h);
+  const ul = document.createElement("ul");
+  if (cls) ul.className = cls;
+  for (const item of items) {
+    const li = document.createElement("li");
+    fill(li, item);
+    ul.appendChild(li);
+  }
+  box.appendChild(ul);
+  return ul;
+}
+
+// ------------------------------------------------------------------ an inspection's findings and machine time
+// how each finding kind reads; the abnormal ones (the part is not as the plan expects)
+// are highlighted as warnings, in words as well as colour
+const FINDING_KINDS = {
+  unexpected_hole: { label: "WARNING: unexpected hole", warning: true },
+  ambiguous_identity: { label: "WARNING: identity unclear", warning: true },
+  datum: { label: "datum", warning: false },
+};
+
+function findingWhere(f) {
+  const parts = [];
+  const has = (v) => v !== null && v !== undefined;
+  if (has(f.axial_mm)) parts.push(`axial ${fmtNum(f.axial_mm, 3)} mm`);
+  if (has(f.angle_deg)) parts.push(`angle ${fmtNum(f.angle_deg, 2)} deg`);
+  if (has(f.diameter_mm)) parts.push(`\u2300 ${fmtNum(f.diameter_mm, 3)} mm`);
+  if (has(f.u_mm)) parts.push(`U ${fmtNum(f.u_mm, 4)} mm`);
+  return parts.join(", ");
+}
+
+/** One finding of an inspection as a list item: kind, message, where. */
+function findingItem(li, f) {
+  const k = FINDING_KINDS[f.kind] || { label: f.kind, warning: false };
+  li.className = `finding finding-${f.kind}` + (k.warning ? " warning" : "");
+  const kind = document.createElement("span");
+  kind.className = "finding-kind";
+  kind.textContent = k.label;
+  li.appendChild(kind);
+  li.appendChild(document.createTextNode(` ${f.message}`));
+  const where = findingWhere(f);
+  if (where) {
+    const w = document.createElement("span");
+    w.className = "finding-where";
+    w.textContent = ` (${where})`;
+    li.appendChild(w);
+  }
+}
+
+/** "machine time 7.1 s, 1.09 x the plan's lower bound (modelled)"; "" when unknown. */
+function cycleText(rec) {
+  if (rec.machine_s === null || rec.machine_s === undefined || !isFinite(rec.machine_s)) return "";
+  const c = rec.cycle || {};
+  let text = `machine time ${fmtNum(rec.machine_s, 1)} s`;
+  if (c.ratio !== null && c.ratio !== undefined && isFinite(c.ratio)) text += `, ${fmtNum(c.ratio, 2)} x the plan's lower bound`;
+  if (c.basis === "modelled") text += " (modelled)";
+  return text;
+}
+
+/** The breakdown of the machine time (and of the lower bound), for a tooltip. */
+function cycleTitle(rec) {
+  const c = rec.cycle;
+  if (!c || !c.breakdown) return "";
+  const parts = (b) => Object.entries(b).map(([k, v]) => `${k.replace(/_s$/, "")} ${fmtNum(v, 2)} s`).join(", ");
+  let t = (c.basis === "modelled" ? "modelled: the plan replayed at the axes' real speeds" : `${c.basis || "machine time"}`) +
+    `; ${parts(c.breakdown)}`;
+  if (c.lower_bound_breakdown) t += `\nlower bound ${fmtNum(c.lower_bound_s, 1)} s: ${parts(c.lower_bound_breakdown)}`;
+  return t;
+}
+
+/** The findings list and the machine time line of an inspection, into ``box`` (cleared). */
+function fillOutcomeExtras(box, rec) {
+  clear(box);
+  const line = cycleText(rec);
+  if (line) {
+    const d = document.createElement("div");
+    d.className = "cycle";
+    d.textContent = line;
+    d.title = cycleTitle(rec);
+    box.appendChild(d);
+  }
+  appendList(box, "Findings", rec.findings, findingItem, "findings");
+}
+
 // ------------------------------------------------------------------ station state
 const ATTENTION = new Set(["paused", "stopping", "aborting", "homing"]);
 const ABNORMAL = new Set(["faulted", "estopped"]);
@@ -247,6 +338,7 @@ async function showInspection(id) {
     `  ${rec.order_id ? "order " + rec.order_id + "  " : ""}started ${fmtTime(rec.started_at)}` +
     (rec.reason && rec.state !== "complete" ? `  (${rec.reason})` : "")));
   fillChars($("chars").querySelector("tbody"), rec.characteristics || []);
+  fillOutcomeExtras($("part-extras"), rec);
 }
 
 function fillChars(tbody, chars) {
@@ -378,6 +470,10 @@ async function showResultDetail(id) {
   t.removeAttribute("id");
   fillChars(t.querySelector("tbody"), rec.characteristics || []);
   box.appendChild(t);
+  const extras = document.createElement("div");
+  extras.className = "outcome-extras";
+  fillOutcomeExtras(extras, rec);
+  box.appendChild(extras);
   if (rec.state !== "running") {
     const a = document.createElement("a");
     a.href = rec.links.qif;
@@ -496,18 +592,7 @@ async function showDiscovery(id) {
   box.appendChild(t);
   for (const [title, list, key] of [["Findings", r.findings, "description"], ["Ambiguities", r.ambiguities, "description"],
     ["Not analysed", r.not_analysed, "why"]]) {
-    if (!list || !list.length) continue;
-    const hh = document.createElement("h2");
-    hh.textContent = title;
-    hh.style.marginTop = "0.75rem";
-    box.appendChild(hh);
-    const ul = document.createElement("ul");
-    for (const f of list) {
-      const li = document.createElement("li");
-      li.textContent = f[key] || JSON.stringify(f);
-      ul.appendChild(li);
-    }
-    box.appendChild(ul);
+    appendList(box, title, list, (li, f) => { li.textContent = f[key] || JSON.stringify(f); });
   }
 }
 
