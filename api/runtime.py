@@ -72,6 +72,11 @@ class SharedCamera:
         self.last = None  # drivers.interfaces.Frame
         self.last_at = 0.0  # time.monotonic() of the last grab
 
+    @property
+    def timing(self):
+        """The camera's sensor timing (the cycle time's frames), as the camera states it."""
+        return getattr(self.camera, "timing", None)
+
     async def grab(self):
         async with self._lock:
             frame = await self.camera.grab()

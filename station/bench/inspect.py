@@ -85,7 +85,7 @@ def _errors(outs):
 def _cycle(outs) -> dict:
     """Medians over the runs of the machine time at the axes' real speeds, the lower
     bound of the same plan and their ratio (station.sequencer.cycle)."""
-    cyc = [o.cycle for o in outs if o.cycle is not None and "lower_bound_s" in o.cycle]
+    cyc = [o.cycle for o in outs if o.cycle is not None and o.cycle.get("ratio") is not None]
     if not cyc:
         raise RuntimeError("no inspection gave a cycle time with its lower bound")
     keys = cyc[0]["breakdown"].keys()

@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any, Generator, Mapping
+from typing import Any, Mapping
 
 import numpy as np
 

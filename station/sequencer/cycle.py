@@ -24,7 +24,6 @@ figures come from it (docs/inspection.md, Cycle time):
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from typing import Iterable, Mapping
 
@@ -196,6 +195,7 @@ def cycle_summary(machine: CycleTime, bound: CycleTime | None) -> dict:
            "breakdown": {k: machine.breakdown.get(k, 0.0) for k in BREAKDOWN_KEYS}}
     if bound is not None:
         out["lower_bound_s"] = bound.total_s
-        out["ratio"] = machine.total_s / bound.total_s if bound.total_s > 0 else math.nan
+        # no bound (a plan without frames): no ratio; never NaN, which JSON cannot carry
+        out["ratio"] = machine.total_s / bound.total_s if bound.total_s > 0 else None
         out["lower_bound_breakdown"] = {k: bound.breakdown.get(k, 0.0) for k in BREAKDOWN_KEYS}
     return out

@@ -55,9 +55,6 @@ def test_job_order_runs_to_a_passing_result(api):
     assert "findings" not in listed[0]
 
 
-@pytest.mark.xfail(strict=True, reason="api/runtime.py's SharedCamera, which the served station's engine grabs "
-                   "through, does not pass on the camera's `timing`: run_cycle then finds no camera timing, so no "
-                   "lower bound (and frames cost the twin's rendering time). Remove this mark once it does.")
 def test_the_served_station_gives_the_plans_lower_bound(api):
     with api.client("mes") as c:
         wait_idle(c)
