@@ -157,6 +157,9 @@ class FrameObservation:
     #: hole's y (px, k = 1), None when it gives none
     diameter_u_px: float | None = None
     y_u_px: float | None = None
+    #: where the station's model put the carriage for this frame's command (mm): the
+    #: grating's reading minus it is what the model did not know (the monitors watch it)
+    carriage_pred_mm: float | None = None
 
 
 @dataclass
@@ -633,7 +636,8 @@ class _BoreScan:
             result.frames.append(FrameObservation(axial, angle, h.diameter_px * s, h.x_px, h.y_px,
                                                   h.diameter_px, float(getattr(h, "confidence", 1.0)), grating,
                                                   z_cmd, c_cmd, None if reading is None else float(reading.timestamp),
-                                                  getattr(h, "diameter_u_px", None), getattr(h, "y_u_px", None)))
+                                                  getattr(h, "diameter_u_px", None), getattr(h, "y_u_px", None),
+                                                  carriage_pred))
             if result.crop is None:
                 result.crop = _crop(frame.image, h.x_px, h.y_px, h.diameter_px)
         if not result.frames:

@@ -1,0 +1,1 @@
+"""The station watches itself: control charts over its own evidence (docs/monitor.md)."""
