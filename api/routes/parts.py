@@ -17,7 +17,7 @@ from api import auth
 from api.routes.common import blocking, runtime
 from api.toml_write import dumps
 from station.parts import PartSpecError, list_parts, load_part
-from station.parts.loader import Problem, _problems_of
+from station.parts.loader import Problem, validation_problems
 from station.parts.spec import PartSpec, is_part_number
 
 router = APIRouter(prefix="/api/v1", tags=["part specs"])
@@ -83,7 +83,7 @@ async def put_part(part_number: str, request: Request, body: dict = Body(..., de
     try:
         spec = PartSpec.model_validate(body)
     except ValidationError as exc:
-        problems = _problems_of(exc, "", "request body")
+        problems = validation_problems(exc, "", "request body")
         raise HTTPException(status.HTTP_422_UNPROCESSABLE_CONTENT,
                             [{"field": p.field, "message": p.message} for p in problems]) from None
     if spec.part_number != part_number:

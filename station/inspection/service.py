@@ -65,6 +65,8 @@ class InspectionOutcome:
     #: machine time of the run and its breakdown, with the plan's lower bound
     #: (station.sequencer.cycle.cycle_summary); None when not known
     cycle: dict | None = None
+    #: the alarms the station's charts raised on this inspection's evidence
+    alarms: list = field(default_factory=list)
 
     def to_json(self, with_truth: bool = False) -> dict:
         chars = []
@@ -75,12 +77,19 @@ class InspectionOutcome:
             chars.append(d)
         return {"id": self.id, "part_number": self.part_number, "serial": self.serial, "state": self.state,
                 "result": self.result, "reason": self.reason, "characteristics": chars,
-                "findings": [dict(f.__dict__) for f in self.findings], "cycle": self.cycle}
+                "findings": [dict(f.__dict__) for f in self.findings], "cycle": self.cycle,
+                "alarms": [a.to_json() for a in self.alarms]}
 
 
 #: per store (by id): inspections whose record could not be finished (store failure),
 #: with the reason to finish them with once the store takes writes again
 _UNFINISHED: dict[int, dict[str, str]] = {}
+
+
+def model_fingerprint(model: StationModel) -> str:
+    """16 hex digits that change with any number of the model (its version for a record)."""
+    return hashlib.sha256(repr((model.endoscope_offset_mm, model.table_offset_mm, sorted(model.static_errors.items()),
+                                sorted(model.motions.items()))).encode()).hexdigest()[:16]
 
 
 def hole_targets(part: PartSpec) -> list[HoleTarget]:
@@ -170,9 +179,7 @@ class InspectionService:
             "python": platform.python_version(),
             "model": self.model.name,
             # which numbers the compensation used: a change of any error value changes it
-            "model_fingerprint": hashlib.sha256(repr((self.model.endoscope_offset_mm, self.model.table_offset_mm,
-                                                      sorted(self.model.static_errors.items()),
-                                                      sorted(self.model.motions.items()))).encode()).hexdigest()[:16],
+            "model_fingerprint": model_fingerprint(self.model),
             "camera_mm_per_px": self.geometry.mm_per_px,
             "part_spec": part.part_number,
             **self.traceability,

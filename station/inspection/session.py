@@ -14,6 +14,7 @@ from typing import Any
 
 from station.inspection.scan import CameraGeometry, ScanSettings
 from station.inspection.service import InspectionOutcome, InspectionService
+from station.monitor.watch import Alarm, CharacteristicCheck, StationWatch
 from station.parts.spec import PartSpec
 from station.sequencer.engine import Devices, Engine
 
@@ -44,11 +45,41 @@ def truth_of(world) -> Any:
 
 
 @dataclass
+class MasterCheckOutcome:
+    """A check of the station on its certified master: the inspection, each
+    characteristic against the certificate, and the alarms it raised (none: in
+    control, and the station's ``needs_check`` cleared)."""
+
+    master_id: str
+    inspection: InspectionOutcome
+    checks: list[CharacteristicCheck]
+    alarms: list[Alarm]
+
+    @property
+    def in_control(self) -> bool:
+        return self.inspection.state == "complete" and not self.alarms
+
+    def to_json(self, with_truth: bool = False) -> dict:
+        return {"master_id": self.master_id, "in_control": self.in_control,
+                "inspection": self.inspection.to_json(with_truth),
+                "checks": [{"id": c.id, "measured": c.measured, "certified": c.certified,
+                            "u_station": c.u_station, "u_certificate": c.u_certificate, "z": c.z, "en": c.en}
+                           for c in self.checks],
+                "alarms": [a.to_json() for a in self.alarms]}
+
+
+@dataclass
 class Session:
     station: Any  # station.runtime.Station
     store: Any  # station.store.Store
     engine: Engine
     settings: ScanSettings
+    #: the station's control charts over its own evidence (docs/monitor.md)
+    watch: StationWatch | None = None
+
+    def __post_init__(self):
+        if self.watch is None:
+            self.watch = StationWatch(gate_um=self.settings.model_u_um)
 
     def service_for(self, part: PartSpec) -> InspectionService:
         st = self.station
@@ -61,7 +92,36 @@ class Session:
                                  time_scale=st.time_scale)
 
     async def inspect(self, part: PartSpec, serial: str, **kw) -> InspectionOutcome:
-        return await self.service_for(part).inspect(part, serial, **kw)
+        """One production inspection; its evidence goes on the station's charts."""
+        out = await self.service_for(part).inspect(part, serial, **kw)
+        if out.state == "complete":
+            out.alarms = self._log_alarms(self.watch.observe_inspection(out.holes), out.id)
+        return out
+
+    async def check_master(self, cert, family: PartSpec) -> MasterCheckOutcome:
+        """Inspect the certified master (``cert``: a ``MasterCertificate`` of the part
+        family ``family``) and judge the station by it. The master must be on the table
+        (in simulation the caller puts it into the world)."""
+        from station.checks.master import compare
+
+        spec = cert.as_part_spec(family)
+        out = await self.service_for(spec).inspect(spec, cert.master_id)
+        checks = compare(cert, out.characteristics) if out.state == "complete" else []
+        positions = [c for c in checks if c.id.endswith(".position")]
+        if out.state != "complete":
+            alarms = self._log_alarms([Alarm(self.watch.index, "master", f"master check {cert.master_id} did not "
+                                                                            f"complete: {out.reason}")], out.id)
+        else:
+            alarms = self._log_alarms(self.watch.observe_master(positions), out.id)
+        if not alarms:
+            self.store.log_event("check", f"master check {cert.master_id} in control: the station is within its "
+                                          f"stated U; charts restarted", out.id)
+        return MasterCheckOutcome(cert.master_id, out, checks, alarms)
+
+    def _log_alarms(self, alarms: list[Alarm], inspection_id: str | None) -> list[Alarm]:
+        for a in alarms:
+            self.store.log_event("alarm", f"station needs a check: {a.reason}", inspection_id)
+        return alarms
 
 
 @contextlib.asynccontextmanager

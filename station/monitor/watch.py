@@ -24,7 +24,7 @@ Two kinds of evidence (docs/monitor.md):
 Each chart's limit is set from the wanted in-control average run length by the
 Markov-chain computation of ``station.monitor.ewma``: the false-alarm rate is stated,
 not guessed. An alarm puts the station in ``needs_check`` (the MES reads it over REST:
-"station needs a check") until a master check in control clears it; that check also
+"station needs a check") until a master check in control clears it; that check then
 restarts the grating chart from a new baseline (the state the master just confirmed).
 """
 
@@ -165,11 +165,13 @@ class StationWatch:
             # the alarm is raised; the next check is judged afresh (a step put right is not a drift)
             self.master.restart()
             return self._raise("master", f"master check: {why}: the station is outside its stated U")
-        # in control: what the master confirmed is the new reference of the grating chart
-        self.needs_check = None
-        self.grating.restart()
-        self._phase1 = []
-        self.baseline_um = None
+        # in control: the station is within its stated U. If a check was asked for, the
+        # state the master has just confirmed becomes the grating chart's new reference
+        if self.needs_check is not None:
+            self.needs_check = None
+            self.grating.restart()
+            self._phase1 = []
+            self.baseline_um = None
         return []
 
     def model_changed(self) -> None:

@@ -110,7 +110,7 @@ def line_of(text: str, loc: tuple) -> int | None:
     return best_line
 
 
-def _problems_of(exc: ValidationError, text: str, source: str) -> list[Problem]:
+def validation_problems(exc: ValidationError, text: str, source: str) -> list[Problem]:
     problems = []
     for err in exc.errors():
         cause = (err.get("ctx") or {}).get("error")
@@ -144,7 +144,7 @@ def parse_part(text: str, source: str = "<text>") -> PartSpec:
     try:
         return PartSpec.model_validate(data)
     except ValidationError as exc:
-        raise PartSpecError(_problems_of(exc, text, source)) from None
+        raise PartSpecError(validation_problems(exc, text, source)) from None
 
 
 def read_part_file(path: str | Path) -> PartSpec:

@@ -1,0 +1,117 @@
+"""``station campaign`` and ``station check master``: the station judged over a production
+run on a scenario's world, and on its certified master (docs/monitor.md)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Optional
+
+import typer
+from rich.table import Table
+
+from station.cli.common import err_console, fail, out_console, print_json
+
+
+def register(app: typer.Typer) -> None:
+    @app.command("campaign")
+    def campaign(
+        scenario: Optional[Path] = typer.Option(None, "--scenario", help="twin scenario TOML (default: the default world)"),
+        parts: int = typer.Option(20, "--parts", help="parts to inspect"),
+        master_every: int = typer.Option(0, "--master-every", help="check on the master after every K parts (0: never)"),
+        seed: int = typer.Option(0, "--seed", help="the master's making (its errors within its certificate)"),
+        time_scale: float = typer.Option(4.0, "--time-scale", help="moves run this much faster than real time"),
+        data: Optional[Path] = typer.Option(None, "--data", help="keep the records here (default: a temporary folder)"),
+        json: bool = typer.Option(False, "--json", help="one JSON object on stdout"),
+    ) -> None:
+        """A production campaign in simulation: the station with its own model on the scenario's world."""
+        from rich.progress import Progress
+
+        from station.bench.campaign import run_campaign
+
+        if scenario is not None and not scenario.is_file():
+            fail(f"{scenario}: no such scenario file", 2)
+        try:
+            with Progress(console=err_console, transient=True) as prog:
+                task = prog.add_task("campaign", total=parts)
+                res = run_campaign(scenario, parts, master_every, data, time_scale, seed,
+                                   progress=lambda: prog.advance(task))
+        except ValueError as exc:
+            fail(str(exc), 2)
+        if json:
+            print_json(res)
+            return
+        t = Table(title=f"campaign: {parts} parts on {res['scenario']}")
+        for col in ("part", "result", "worst error um", "U um", "model"):
+            t.add_column(col, justify="right")
+        for r in res["inspections"]:
+            t.add_row(str(r["index"]), r["result"] or r["state"],
+                      "-" if r["worst_error_um"] is None else f"{r['worst_error_um']:.2f}",
+                      "-" if r["u_um"] is None else f"{r['u_um']:.2f}", r["model_version"])
+        out_console.print(t)
+        for a in res["alarms"]:
+            out_console.print(f"[yellow]alarm after part {a['index']}:[/] {a['reason']}")
+        c = res["cost"]
+        out_console.print(f"[dim]{c['wall_s_per_inspection']:.2f} s of this PC per inspection; machine time "
+                          f"{c['machine_s_per_inspection_median']:.2f} s per part[/]")
+
+    check_app = typer.Typer(help="checks of the station itself", no_args_is_help=True)
+    app.add_typer(check_app, name="check")
+
+    @check_app.command("master")
+    def check_master(
+        master: str = typer.Option("MC-22.2-A", "--master", help="a built-in master's id or a certificate file"),
+        config: Optional[Path] = typer.Option(None, "--config", help="station config TOML (default: simulated)"),
+        scenario: Optional[Path] = typer.Option(None, "--scenario", help="twin scenario TOML (simulation only)"),
+        data: Path = typer.Option(Path("var"), "--data", help="data folder: database, images"),
+        time_scale: float = typer.Option(20.0, "--time-scale", help="simulation: moves this much faster"),
+        seed: int = typer.Option(0, "--seed", help="simulation: the master's making"),
+        json: bool = typer.Option(False, "--json", help="one JSON object on stdout"),
+    ) -> None:
+        """Inspect the certified master and judge the station by its certificate.
+        Exit 0 in control, 1 out of its stated U, 2 error."""
+        import asyncio
+
+        from drivers.interfaces import DriverError
+        from station.checks.master import load_master
+        from station.inspection.session import open_session
+        from station.parts import load_part
+        from station.runtime import ConfigError
+        from station.store.errors import StoreError
+
+        try:
+            cert = load_master(master)
+            family = load_part(cert.part_number)
+        except ValueError as exc:
+            fail(str(exc), 2)
+
+        async def go():
+            async with open_session(config, scenario=scenario, time_scale=time_scale, data_dir=data) as s:
+                world = s.station.world
+                if world is None:
+                    return await s.check_master(cert, family), False
+                from sim.masters import master_part  # simulation: the master goes into the twin's world
+
+                saved, world.part = world.part, master_part(cert, bore_diameter_mm=family.bore.diameter_mm, seed=seed)
+                try:
+                    return await s.check_master(cert, family), True
+                finally:
+                    world.part = saved
+
+        try:
+            res, simulated = asyncio.run(go())
+        except (ConfigError, StoreError, DriverError, OSError) as exc:
+            fail(str(exc), 2)
+        if json:
+            print_json(res.to_json(with_truth=simulated))
+        else:
+            t = Table(title=f"master {res.master_id}: {'in control' if res.in_control else 'OUT OF ITS STATED U'}")
+            for col in ("characteristic", "measured", "certified", "diff um", "E_n"):
+                t.add_column(col, justify="right")
+            for c in res.checks:
+                t.add_row(c.id, "-" if c.measured is None else f"{c.measured:.4f}", f"{c.certified:.4f}",
+                          "-" if c.measured is None else f"{(c.measured - c.certified) * 1e3:+.2f}",
+                          "-" if c.en is None else f"{c.en:+.2f}")
+            out_console.print(t)
+            for a in res.alarms:
+                out_console.print(f"[yellow]alarm:[/] {a.reason}")
+        raise typer.Exit(0 if res.in_control else (1 if res.inspection.state == "complete" else 2))
