@@ -48,6 +48,7 @@ Config file (TOML), every key optional; the embedded default is a simulated stat
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import logging
 import tomllib
@@ -90,6 +91,23 @@ class Station:
     twins: Any = None  # sim.twins.TwinsThread when simulated
     world: Any = None  # sim.world.World when simulated
     endpoints: dict[str, Any] = field(default_factory=dict)
+
+    @contextlib.contextmanager
+    def master_on_table(self, cert, *, bore_diameter_mm: float, seed: int = 0):
+        """The certified master on the table for a check. On hardware the operator has
+        put it there; in simulation the twin's world holds the master (made within its
+        certificate, ``sim.masters``) until the block ends, then the production part again."""
+        if self.world is None:
+            yield
+            return
+        from sim.masters import master_part
+
+        saved = self.world.part
+        self.world.part = master_part(cert, bore_diameter_mm=bore_diameter_mm, seed=seed)
+        try:
+            yield
+        finally:
+            self.world.part = saved
 
     async def connect(self) -> None:
         for dev in (self.z, self.c, self.encoder, self.camera):

@@ -36,15 +36,8 @@ def largest_u_um(outcome) -> float | None:
     return max(us) if us else None
 
 
-def model_version(model) -> str:
-    from station.inspection.service import model_fingerprint
-
-    return f"{model.name}@{model_fingerprint(model)[:8]}"
-
-
 async def _campaign(scenario: Path | None, parts: int, master_every: int, data: Path, time_scale: float,
-                    seed: int, progress=None) -> dict:
-    from sim.masters import master_part
+                    seed: int, auto_approve: bool = False, progress=None) -> dict:
     from station.checks.master import load_master
     from station.inspection.session import open_session
     from station.parts import load_part
@@ -54,27 +47,31 @@ async def _campaign(scenario: Path | None, parts: int, master_every: int, data: 
     inspections, alarms, checks = [], [], []
     t0 = time.perf_counter()
     async with open_session(scenario=scenario, time_scale=time_scale, data_dir=data) as s:
-        world = s.station.world
-        production = world.part
-        master = master_part(cert, bore_diameter_mm=family.bore.diameter_mm, seed=seed)
-        models = [{"index": 1, "version": model_version(s.station.model), "added": []}]
+        models = [{"index": 1, "version": s.model_version, "added": []}]
+        proposals = []
         for i in range(1, parts + 1):
             out = await s.inspect(family, f"CAMPAIGN-{seed}-{i:04d}")
             inspections.append({"index": i, "state": out.state, "result": out.result,
                                 "worst_error_um": worst_error_um(out), "u_um": largest_u_um(out),
-                                "model_version": models[-1]["version"],
+                                "model_version": s.model_version,
                                 "machine_s": None if out.cycle is None else out.cycle["machine_s"]})
             alarms += [{"index": i, "reason": a.reason, "chart": a.chart} for a in out.alarms]
             if master_every and i % master_every == 0:
-                world.part = master
-                try:
-                    chk = await s.check_master(cert, family)
-                finally:
-                    world.part = production
+                chk = await s.check_master(cert, family, seed=seed)
                 checks.append({"index": i, "in_control": chk.in_control,
                                "z": [c.z for c in chk.checks if c.id.endswith(".position")],
                                "worst_error_um": worst_error_um(chk.inspection)})
                 alarms += [{"index": i, "reason": a.reason, "chart": a.chart} for a in chk.alarms]
+                if chk.alarms:
+                    holes_mm = {h.id: h.position_mm for h in cert.holes}
+                    p = s.propose(chk.alarms[0].reason, holes_mm)
+                    if p is not None:
+                        proposals.append({"index": i, "id": p.id, "changes": [c.term for c in p.changes],
+                                          "expected_change_um": p.expected_change_um})
+                        if auto_approve:  # standing in for the engineer
+                            s.decide(p.id, True, "campaign --auto-approve")
+                            models.append({"index": i + 1, "version": s.model_version,
+                                           "added": [c.term for c in p.changes]})
             if progress:
                 progress()
         state = s.watch.state()
@@ -82,18 +79,18 @@ async def _campaign(scenario: Path | None, parts: int, master_every: int, data: 
     machine = [r["machine_s"] for r in inspections if r["machine_s"] is not None]
     return {"scenario": str(scenario) if scenario else "default", "parts": parts, "master_every": master_every,
             "seed": seed, "time_scale": time_scale, "inspections": inspections, "alarms": alarms,
-            "models": models, "checks": checks, "watch": state,
+            "models": models, "checks": checks, "proposals": proposals, "watch": state,
             "cost": {"wall_s_per_inspection": wall / max(1, parts + len(checks)),
                      "machine_s_per_inspection_median": statistics.median(machine) if machine else None}}
 
 
 def run_campaign(scenario: Path | None = None, parts: int = 20, master_every: int = 0, data: Path | None = None,
-                 time_scale: float = 4.0, seed: int = 0, progress=None) -> dict:
+                 time_scale: float = 4.0, seed: int = 0, progress=None, auto_approve: bool = False) -> dict:
     if parts < 1:
         raise ValueError("a campaign needs at least one part")
     if master_every < 0:
         raise ValueError("--master-every must be 0 (never) or a positive number of parts")
     if data is not None:
-        return asyncio.run(_campaign(scenario, parts, master_every, data, time_scale, seed, progress))
+        return asyncio.run(_campaign(scenario, parts, master_every, data, time_scale, seed, auto_approve, progress))
     with tempfile.TemporaryDirectory() as tmp:
-        return asyncio.run(_campaign(scenario, parts, master_every, Path(tmp), time_scale, seed, progress))
+        return asyncio.run(_campaign(scenario, parts, master_every, Path(tmp), time_scale, seed, auto_approve, progress))

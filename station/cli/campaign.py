@@ -21,6 +21,8 @@ def register(app: typer.Typer) -> None:
         seed: int = typer.Option(0, "--seed", help="the master's making (its errors within its certificate)"),
         time_scale: float = typer.Option(4.0, "--time-scale", help="moves run this much faster than real time"),
         data: Optional[Path] = typer.Option(None, "--data", help="keep the records here (default: a temporary folder)"),
+        auto_approve: bool = typer.Option(False, "--auto-approve", help="approve each model proposal (stands in "
+                                                                          "for the engineer)"),
         json: bool = typer.Option(False, "--json", help="one JSON object on stdout"),
     ) -> None:
         """A production campaign in simulation: the station with its own model on the scenario's world."""
@@ -34,7 +36,7 @@ def register(app: typer.Typer) -> None:
             with Progress(console=err_console, transient=True) as prog:
                 task = prog.add_task("campaign", total=parts)
                 res = run_campaign(scenario, parts, master_every, data, time_scale, seed,
-                                   progress=lambda: prog.advance(task))
+                                   progress=lambda: prog.advance(task), auto_approve=auto_approve)
         except ValueError as exc:
             fail(str(exc), 2)
         if json:
@@ -86,16 +88,7 @@ def register(app: typer.Typer) -> None:
 
         async def go():
             async with open_session(config, scenario=scenario, time_scale=time_scale, data_dir=data) as s:
-                world = s.station.world
-                if world is None:
-                    return await s.check_master(cert, family), False
-                from sim.masters import master_part  # simulation: the master goes into the twin's world
-
-                saved, world.part = world.part, master_part(cert, bore_diameter_mm=family.bore.diameter_mm, seed=seed)
-                try:
-                    return await s.check_master(cert, family), True
-                finally:
-                    world.part = saved
+                return await s.check_master(cert, family, seed=seed), s.station.world is not None
 
         try:
             res, simulated = asyncio.run(go())

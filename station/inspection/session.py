@@ -78,8 +78,58 @@ class Session:
     watch: StationWatch | None = None
 
     def __post_init__(self):
+        from station.monitor.proposals import ProposalBook, apply_changes
+
         if self.watch is None:
             self.watch = StationWatch(gate_um=self.settings.model_u_um)
+        #: model proposals and the approved changes (docs/monitor.md, The loop)
+        self.proposals = ProposalBook(self.store.data_dir)
+        approved = self.proposals.approved_changes()
+        if approved:
+            # what engineers approved is the station's model from now on, over its configured one
+            self.station.model = apply_changes(self.station.model, approved, f"+{len(approved)}")
+        #: position errors (um) of the master checks out of control since the last in control
+        self._out_of_control: dict[str, list[float]] = {}
+
+    @property
+    def model_version(self) -> str:
+        from station.inspection.service import model_fingerprint
+
+        return f"{self.station.model.name}@{model_fingerprint(self.station.model)[:8]}"
+
+    def propose(self, reason: str, holes_mm: dict[str, float]):
+        """A model proposal from the master checks out of control since the last one in
+        control (None when there are none); logged."""
+        from station.monitor.proposals import ProposalError, datum_proposal
+
+        if not self._out_of_control:
+            return None
+        try:
+            p = datum_proposal(self.station.model, self.model_version, reason, dict(self._out_of_control), holes_mm)
+        except ProposalError as exc:
+            self.store.log_event("alarm", f"no model proposal: {exc}")
+            return None
+        self.proposals.add(p)
+        self.store.log_event("proposal", f"model proposal {p.id} on {p.base_version}: "
+                                         + "; ".join(c.why for c in p.changes))
+        return p
+
+    def decide(self, proposal_id: str, approve: bool, who: str, note: str = ""):
+        """An engineer's decision on a proposal (audit-logged); approved, the station
+        uses the changed model from its next inspection and its charts start again."""
+        from station.monitor.proposals import apply_changes
+
+        p = self.proposals.decide(proposal_id, approve, who, note)
+        if approve:
+            before = self.model_version
+            self.station.model = apply_changes(self.station.model, p.changes,
+                                               f"+{len(self.proposals.approved_changes())}")
+            self.watch.model_changed()
+            self.store.log_event("approval", f"model proposal {p.id} approved by {who}: {before} -> "
+                                             f"{self.model_version}" + (f" ({note})" if note else ""))
+        else:
+            self.store.log_event("rejection", f"model proposal {p.id} rejected by {who}" + (f": {note}" if note else ""))
+        return p
 
     def service_for(self, part: PartSpec) -> InspectionService:
         st = self.station
@@ -93,19 +143,25 @@ class Session:
 
     async def inspect(self, part: PartSpec, serial: str, **kw) -> InspectionOutcome:
         """One production inspection; its evidence goes on the station's charts."""
-        out = await self.service_for(part).inspect(part, serial, **kw)
+        return self.observe(await self.service_for(part).inspect(part, serial, **kw))
+
+    def observe(self, out: InspectionOutcome) -> InspectionOutcome:
+        """Put a production inspection's evidence on the station's charts (its alarms
+        logged and kept on the outcome)."""
         if out.state == "complete":
             out.alarms = self._log_alarms(self.watch.observe_inspection(out.holes), out.id)
         return out
 
-    async def check_master(self, cert, family: PartSpec) -> MasterCheckOutcome:
+    async def check_master(self, cert, family: PartSpec, *, seed: int = 0) -> MasterCheckOutcome:
         """Inspect the certified master (``cert``: a ``MasterCertificate`` of the part
-        family ``family``) and judge the station by it. The master must be on the table
-        (in simulation the caller puts it into the world)."""
+        family ``family``) and judge the station by it. On hardware the operator has put
+        the master on the table; in simulation the composition root puts it into the
+        twin's world for the check (``seed``: its making)."""
         from station.checks.master import compare
 
         spec = cert.as_part_spec(family)
-        out = await self.service_for(spec).inspect(spec, cert.master_id)
+        with self.station.master_on_table(cert, bore_diameter_mm=family.bore.diameter_mm, seed=seed):
+            out = await self.service_for(spec).inspect(spec, cert.master_id)
         checks = compare(cert, out.characteristics) if out.state == "complete" else []
         positions = [c for c in checks if c.id.endswith(".position")]
         if out.state != "complete":
@@ -114,8 +170,13 @@ class Session:
         else:
             alarms = self._log_alarms(self.watch.observe_master(positions), out.id)
         if not alarms:
+            self._out_of_control = {}
             self.store.log_event("check", f"master check {cert.master_id} in control: the station is within its "
-                                          f"stated U; charts restarted", out.id)
+                                          f"stated U", out.id)
+        else:
+            for c in positions:
+                if c.measured is not None:
+                    self._out_of_control.setdefault(c.id, []).append((c.measured - c.certified) * 1e3)
         return MasterCheckOutcome(cert.master_id, out, checks, alarms)
 
     def _log_alarms(self, alarms: list[Alarm], inspection_id: str | None) -> list[Alarm]:

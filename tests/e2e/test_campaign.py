@@ -28,22 +28,35 @@ def scenario(tmp_path: Path, name: str, extra: str = "", matched: bool = False) 
     return p
 
 
-def test_a_knocked_datum_is_caught_by_the_next_master_check_and_logged(tmp_path):
+def test_a_knocked_datum_is_caught_named_corrected_and_logged(tmp_path):
     # each part is about 14 s of the drives' clock at time scale 4: the knock falls after part 3
     knock = scenario(tmp_path, "knock", '\n[world.collision]\nat_s = 45.0\nbody = "J"\nshift = { z_um = 8.0 }\n')
-    res = run_campaign(knock, parts=8, master_every=3, data=tmp_path / "var", time_scale=4.0)
+    res = run_campaign(knock, parts=11, master_every=3, data=tmp_path / "var", time_scale=4.0, auto_approve=True)
     errs = [r["worst_error_um"] for r in res["inspections"]]
     first_bad = next(i for i, e in enumerate(errs, start=1) if e > 3.0)
     assert all(e < 3.0 for e in errs[:first_bad - 1]), errs
-    assert all(7.0 < e < 10.0 for e in errs[first_bad - 1:]), errs  # the block's 8 um, unseen by the station
-    assert res["checks"][0]["in_control"] or res["checks"][0]["index"] >= first_bad
     alarms = res["alarms"]
-    assert alarms, res["checks"]
-    assert alarms[0]["chart"] == "master" and first_bad <= alarms[0]["index"] <= first_bad + 3
-    assert res["watch"]["needs_check"]
+    assert alarms and alarms[0]["chart"] == "master", res["checks"]
+    caught = alarms[0]["index"]
+    assert first_bad <= caught <= first_bad + 3
+    # between the knock and the new model: the block's 8 um, unseen by the station
+    assert all(7.0 < e < 10.0 for e in errs[first_bad - 1:caught]), errs
+    # the proposal names the block's installation error along Z, and the fix is the knock
+    (prop,) = res["proposals"]
+    assert prop["index"] == caught and prop["changes"] == ["installation.J.z_um"]
+    assert all(-9.5 < v < -7.0 for v in prop["expected_change_um"].values())
+    assert [m["index"] for m in res["models"]] == [1, caught + 1]
+    assert res["models"][1]["added"] == ["installation.J.z_um"]
+    # from the next part on: within 3 um and within the stated U again, and the master agrees
+    after = res["inspections"][caught:]
+    assert after and all(r["worst_error_um"] < 3.0 and r["worst_error_um"] < r["u_um"] for r in after), after
+    assert all(r["model_version"] == res["models"][1]["version"] for r in after)
+    assert res["checks"][-1]["in_control"] and not res["watch"]["needs_check"]
     with Store(data_dir=tmp_path / "var") as store:
-        logged = [e.message for e in store.events(kind="alarm")]
-    assert len(logged) == len(alarms) and all(m.startswith("station needs a check: master check") for m in logged)
+        kinds = [(e.kind, e.message) for e in store.events() if e.kind in ("alarm", "proposal", "approval", "check")]
+    assert [k for k, _ in kinds if k != "check"] == ["alarm", "proposal", "approval"]
+    assert kinds[[k for k, _ in kinds].index("alarm")][1].startswith("station needs a check: master check")
+    assert "approved by campaign --auto-approve" in [m for k, m in kinds if k == "approval"][0]
 
 
 def test_a_world_that_agrees_with_its_model_raises_no_alarm(tmp_path):

@@ -1,0 +1,192 @@
+"""The loop closes: from the station's own evidence to a proposed model, approved by an engineer.
+
+The master checks measure what no other sensor of the station sees: where the holes
+are on the part against where a calibration laboratory found them. When a check is out
+of the station's stated U, the mean of its position errors over the checks since the
+alarm is the station's axial datum error, and the physics that moved it is named: the
+installation error along Z of the calibration block J that carries the part
+(ISO 230-1: a location error of the workholding, EZ0 of the part datum). The
+proposal corrects that one parameter by the amount the model's own sensitivity says
+(the finite difference of the model's predicted detection point), and states the
+expected change of every hole's measured position.
+
+Proposals live under ``<data>/models/``: ``proposals/<id>.json`` (what, why, the
+evidence, the expected change), and ``approved.json`` (the accepted changes in order,
+applied over the station's configured model at every start). Every proposal, approval
+and rejection is an event of the store's log (the audit trail).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import uuid
+from dataclasses import asdict, dataclass, field, replace
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Iterable
+
+import numpy as np
+
+from station.kinematics.model import StationModel
+from station.kinematics.parameters import SixDof
+
+#: the parameter a master check names when the datum moved
+DATUM_BODY = "J"
+DATUM_TERM = f"installation.{DATUM_BODY}.z_um"
+STATES = ("proposed", "approved", "rejected")
+
+
+class ProposalError(ValueError):
+    """A proposal that does not exist or cannot change state as asked."""
+
+
+@dataclass
+class Change:
+    """One parameter of the model changed: ``installation.<body>.<key>`` by ``delta``."""
+
+    term: str
+    delta: float
+    why: str = ""
+
+    def apply(self, model: StationModel) -> StationModel:
+        section, body, key = self.term.split(".")
+        if section != "installation":
+            raise ProposalError(f"cannot change {self.term}: only installation errors are proposed")
+        old = model.static_errors.get(body, SixDof())
+        new = replace(old, **{key: getattr(old, key) + self.delta})
+        return replace(model, static_errors={**model.static_errors, body: new})
+
+
+@dataclass
+class Proposal:
+    id: str
+    created_at: str
+    base_version: str
+    reason: str
+    changes: list[Change]
+    #: the checks it rests on: per characteristic, measured - certified (um)
+    evidence: dict[str, list[float]]
+    #: per hole: the expected change of its measured position with the change (um)
+    expected_change_um: dict[str, float]
+    state: str = "proposed"
+    decided_by: str | None = None
+    decided_at: str | None = None
+    decision_note: str | None = None
+
+    def to_json(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_json(cls, d: dict) -> Proposal:
+        d = dict(d)
+        d["changes"] = [Change(**c) for c in d["changes"]]
+        return cls(**d)
+
+
+def datum_sensitivity(model: StationModel, z_mm: float, c_deg: float, term: str = DATUM_TERM) -> float:
+    """d(predicted axial position of the detection point)/d(term), um per um, at a pose:
+    a central difference of the model (the change is linear to far below a nm)."""
+    h = 1.0
+    up = Change(term, +h).apply(model)
+    down = Change(term, -h).apply(model)
+    ax = [m.part_coordinates(m.errors([z_mm], [c_deg]).actual_point_mm)[0][0] for m in (up, down)]
+    return float((ax[0] - ax[1]) * 1e3 / (2 * h))
+
+
+def datum_proposal(model: StationModel, base_version: str, reason: str,
+                   errors_um: dict[str, list[float]], holes_mm: dict[str, float]) -> Proposal:
+    """A proposal from master checks' position errors (``errors_um``: characteristic
+    id -> measured - certified, um, per check since the alarm) at the holes' axial
+    places (``holes_mm``: hole id -> mm): the datum's error is their mean, corrected
+    through the model's sensitivity at each hole."""
+    pooled = [e for es in errors_um.values() for e in es]
+    if not pooled:
+        raise ProposalError("no master check results to propose from")
+    mean_um = float(np.mean(pooled))
+    sens = [datum_sensitivity(model, z, 0.0) for z in holes_mm.values()]
+    s = float(np.mean(sens))
+    if abs(s) < 0.5:
+        raise ProposalError(f"the datum term {DATUM_TERM} barely moves the holes (sensitivity {s:.3f} um/um)")
+    # the station measures a hole at target + (its image offset from the true point):
+    # a world datum moved by d puts the point -s d from the model's prediction, so the
+    # holes read e = -s d high; a model moved by delta moves its prediction s delta and
+    # the readings with it: delta = -e / s removes e
+    delta = -mean_um / s
+    spread = float(np.std(pooled, ddof=1)) if len(pooled) > 1 else math.nan
+    change = Change(DATUM_TERM, delta, why=(
+        f"master checks: positions {mean_um:+.2f} um from the certificate on average (spread {spread:.2f} um over "
+        f"{len(pooled)} values): the part's axial datum moved; the calibration block's installation error along Z "
+        f"(ISO 230-1: location error EZ0 of the workholding) changes by {delta:+.2f} um"))
+    after = change.apply(model)
+    expected = {}
+    for hole, z in holes_mm.items():
+        a0 = model.part_coordinates(model.errors([z], [0.0]).actual_point_mm)[0][0]
+        a1 = after.part_coordinates(after.errors([z], [0.0]).actual_point_mm)[0][0]
+        # compensation cancels the model's predicted shift, so the world's point moves
+        # the other way and the hole's image offset, the reading, by the shift itself
+        expected[hole] = float((a1 - a0) * 1e3)
+    return Proposal(uuid.uuid4().hex[:12], datetime.now(timezone.utc).isoformat(), base_version, reason, [change],
+                    errors_um, expected)
+
+
+@dataclass
+class ProposalBook:
+    """Proposals and the approved changes of one station (``<data>/models``)."""
+
+    data_dir: Path
+    folder: Path = field(init=False)
+
+    def __post_init__(self):
+        self.folder = Path(self.data_dir) / "models"
+        (self.folder / "proposals").mkdir(parents=True, exist_ok=True)
+
+    def _path(self, pid: str) -> Path:
+        if not pid.isalnum() or len(pid) > 64:
+            raise ProposalError(f"no proposal {pid!r}")
+        return self.folder / "proposals" / f"{pid}.json"
+
+    def _write(self, path: Path, data) -> None:
+        tmp = path.with_suffix(".tmp")
+        tmp.write_text(json.dumps(data, indent=2))
+        with open(tmp, "rb+") as f:
+            os.fsync(f.fileno())
+        os.replace(tmp, path)  # whole or not at all
+
+    def add(self, p: Proposal) -> Proposal:
+        self._write(self._path(p.id), p.to_json())
+        return p
+
+    def get(self, pid: str) -> Proposal:
+        path = self._path(pid)
+        if not path.is_file():
+            raise ProposalError(f"no proposal {pid!r}")
+        return Proposal.from_json(json.loads(path.read_text()))
+
+    def list(self) -> list[Proposal]:
+        out = [Proposal.from_json(json.loads(f.read_text())) for f in (self.folder / "proposals").glob("*.json")]
+        return sorted(out, key=lambda p: p.created_at)
+
+    def decide(self, pid: str, approve: bool, who: str, note: str = "") -> Proposal:
+        p = self.get(pid)
+        if p.state != "proposed":
+            raise ProposalError(f"proposal {pid} is already {p.state}")
+        p.state = "approved" if approve else "rejected"
+        p.decided_by, p.decided_at, p.decision_note = who, datetime.now(timezone.utc).isoformat(), note or None
+        if approve:
+            approved = self.approved_changes()
+            approved.extend(p.changes)
+            self._write(self.folder / "approved.json", [asdict(c) for c in approved])
+        self._write(self._path(pid), p.to_json())
+        return p
+
+    def approved_changes(self) -> list[Change]:
+        f = self.folder / "approved.json"
+        return [Change(**c) for c in json.loads(f.read_text())] if f.is_file() else []
+
+
+def apply_changes(model: StationModel, changes: Iterable[Change], name_suffix: str = "") -> StationModel:
+    for c in changes:
+        model = c.apply(model)
+    return replace(model, name=model.name + name_suffix) if name_suffix else model
