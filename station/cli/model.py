@@ -156,5 +156,63 @@ def compensate_cmd(
         fail("some targets did not converge", code=1)
 
 
+@model_app.command("proposals")
+def proposals_cmd(
+    data: Path = typer.Option(Path("var"), "--data", help="the station's data folder"),
+    json: bool = typer.Option(False, "--json"),
+) -> None:
+    """Model proposals the station made from its own evidence (docs/monitor.md)."""
+    from station.monitor.proposals import ProposalBook
+
+    book = ProposalBook(data)
+    items = book.list()
+    if json:
+        print_json({"proposals": [p.to_json() for p in items],
+                    "approved_changes": [c.__dict__ for c in book.approved_changes()]})
+        return
+    if not items:
+        out_console.print("no model proposals")
+    for p in items:
+        out_console.print(f"[bold]{p.id}[/] {p.state} ({p.created_at}) on {p.base_version}: {p.reason}")
+        for c in p.changes:
+            out_console.print(f"  {c.term} {c.delta:+.3f}: {c.why}")
+        out_console.print("  expected change: " + ", ".join(f"{h} {v:+.2f} um" for h, v in p.expected_change_um.items()))
+        if p.decided_by:
+            out_console.print(f"  {p.state} by {p.decided_by} at {p.decided_at}" + (f": {p.decision_note}" if p.decision_note else ""))
+
+
+def _decide(pid: str, approve: bool, who: str, note: str, data: Path) -> None:
+    from station.monitor.proposals import ProposalBook, ProposalError
+    from station.store import Store
+    from station.store.errors import StoreError
+
+    try:
+        p = ProposalBook(data).decide(pid, approve, who, note)
+    except ProposalError as exc:
+        fail(str(exc), 2)
+    try:
+        with Store(data_dir=data) as store:  # a reader: the audit entry, not the station's ownership
+            store.log_event("approval" if approve else "rejection",
+                            f"model proposal {p.id} {'approved' if approve else 'rejected'} by {who} (command line)"
+                            + (f": {note}" if note else ""))
+    except StoreError as exc:
+        fail(f"decision recorded in {data}/models but not in the event log: {exc}", 2)
+    out_console.print(f"proposal {p.id} {p.state}" + ("; the station uses it from its next start" if approve else ""))
+
+
+@model_app.command("approve")
+def approve_cmd(proposal: str = typer.Argument(...), who: str = typer.Option(..., "--who", help="the engineer"),
+                note: str = typer.Option("", "--note"), data: Path = typer.Option(Path("var"), "--data")) -> None:
+    """Approve a model proposal (a running station takes it over REST at once; from here, at its next start)."""
+    _decide(proposal, True, who, note, data)
+
+
+@model_app.command("reject")
+def reject_cmd(proposal: str = typer.Argument(...), who: str = typer.Option(..., "--who", help="the engineer"),
+               note: str = typer.Option("", "--note"), data: Path = typer.Option(Path("var"), "--data")) -> None:
+    """Reject a model proposal."""
+    _decide(proposal, False, who, note, data)
+
+
 def register(app: typer.Typer) -> None:
     app.add_typer(model_app, name="model")

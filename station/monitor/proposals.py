@@ -19,7 +19,6 @@ and rejection is an event of the store's log (the audit trail).
 from __future__ import annotations
 
 import json
-import math
 import os
 import uuid
 from dataclasses import asdict, dataclass, field, replace
@@ -114,11 +113,12 @@ def datum_proposal(model: StationModel, base_version: str, reason: str,
     # holes read e = -s d high; a model moved by delta moves its prediction s delta and
     # the readings with it: delta = -e / s removes e
     delta = -mean_um / s
-    spread = float(np.std(pooled, ddof=1)) if len(pooled) > 1 else math.nan
+    spread = (f"spread {float(np.std(pooled, ddof=1)):.2f} um over {len(pooled)} values" if len(pooled) > 1
+              else "one value")
     change = Change(DATUM_TERM, delta, why=(
-        f"master checks: positions {mean_um:+.2f} um from the certificate on average (spread {spread:.2f} um over "
-        f"{len(pooled)} values): the part's axial datum moved; the calibration block's installation error along Z "
-        f"(ISO 230-1: location error EZ0 of the workholding) changes by {delta:+.2f} um"))
+        f"master checks: positions {mean_um:+.2f} um from the certificate on average ({spread}): the part's axial "
+        f"datum moved; the calibration block's installation error along Z (ISO 230-1: location error EZ0 of the "
+        f"workholding) changes by {delta:+.2f} um"))
     after = change.apply(model)
     expected = {}
     for hole, z in holes_mm.items():
