@@ -110,3 +110,24 @@ def test_master_checks_in_control_clear_and_a_knocked_datum_alarms_at_once():
     assert w.observe_master(check(rng=rng)) == []  # the datum set right again: a check in control clears
     assert not w.state()["needs_check"]
     assert CharacteristicCheck("x", 1.001, 1.0, 0.0003, 0.0004).en == pytest.approx(1.0)
+
+
+def test_master_bias_within_the_stated_u_is_not_an_alarm_and_beyond_it_is():
+    rng = np.random.default_rng(9)
+
+    def biased(z_bias):
+        u = np.hypot(0.37e-3, 0.3e-3)
+        return [CharacteristicCheck(f"hole_{i}.position", 71.0 + z_bias * u + u * rng.standard_normal(), 71.0,
+                                    0.37e-3, 0.3e-3) for i in (1, 2)]
+
+    w = StationWatch()
+    # the world's datum 0.8 combined standard uncertainties off: real, and inside U (k = 2)
+    for _ in range(500):
+        assert w.observe_master(biased(0.8)) == []
+    # 3 combined standard uncertainties off (E_n 1.5), below the single-check rule: the chart finds it
+    for k in range(1, 11):
+        if w.observe_master(biased(3.0)):
+            break
+    else:
+        pytest.fail("a bias beyond the stated U went unnoticed for 10 checks")
+    assert w.state()["needs_check"] and "drift from the certificate" in w.state()["reason"]
