@@ -98,6 +98,13 @@ def register(app: typer.Typer) -> None:
             for f in outcome.findings:
                 style = "dim" if f.kind == "datum" else "yellow"
                 out_console.print(f"[{style}]{f.kind.replace('_', ' ')}: {f.message}[/]")
+            cyc = outcome.cycle
+            if cyc is not None:
+                bound = (f", {cyc['ratio']:.2f} x the plan's lower bound of {cyc['lower_bound_s']:.2f} s"
+                         if cyc.get("ratio") is not None else "")
+                out_console.print(f"[dim]machine time {cyc['machine_s']:.2f} s ({cyc['basis']}){bound}[/]")
+            for a in outcome.alarms:
+                out_console.print(f"[bold yellow]station needs a check:[/] {a.reason}")
             out_console.print(f"[dim]inspection {outcome.id} stored in {data}/[/]")
         if outcome.state != "complete":
             raise typer.Exit(EXIT_ERROR)
