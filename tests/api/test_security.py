@@ -578,11 +578,18 @@ def test_upload_file_names_are_only_names(sec, outside, url):
             assert SENTINEL not in r.text
     assert _outside_state(outside, sec.data_dir) == before
     _check_data_dir_names(sec.data_dir)
+    # <data>/models also holds the station's model proposals and the approved changes
+    # (station.monitor.proposals.ProposalBook: proposals/<id>.json, approved.json), named by the station
+    book = {"models": {"proposals", "approved.json"}, "calibrations": set()}
     for kind, ext in (("models", "toml"), ("calibrations", "json")):
         folder = sec.data_dir / kind
         if folder.is_dir():
-            assert all(p.name == "index.json" or (p.stem.isdigit() and p.suffix == f".{ext}")
+            assert all(p.name == "index.json" or p.name in book[kind] or (p.stem.isdigit() and p.suffix == f".{ext}")
                        for p in folder.iterdir()), sorted(p.name for p in folder.iterdir())
+            proposals = folder / "proposals"
+            if kind == "models" and proposals.is_dir():
+                assert all(p.suffix == ".json" and p.stem.isalnum() for p in proposals.iterdir()), \
+                    sorted(p.name for p in proposals.iterdir())
     reports = sec.data_dir / "reports" / "discovery"
     if reports.is_dir():
         import uuid
