@@ -25,7 +25,15 @@ class Metrics:
         self.driver_errors = Counter("station_driver_errors", "Driver errors seen by the engine: "
                                      "'retry' (transient, retried) and 'fault' (the engine faulted)", ["kind"],
                                      registry=self.registry)
-        self.busy = Gauge("station_busy", "1 while an inspection or homing runs", registry=self.registry)
+        self.busy = Gauge("station_busy", "1 while an inspection, a master check or homing runs",
+                          registry=self.registry)
+        # the station's watch (docs/monitor.md): "station needs a check" and the charts' alarms
+        self.needs_check = Gauge("station_needs_check", "1 while the station's control charts ask for a check "
+                                 "on the certified master (an alarm since the last check in control), else 0",
+                                 registry=self.registry)
+        self.monitor_alarms = Counter("station_monitor_alarms", "Alarms the station's control charts raised in "
+                                      "this process (production inspections and master checks)",
+                                      registry=self.registry)
         for result in ("pass", "fail", "aborted", "faulted"):
             self.inspections.labels(result)  # present at 0 from the start, so rates work
         for kind in ("retry", "fault"):

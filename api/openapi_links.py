@@ -37,6 +37,11 @@ for _kind in ("models", "calibrations"):
     LINKS[("post", f"/api/v1/{_kind}/{{version}}/activate", "200")] = {
         "List": ("get", f"/api/v1/{_kind}", {})}
 
+# a check on the master: the check to poll, its master inspection
+LINKS[("post", "/api/v1/checks", "202")] = {
+    "GetCheck": ("get", "/api/v1/checks/{check_id}", {"check_id": "$response.body#/id"}),
+    "GetCheckInspection": ("get", "/api/v1/inspections/{inspection_id}", {"inspection_id": "$response.body#/id"})}
+
 
 def add_links(schema: dict[str, Any]) -> dict[str, Any]:
     """Write :data:`LINKS` into a generated OpenAPI schema (in place; returned)."""

@@ -33,7 +33,9 @@ import concurrent.futures
 import contextlib
 import logging
 import time
-from dataclasses import dataclass
+from collections import OrderedDict
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
 from typing import Any, Callable
 
 from api.events import EventHub
@@ -113,7 +115,8 @@ class LiveCamera:
 
 @dataclass
 class Job:
-    """The job running now: an inspection (kind "inspection") or homing ("home").
+    """The job running now: an inspection (kind "inspection"), a check on the master
+    ("check") or homing ("home").
 
     ``task`` is the ``concurrent.futures.Future`` of its coroutine on the station
     loop: ``done()`` and ``cancel()`` are safe from the API loop."""
@@ -167,10 +170,48 @@ def _settle(future: asyncio.Future, value, exc) -> None:
 class _Ended:
     """How a job's coroutine on the station loop ended, for the API loop to publish."""
 
-    outcome: Any = None  # InspectionOutcome when it completed
+    outcome: Any = None  # InspectionOutcome (MasterCheckOutcome for a check) when it completed
     seconds: float = 0.0
     iid: str | None = None
     reason: str | None = None  # set when it failed
+    #: the station's watch after the job (StationWatch.state(), taken on the station loop)
+    monitor: dict | None = None
+    #: a check out of control: the model proposal it made (station.monitor.proposals.Proposal)
+    proposal: Any = None
+
+
+#: master checks whose results the API keeps (in memory, newest; the inspection itself is in the store)
+CHECKS_KEPT = 100
+
+
+def _now() -> str:
+    return datetime.now(timezone.utc).isoformat()
+
+
+@dataclass
+class CheckRecord:
+    """A check on the certified master as the API shows it (``GET /checks/{id}``): its
+    id is the master inspection's; ``result`` is ``MasterCheckOutcome.to_json()`` once it
+    has ended (the twin's truth left out)."""
+
+    id: str
+    master_id: str
+    state: str = "running"  # running, then the master inspection's: complete | aborted | faulted
+    started_at: str = field(default_factory=_now)
+    finished_at: str | None = None
+    reason: str | None = None
+    result: dict | None = None
+    proposal_id: str | None = None
+    kind: str = "master"
+
+    def to_json(self) -> dict:
+        r = self.result
+        return {"id": self.id, "kind": self.kind, "master_id": self.master_id, "state": self.state,
+                "in_control": None if r is None else r["in_control"], "reason": self.reason,
+                "started_at": self.started_at, "finished_at": self.finished_at, "result": r,
+                "proposal_id": self.proposal_id,
+                "links": {"self": f"/api/v1/checks/{self.id}", "inspection": f"/api/v1/inspections/{self.id}",
+                          **({"proposal": f"/api/v1/model-proposals/{self.proposal_id}"} if self.proposal_id else {})}}
 
 
 class StationRuntime:
@@ -196,6 +237,8 @@ class StationRuntime:
         self.tokens: TokenRepository | None = None
         self.camera: LiveCamera | None = None
         self.job: Job | None = None
+        #: master checks started by this process, by id (API loop only; the last CHECKS_KEPT)
+        self.checks: OrderedDict[str, CheckRecord] = OrderedDict()
 
     # ------------------------------------------------------------------ life cycle
     async def open(self) -> None:
@@ -318,7 +361,8 @@ class StationRuntime:
             iid = await asyncio.wait_for(asyncio.shield(started), timeout=30.0)
         except DuplicateIdempotencyKey as dup:  # another process or a race: the same job
             return dup.inspection_id, False
-        self.hub.publish("job", event="started", inspection_id=iid, part_number=part.part_number, serial=serial)
+        self.hub.publish("job", event="started", job="inspection", inspection_id=iid, part_number=part.part_number,
+                         serial=serial)
         return iid, True
 
     async def _run_inspection(self, part, serial, order_id, key, started: asyncio.Future) -> _Ended:
@@ -329,7 +373,9 @@ class StationRuntime:
             service = self.session.service_for(part)
             notifier = service.store = _BeginNotifier(self.store, started, self.api_loop)
             outcome = await service.inspect(part, serial, order_id=order_id, idempotency_key=key)
-            return _Ended(outcome=outcome, seconds=time.monotonic() - t0, iid=outcome.id)
+            self._observe(outcome)
+            return _Ended(outcome=outcome, seconds=time.monotonic() - t0, iid=outcome.id,
+                          monitor=self.session.watch.state())
         except asyncio.CancelledError:
             raise
         except Exception as exc:  # noqa: BLE001 - a job must end recorded, whatever broke
@@ -342,6 +388,15 @@ class StationRuntime:
             with contextlib.suppress(StoreError):
                 await asyncio.to_thread(self.store.log_event, "alarm", f"inspection failed: {reason}", iid)
             return _Ended(iid=iid, reason=reason)
+
+    def _observe(self, outcome) -> None:
+        """On the station loop: a production inspection's evidence on the station's charts
+        (its alarms logged and kept on the outcome). A failure to log an alarm does not
+        undo the inspection: the watch is in ``needs_check`` all the same."""
+        try:
+            self.session.observe(outcome)
+        except Exception:  # noqa: BLE001 - the inspection is recorded; the charts' trouble is logged
+            log.exception("putting inspection %s on the station's charts failed", outcome.id)
 
     def _inspection_ended(self, fut: concurrent.futures.Future) -> None:
         """On the API loop: the metrics and the events of a finished inspection."""
@@ -356,13 +411,141 @@ class StationRuntime:
             label = outcome.result if outcome.state == "complete" else outcome.state
             self.metrics.inspections.labels(label).inc()
             self.metrics.duration.observe(ended.seconds)
-            self.hub.publish("job", event="finished", inspection_id=outcome.id, state=outcome.state,
-                             result=outcome.result, reason=outcome.reason)
+            self._monitor_news("inspection", outcome.id, outcome.alarms, ended.monitor)
+            self.hub.publish("job", event="finished", job="inspection", inspection_id=outcome.id,
+                             state=outcome.state, result=outcome.result, reason=outcome.reason)
             self.hub.publish("result", **outcome.to_json())
         else:
             self.metrics.inspections.labels("faulted").inc()
-            self.hub.publish("job", event="finished", inspection_id=ended.iid, state="faulted", result=None,
-                             reason=ended.reason)
+            self.hub.publish("job", event="finished", job="inspection", inspection_id=ended.iid, state="faulted",
+                             result=None, reason=ended.reason)
+
+    # ------------------------------------------------------------------ the station's watch
+    def monitor_state(self) -> dict:
+        """The station's watch as the MES reads it (``StationWatch.state()``: single
+        attributes, read from the API loop like the engine's state)."""
+        return self.session.watch.state()
+
+    def update_monitor_metrics(self, state: dict | None = None) -> None:
+        state = state if state is not None else self.monitor_state()
+        self.metrics.needs_check.set(1 if state["needs_check"] else 0)
+
+    def _monitor_news(self, source: str, iid: str | None, alarms, state: dict | None) -> None:
+        """On the API loop, after an inspection or a check: the metrics, and an ``alarm``
+        event when the charts raised any."""
+        self.update_monitor_metrics(state)
+        if alarms:
+            self.metrics.monitor_alarms.inc(len(alarms))
+            self.hub.publish("alarm", source=source, inspection_id=iid, alarms=[a.to_json() for a in alarms],
+                             needs_check=bool(state and state["needs_check"]),
+                             reason=state["reason"] if state else None)
+
+    def _keep_check(self, rec: CheckRecord) -> CheckRecord:
+        self.checks[rec.id] = rec
+        self.checks.move_to_end(rec.id)
+        while len(self.checks) > CHECKS_KEPT:
+            self.checks.popitem(last=False)
+        return rec
+
+    async def start_check(self, cert, family: PartSpec) -> CheckRecord:
+        """Start a check on the certified master (``cert``, of the part family
+        ``family``) as the job; returns its record (state running) once the master's
+        inspection has its id. Busy while another job runs."""
+        if self.busy:
+            raise Busy(self._busy_text())
+        started = asyncio.get_running_loop().create_future()
+        self._start_job("check", self._run_check(cert, family, started),
+                        lambda fut: self._check_ended(fut, cert.master_id), started=started)
+        iid = await asyncio.wait_for(asyncio.shield(started), timeout=30.0)
+        rec = self.checks.get(iid) or self._keep_check(CheckRecord(iid, cert.master_id))
+        self.hub.publish("job", event="started", job="check", inspection_id=iid, part_number=cert.master_id,
+                         serial=cert.master_id)
+        return rec
+
+    async def _run_check(self, cert, family: PartSpec, started: asyncio.Future) -> _Ended:
+        """On the station loop: the session's check on the master, then (out of control)
+        a model proposal from the checks since the last in control, as the campaign
+        makes it. The session's store is wrapped for the check's duration so the master
+        inspection's id reaches the waiting request as soon as its record exists."""
+        t0 = time.monotonic()
+        session = self.session
+        notifier = _BeginNotifier(session.store, started, self.api_loop)
+        session.store = notifier
+        try:
+            chk = await session.check_master(cert, family)
+        except asyncio.CancelledError:
+            raise
+        except Exception as exc:  # noqa: BLE001 - a job must end recorded, whatever broke
+            log.exception("master check failed")
+            reason = f"{type(exc).__name__}: {exc}"
+            iid = notifier.iid
+            if iid is not None:
+                await self._finish_if_running(iid, reason)
+            self._to_api(_settle, started, None, exc)
+            with contextlib.suppress(StoreError):
+                await asyncio.to_thread(self.store.log_event, "alarm", f"master check failed: {reason}", iid)
+            return _Ended(iid=iid, reason=reason, monitor=session.watch.state())
+        finally:
+            session.store = notifier._store
+        proposal = None
+        if chk.alarms:
+            try:
+                proposal = session.propose(chk.alarms[0].reason, {h.id: h.position_mm for h in cert.holes})
+            except Exception:  # noqa: BLE001 - the check stands; the proposal's trouble is logged
+                log.exception("a model proposal from master check %s failed", chk.inspection.id)
+        return _Ended(outcome=chk, seconds=time.monotonic() - t0, iid=chk.inspection.id,
+                      monitor=session.watch.state(), proposal=proposal)
+
+    def _check_ended(self, fut: concurrent.futures.Future, master_id: str) -> None:
+        """On the API loop: the check's record, the metrics and the events."""
+        if fut.cancelled():
+            return
+        if fut.exception() is not None:
+            ended = _Ended(reason=f"{type(fut.exception()).__name__}: {fut.exception()}")
+        else:
+            ended = fut.result()
+        chk = ended.outcome
+        if ended.iid is None:  # it never got as far as a record: nothing to keep
+            self.hub.publish("job", event="finished", job="check", inspection_id=None, state="faulted",
+                             result=None, reason=ended.reason)
+            return
+        rec = self.checks.get(ended.iid) or self._keep_check(CheckRecord(ended.iid, master_id))
+        rec.finished_at = _now()
+        if chk is None:
+            rec.state, rec.reason = "faulted", ended.reason
+            self.update_monitor_metrics(ended.monitor)
+        else:
+            # the master inspection's own state: complete, or aborted / faulted (then out of control)
+            rec.state, rec.reason = chk.inspection.state, chk.inspection.reason or None
+            rec.result = chk.to_json(with_truth=False)
+            rec.proposal_id = ended.proposal.id if ended.proposal is not None else None
+            self._monitor_news("check", rec.id, chk.alarms, ended.monitor)
+        self.hub.publish("job", event="finished", job="check", inspection_id=rec.id, state=rec.state,
+                         result=None if chk is None else chk.inspection.result, reason=rec.reason)
+        if ended.proposal is not None:
+            p = ended.proposal
+            self.hub.publish("proposal", event="proposed", id=p.id, state=p.state, reason=p.reason,
+                             terms=[c.term for c in p.changes])
+        # last: whoever waits for the check's end finds its alarm and proposal published
+        self.hub.publish("check", event="finished", id=rec.id, master_id=rec.master_id, state=rec.state,
+                         in_control=None if chk is None else chk.in_control, proposal_id=rec.proposal_id)
+
+    async def decide_proposal(self, proposal_id: str, approve: bool, who: str, note: str = ""):
+        """An engineer's decision on a model proposal, made on the station loop (approved:
+        the station's model from the next inspection); not while a job runs (Busy).
+        Returns (proposal, the station's model version after it)."""
+        if self.busy:
+            raise Busy(f"cannot decide on a model proposal while a job runs: {self._busy_text()}")
+
+        def decide():
+            p = self.session.decide(proposal_id, approve, who, note)
+            return p, self.session.model_version
+
+        p, version = await self.thread.run(decide)
+        self.update_monitor_metrics()
+        self.hub.publish("proposal", event=p.state, id=p.id, state=p.state, decided_by=p.decided_by,
+                         model_version=version)
+        return p, version
 
     async def _finish_if_running(self, iid: str, reason: str) -> None:
         with contextlib.suppress(StoreError, ValueError):
@@ -374,9 +557,10 @@ class StationRuntime:
         job = self.job
         if job is None:
             return "busy"
-        if job.kind == "inspection" and job.inspection_id is not None and job.inspection_id.done() \
+        if job.kind in ("inspection", "check") and job.inspection_id is not None and job.inspection_id.done() \
                 and not job.inspection_id.cancelled() and job.inspection_id.exception() is None:
-            return f"the station is running inspection {job.inspection_id.result()}; try again when it ends"
+            what = "inspection" if job.kind == "inspection" else "a check on the master, inspection"
+            return f"the station is running {what} {job.inspection_id.result()}; try again when it ends"
         return f"the station is busy ({job.kind}); try again when it ends"
 
     # ------------------------------------------------------------------ station commands
@@ -437,5 +621,8 @@ class StationRuntime:
             if f is not None and f.done() and not f.cancelled() and f.exception() is None:
                 iid = f.result()
             job = {"kind": self.job.kind, "inspection_id": iid, "running": not self.job.task.done()}
+        monitor = self.monitor_state()
         return {"state": e.state.value, "reason": e.reason, "progress": {"done": done, "total": total, "text": text},
-                "mode": self.station.mode, "busy": self.busy, "job": job}
+                "mode": self.station.mode, "busy": self.busy, "job": job,
+                # "station needs a check" (docs/api.md): the station's charts asked for a check on the master
+                "needs_check": monitor["needs_check"], "needs_check_reason": monitor["reason"], "monitor": monitor}

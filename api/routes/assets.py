@@ -62,11 +62,25 @@ def parse_calibration(text: str, source: str):
     return cal
 
 
+def _use_model(rt: StationRuntime, model) -> None:
+    """On the station loop: ``model`` with the engineer-approved changes over it (the
+    station's model proposals, docs/monitor.md: applied over whatever model the station
+    is configured with, at every start and at every activation), and the station's
+    charts started again (their reference was the old model's predictions)."""
+    from station.monitor.proposals import apply_changes
+
+    approved = rt.session.proposals.approved_changes()
+    if approved:
+        model = apply_changes(model, approved, f"+{len(approved)}")
+    rt.station.model = model
+    rt.session.watch.model_changed()
+
+
 async def apply_model(rt: StationRuntime, text: str, source: str) -> None:
     """The compensation model the next inspection uses: parsed in a worker thread,
     set on the station loop (the station reads it there)."""
     model = await blocking(parse_model, text, source)
-    await rt.thread.run(setattr, rt.station, "model", model)
+    await rt.thread.run(_use_model, rt, model)
 
 
 def _set_scale(rt: StationRuntime, mm_per_px: float) -> None:

@@ -47,4 +47,5 @@ async def metrics(request: Request, who: auth.Principal = Depends(auth.reader)) 
     passed = await blocking(rt.store.count_inspections, state="complete", result="pass")
     complete = await blocking(rt.store.count_inspections, state="complete")
     rt.metrics.pass_rate.set(passed / complete if complete else 0.0)
+    rt.update_monitor_metrics()  # as it is now, whatever changed it
     return Response(generate_latest(rt.metrics.registry), media_type=CONTENT_TYPE_LATEST)

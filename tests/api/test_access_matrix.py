@@ -73,9 +73,16 @@ POLICY: dict[tuple[str, str], frozenset[str] | str] = {
     ("GET", "/api/v1/reports/discovery/{report_id}"): ANY,
     ("GET", "/api/v1/events"): ANY,
     ("GET", "/api/v1/camera.mjpg"): ANY,
+    ("GET", "/api/v1/checks/{check_id}"): ANY,
+    ("GET", "/api/v1/model-proposals"): ANY,
+    ("GET", "/api/v1/model-proposals/{proposal_id}"): ANY,
     # writes
     ("POST", "/api/v1/job-orders"): roles("mes", "operator"),
     ("POST", "/api/v1/station/{command}"): roles("operator"),
+    # a check on the master: whoever works at the machine, not the MES
+    ("POST", "/api/v1/checks"): roles("operator", "engineer"),
+    ("POST", "/api/v1/model-proposals/{proposal_id}/approve"): roles("engineer"),
+    ("POST", "/api/v1/model-proposals/{proposal_id}/reject"): roles("engineer"),
     ("PUT", "/api/v1/parts/{part_number}"): roles("engineer"),
     ("POST", "/api/v1/models"): roles("engineer"),
     ("POST", "/api/v1/models/{version}/activate"): roles("engineer"),
@@ -105,6 +112,13 @@ PROBES: dict[tuple[str, str], list[Probe]] = {
     # 422: no such part (the part is looked up only after the caller is admitted)
     ("POST", "/api/v1/job-orders"): [Probe("/api/v1/job-orders",
                                            {"json": {"part_number": "NO-SUCH-PART", "serial": "S"}})],
+    ("GET", "/api/v1/checks/{check_id}"): [Probe(f"/api/v1/checks/{uuid.uuid4()}")],
+    ("GET", "/api/v1/model-proposals/{proposal_id}"): [Probe("/api/v1/model-proposals/0123456789ab")],
+    # 422: no such kind of check; 404: no such proposal
+    ("POST", "/api/v1/checks"): [Probe("/api/v1/checks", {"json": {"kind": "nonsense"}})],
+    ("POST", "/api/v1/model-proposals/{proposal_id}/approve"): [Probe("/api/v1/model-proposals/0123456789ab/approve")],
+    ("POST", "/api/v1/model-proposals/{proposal_id}/reject"): [Probe("/api/v1/model-proposals/0123456789ab/reject",
+                                                                      {"json": {"note": "matrix"}})],
     # 409 on an idle station; the station is made idle before the matrix runs
     ("POST", "/api/v1/station/{command}"): [Probe("/api/v1/station/pause")],
     # 422: a spec without bore and holes

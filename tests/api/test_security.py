@@ -291,6 +291,9 @@ BODY_ROUTES = {
     ("PUT", "/api/v1/parts/{part_number}"): "json",
     ("POST", "/api/v1/job-orders"): "json",
     ("POST", "/api/v1/session"): "json",
+    ("POST", "/api/v1/checks"): "json",
+    ("POST", "/api/v1/model-proposals/{proposal_id}/approve"): "json",
+    ("POST", "/api/v1/model-proposals/{proposal_id}/reject"): "json",
 }
 #: every file field of every upload
 FILE_FIELDS = [("/api/v1/models", "file"), ("/api/v1/calibrations", "file"),
@@ -354,7 +357,7 @@ def test_every_route_with_a_body_is_listed(sec):
 
 
 def _concrete(path: str) -> str:
-    return path.replace("{part_number}", "LIMIT-1")
+    return path.replace("{part_number}", "LIMIT-1").replace("{proposal_id}", "0123456789ab")
 
 
 @pytest.mark.parametrize("method, path", list(BODY_ROUTES), ids=[f"{m} {p}" for m, p in BODY_ROUTES])
@@ -475,6 +478,10 @@ TRAVERSAL_ROUTES = [
     ("POST", "/api/v1/calibrations/{version}/activate"),
     ("GET", "/api/v1/reports/discovery/{report_id}"),
     ("POST", "/api/v1/station/{command}"),
+    ("GET", "/api/v1/checks/{check_id}"),
+    ("GET", "/api/v1/model-proposals/{proposal_id}"),
+    ("POST", "/api/v1/model-proposals/{proposal_id}/approve"),
+    ("POST", "/api/v1/model-proposals/{proposal_id}/reject"),
 ]
 
 
