@@ -161,7 +161,52 @@ function showStation(st) {
   $("mode").textContent = st.mode === "simulated" ? "simulated hardware" : st.mode || "";
   showProgress(st.progress, st.busy, st.state);
   if (st.state === "estopped") showEstop(true);
+  showNeedsCheck(st);
   updateButtons();
+}
+
+// ------------------------------------------------------------------ station needs a check
+const CHECK_ROLES = ["operator", "engineer", "admin"];
+const DECIDE_ROLES = ["engineer", "admin"];
+const hasRole = (roles) => Boolean(panel.who && roles.includes(panel.who.role));
+
+/** The banner over every page while the station's charts ask for a check on the master. */
+function showNeedsCheck(st) {
+  if (st.needs_check === undefined) return; // an engine event's partial state: keep the last
+  const banner = $("check-banner");
+  banner.classList.toggle("hidden", !st.needs_check);
+  $("check-text").textContent = st.needs_check ? `Station needs a check: ${st.needs_check_reason || "an alarm"}` : "";
+  $("check-master").classList.toggle("hidden", !hasRole(CHECK_ROLES));
+}
+
+async function checkOnMaster() {
+  panel.busyClick = true;
+  updateButtons();
+  $("check-message").textContent = "Starting the check ...";
+  try {
+    const chk = await api("POST", "/api/v1/checks", { json: { kind: "master" } });
+    $("check-message").textContent = `Check on master ${chk.master_id} running (inspection ${chk.id.slice(0, 8)}).`;
+    await showInspection(chk.id);
+  } catch (err) {
+    $("check-message").textContent = `Not started: ${err.message}`;
+  } finally {
+    panel.busyClick = false;
+    refreshStationSoon();
+    updateButtons();
+  }
+}
+
+/** A check has ended (SSE "check"): say how, where the operator looks. */
+function checkEnded(d) {
+  const text = d.in_control
+    ? `Check on master ${d.master_id}: in control, the station is within its stated U.`
+    : `Check on master ${d.master_id}: OUT OF CONTROL` + (d.state !== "complete" ? ` (the inspection ${d.state})` : "") +
+      (d.proposal_id ? `; a model proposal (${d.proposal_id}) awaits an engineer.` : ".");
+  say("job-message", text, !d.in_control);
+  $("check-message").textContent = text;
+  refreshStationSoon();
+  refreshAlarms().catch(() => {});
+  if (hasRole(DECIDE_ROLES)) refreshProposals().catch(() => {});
 }
 
 function showProgress(p, running = true, state = "running") {
@@ -187,12 +232,14 @@ function updateButtons() {
   set("abort", running || state === "aborting");
   set("reset", st && !st.busy && ["faulted", "estopped", "idle", "ready"].includes(state));
   set("home", st && !st.busy && ["idle", "ready"].includes(state));
+  $("check-master").disabled = !(st && !st.busy && ["idle", "ready"].includes(state)) || panel.busyClick
+    || !hasRole(CHECK_ROLES);
 }
 
 async function refreshStation() {
   showStation(await api("GET", "/api/v1/station"));
   const job = panel.station.job;
-  if (job && job.kind === "inspection" && job.inspection_id) {
+  if (job && ["inspection", "check"].includes(job.kind) && job.inspection_id) {
     await showInspection(job.inspection_id);
   } else if (!panel.current) {
     const last = await api("GET", "/api/v1/inspections?limit=1");
@@ -240,6 +287,15 @@ function connectEvents() {
     if (d.text) $("progress-text").textContent = d.text;
   });
   es.addEventListener("fault", () => { refreshAlarms().catch(() => {}); });
+  es.addEventListener("alarm", () => {
+    refreshStationSoon();
+    refreshAlarms().catch(() => {});
+  });
+  es.addEventListener("check", (ev) => checkEnded(JSON.parse(ev.data)));
+  es.addEventListener("proposal", () => {
+    if (hasRole(DECIDE_ROLES)) refreshProposals().catch(() => {});
+    refreshStationSoon();
+  });
   es.addEventListener("retry", () => { refreshAlarms().catch(() => {}); });
   es.addEventListener("job", (ev) => {
     const d = JSON.parse(ev.data);
@@ -613,6 +669,138 @@ async function runDiscovery(ev) {
   }
 }
 
+// ------------------------------------------------------------------ model proposals (engineer)
+const PROPOSAL_STATES = { proposed: "PROPOSED", approved: "APPROVED", rejected: "REJECTED" };
+
+/** "installation.J.z_um" -> "um" (the unit is the key's suffix). */
+function termUnit(term) {
+  const key = term.split(".").pop();
+  return key.includes("_") ? key.split("_").pop() : "";
+}
+function signed(v, digits) {
+  return v === null || v === undefined || !isFinite(v) ? "-" : (v > 0 ? "+" : "") + Number(v).toFixed(digits);
+}
+
+/** A small titled table (h3 + table) appended to ``box``. */
+function miniTable(box, title, head, rows, cls) {
+  const h = document.createElement("h3");
+  h.textContent = title;
+  box.appendChild(h);
+  const t = document.createElement("table");
+  t.className = `mini ${cls}`;
+  const thead = document.createElement("thead");
+  const hr = document.createElement("tr");
+  for (const [text, num] of head) {
+    const th = document.createElement("th");
+    th.textContent = text;
+    if (num) th.className = "num";
+    hr.appendChild(th);
+  }
+  thead.appendChild(hr);
+  t.appendChild(thead);
+  const tbody = document.createElement("tbody");
+  rows.forEach((cells) => tbody.appendChild(row(cells)));
+  t.appendChild(tbody);
+  box.appendChild(t);
+}
+
+function proposalCard(p) {
+  const card = document.createElement("div");
+  card.className = `card proposal state-${p.state}`;
+  card.dataset.id = p.id;
+  const h = document.createElement("h2");
+  h.textContent = "Proposal ";
+  const pid = document.createElement("span");
+  pid.className = "proposal-id";
+  pid.textContent = p.id;
+  h.appendChild(pid);
+  const st = document.createElement("span");
+  st.className = "proposal-state";
+  st.textContent = PROPOSAL_STATES[p.state] || p.state;
+  h.appendChild(st);
+  card.appendChild(h);
+  const meta = document.createElement("div");
+  meta.className = "part-info";
+  meta.textContent = `made ${fmtTime(p.created_at)} on model ${p.base_version}`;
+  card.appendChild(meta);
+  const reason = document.createElement("div");
+  reason.className = "proposal-reason";
+  reason.textContent = `Why: ${p.reason}`;
+  card.appendChild(reason);
+  miniTable(card, "Changes", [["Term"], ["Change", true], ["Why"]],
+    p.changes.map((c) => [td(c.term), td(`${signed(c.delta, 3)} ${termUnit(c.term)}`, "num"), td(c.why || "")]),
+    "changes");
+  miniTable(card, "Expected change of each hole's measured position", [["Hole"], ["um", true]],
+    Object.entries(p.expected_change_um).map(([hole, v]) => [td(hole), td(signed(v, 2), "num")]), "expected");
+  miniTable(card, "Evidence: measured minus certified, per check", [["Characteristic"], ["um", true]],
+    Object.entries(p.evidence).map(([cid, vs]) => [td(cid), td(vs.map((v) => signed(v, 2)).join(", "), "num")]),
+    "evidence");
+  const decision = document.createElement("div");
+  decision.className = "decision";
+  if (p.state === "proposed") {
+    if (hasRole(DECIDE_ROLES)) {
+      const note = document.createElement("input");
+      note.className = "note";
+      note.maxLength = 500;
+      note.placeholder = "note (optional): why";
+      note.setAttribute("aria-label", "note on the decision");
+      const approve = document.createElement("button");
+      approve.className = "cmd primary approve";
+      approve.type = "button";
+      approve.textContent = "Approve";
+      approve.title = "The station uses the changed model from its next inspection";
+      const reject = document.createElement("button");
+      reject.className = "cmd reject";
+      reject.type = "button";
+      reject.textContent = "Reject";
+      const msg = document.createElement("span");
+      msg.className = "message";
+      const decide = async (yes) => {
+        approve.disabled = reject.disabled = true;
+        msg.textContent = yes ? "Approving ..." : "Rejecting ...";
+        try {
+          await api("POST", `/api/v1/model-proposals/${encodeURIComponent(p.id)}/${yes ? "approve" : "reject"}`,
+            { json: { note: note.value.trim() } });
+          await refreshProposals();
+        } catch (err) {
+          msg.textContent = `Refused: ${err.message}`;
+          msg.className = "message error";
+          approve.disabled = reject.disabled = false;
+        }
+      };
+      approve.addEventListener("click", () => decide(true));
+      reject.addEventListener("click", () => decide(false));
+      decision.append(note, approve, reject, msg);
+    } else {
+      decision.textContent = "Awaiting an engineer's decision.";
+    }
+  } else {
+    decision.textContent = `${PROPOSAL_STATES[p.state] || p.state} by ${p.decided_by || "?"} at ${fmtTime(p.decided_at)}` +
+      (p.decision_note ? `: ${p.decision_note}` : "");
+  }
+  card.appendChild(decision);
+  return card;
+}
+
+async function refreshProposals() {
+  const data = await api("GET", "/api/v1/model-proposals");
+  $("model-version").textContent = `The station's model now: ${data.model_version}`;
+  const box = $("proposals");
+  clear(box);
+  const items = [...data.items].reverse(); // newest first
+  if (!items.length) {
+    const none = document.createElement("div");
+    none.className = "muted";
+    none.textContent = "No model proposals.";
+    box.appendChild(none);
+  }
+  items.forEach((p) => box.appendChild(proposalCard(p)));
+  const open = items.filter((p) => p.state === "proposed").length;
+  const badge = $("proposal-badge");
+  badge.textContent = String(open);
+  badge.className = "badge" + (open ? "" : " hidden");
+}
+
 // ------------------------------------------------------------------ views
 const VIEWS = {
   operation: () => Promise.all([refreshRecent(), refreshAlarms()]),
@@ -620,6 +808,7 @@ const VIEWS = {
   alarms: refreshAlarms,
   errors: refreshErrors,
   discovery: refreshDiscovery,
+  proposals: refreshProposals,
 };
 
 function showView(name) {
@@ -657,6 +846,9 @@ async function main() {
   $("page-prev").addEventListener("click", () => { panel.resultsOffset = Math.max(0, panel.resultsOffset - 50); refreshResults().catch(() => {}); });
   $("page-next").addEventListener("click", () => { panel.resultsOffset += 50; refreshResults().catch(() => {}); });
   $("discovery-form").addEventListener("submit", runDiscovery);
+  $("check-master").addEventListener("click", checkOnMaster);
+  $("tab-proposals").classList.toggle("hidden", !hasRole(DECIDE_ROLES));
+  if (hasRole(DECIDE_ROLES)) refreshProposals().catch(() => {});
   updateButtons();
   await loadParts().catch((err) => say("job-message", `Part list: ${err.message}`, true));
   await refreshStation().catch(() => {});
@@ -664,7 +856,8 @@ async function main() {
   pollAxes();
   setInterval(() => { if (!document.hidden) refreshAlarms().catch(() => {}); }, ALARMS_PERIOD_MS);
   const initial = (location.hash || "#operation").slice(1);
-  showView(VIEWS[initial] ? initial : "operation");
+  const allowed = VIEWS[initial] && (initial !== "proposals" || hasRole(DECIDE_ROLES));
+  showView(allowed ? initial : "operation");
   // last: an endless MJPEG stream must not hold up the page's load
   $("camera").addEventListener("error", () => { $("camera-note").textContent = "camera: no picture"; });
   $("camera").addEventListener("load", () => { $("camera-note").textContent = "live"; });
