@@ -373,7 +373,7 @@ class StationRuntime:
             service = self.session.service_for(part)
             notifier = service.store = _BeginNotifier(self.store, started, self.api_loop)
             outcome = await service.inspect(part, serial, order_id=order_id, idempotency_key=key)
-            self._observe(outcome)
+            await self._observe(outcome)
             return _Ended(outcome=outcome, seconds=time.monotonic() - t0, iid=outcome.id,
                           monitor=self.session.watch.state())
         except asyncio.CancelledError:
@@ -389,12 +389,12 @@ class StationRuntime:
                 await asyncio.to_thread(self.store.log_event, "alarm", f"inspection failed: {reason}", iid)
             return _Ended(iid=iid, reason=reason)
 
-    def _observe(self, outcome) -> None:
+    async def _observe(self, outcome) -> None:
         """On the station loop: a production inspection's evidence on the station's charts
         (its alarms logged and kept on the outcome). A failure to log an alarm does not
         undo the inspection: the watch is in ``needs_check`` all the same."""
         try:
-            self.session.observe(outcome)
+            await self.session.observe(outcome)
         except Exception:  # noqa: BLE001 - the inspection is recorded; the charts' trouble is logged
             log.exception("putting inspection %s on the station's charts failed", outcome.id)
 
@@ -490,7 +490,7 @@ class StationRuntime:
         proposal = None
         if chk.alarms:
             try:
-                proposal = session.propose(chk.alarms[0].reason, {h.id: h.position_mm for h in cert.holes})
+                proposal = await session.propose(chk.alarms[0].reason, {h.id: h.position_mm for h in cert.holes})
             except Exception:  # noqa: BLE001 - the check stands; the proposal's trouble is logged
                 log.exception("a model proposal from master check %s failed", chk.inspection.id)
         return _Ended(outcome=chk, seconds=time.monotonic() - t0, iid=chk.inspection.id,
@@ -537,11 +537,11 @@ class StationRuntime:
         if self.busy:
             raise Busy(f"cannot decide on a model proposal while a job runs: {self._busy_text()}")
 
-        def decide():
-            p = self.session.decide(proposal_id, approve, who, note)
+        async def decide():
+            p = await self.session.decide(proposal_id, approve, who, note)
             return p, self.session.model_version
 
-        p, version = await self.thread.run(decide)
+        p, version = await self.thread.call(decide())
         self.update_monitor_metrics()
         self.hub.publish("proposal", event=p.state, id=p.id, state=p.state, decided_by=p.decided_by,
                          model_version=version)

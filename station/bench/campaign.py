@@ -64,12 +64,12 @@ async def _campaign(scenario: Path | None, parts: int, master_every: int, data: 
                 alarms += [{"index": i, "reason": a.reason, "chart": a.chart} for a in chk.alarms]
                 if chk.alarms:
                     holes_mm = {h.id: h.position_mm for h in cert.holes}
-                    p = s.propose(chk.alarms[0].reason, holes_mm)
+                    p = await s.propose(chk.alarms[0].reason, holes_mm)
                     if p is not None:
                         proposals.append({"index": i, "id": p.id, "changes": [c.term for c in p.changes],
                                           "expected_change_um": p.expected_change_um})
                         if auto_approve:  # standing in for the engineer
-                            s.decide(p.id, True, "campaign --auto-approve")
+                            await s.decide(p.id, True, "campaign --auto-approve")
                             models.append({"index": i + 1, "version": s.model_version,
                                            "added": [c.term for c in p.changes]})
             if progress:

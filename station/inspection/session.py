@@ -7,6 +7,7 @@ the same code the plant runs.
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
 from dataclasses import dataclass
 from pathlib import Path
@@ -97,9 +98,10 @@ class Session:
 
         return f"{self.station.model.name}@{model_fingerprint(self.station.model)[:8]}"
 
-    def propose(self, reason: str, holes_mm: dict[str, float]):
+    async def propose(self, reason: str, holes_mm: dict[str, float]):
         """A model proposal from the master checks out of control since the last one in
-        control (None when there are none); logged."""
+        control (None when there are none); logged. Files and the store are written
+        off the event loop (it carries the drives' heartbeats)."""
         from station.monitor.proposals import ProposalError, datum_proposal
 
         if not self._out_of_control:
@@ -107,28 +109,35 @@ class Session:
         try:
             p = datum_proposal(self.station.model, self.model_version, reason, dict(self._out_of_control), holes_mm)
         except ProposalError as exc:
-            self.store.log_event("alarm", f"no model proposal: {exc}")
+            await asyncio.to_thread(self.store.log_event, "alarm", f"no model proposal: {exc}")
             return None
-        self.proposals.add(p)
-        self.store.log_event("proposal", f"model proposal {p.id} on {p.base_version}: "
-                                         + "; ".join(c.why for c in p.changes))
+        await asyncio.to_thread(self.proposals.add, p)
+        await asyncio.to_thread(self.store.log_event, "proposal", f"model proposal {p.id} on {p.base_version}: "
+                                + "; ".join(c.why for c in p.changes))
         return p
 
-    def decide(self, proposal_id: str, approve: bool, who: str, note: str = ""):
+    async def decide(self, proposal_id: str, approve: bool, who: str, note: str = ""):
         """An engineer's decision on a proposal (audit-logged); approved, the station
-        uses the changed model from its next inspection and its charts start again."""
+        uses the changed model from its next inspection and its charts start again.
+        The changed model is made before the decision is recorded, so a change that
+        cannot be applied is refused and nothing is recorded."""
         from station.monitor.proposals import apply_changes
 
-        p = self.proposals.decide(proposal_id, approve, who, note)
+        new_model = None
+        if approve:
+            pending = await asyncio.to_thread(self.proposals.get, proposal_id)
+            n = len(await asyncio.to_thread(self.proposals.approved_changes)) + len(pending.changes)
+            new_model = apply_changes(self.station.model, pending.changes, f"+{n}")
+        p = await asyncio.to_thread(self.proposals.decide, proposal_id, approve, who, note)
         if approve:
             before = self.model_version
-            self.station.model = apply_changes(self.station.model, p.changes,
-                                               f"+{len(self.proposals.approved_changes())}")
+            self.station.model = new_model
             self.watch.model_changed()
-            self.store.log_event("approval", f"model proposal {p.id} approved by {who}: {before} -> "
-                                             f"{self.model_version}" + (f" ({note})" if note else ""))
+            await asyncio.to_thread(self.store.log_event, "approval", f"model proposal {p.id} approved by {who}: "
+                                    f"{before} -> {self.model_version}" + (f" ({note})" if note else ""))
         else:
-            self.store.log_event("rejection", f"model proposal {p.id} rejected by {who}" + (f": {note}" if note else ""))
+            await asyncio.to_thread(self.store.log_event, "rejection",
+                                    f"model proposal {p.id} rejected by {who}" + (f": {note}" if note else ""))
         return p
 
     def service_for(self, part: PartSpec) -> InspectionService:
@@ -143,13 +152,13 @@ class Session:
 
     async def inspect(self, part: PartSpec, serial: str, **kw) -> InspectionOutcome:
         """One production inspection; its evidence goes on the station's charts."""
-        return self.observe(await self.service_for(part).inspect(part, serial, **kw))
+        return await self.observe(await self.service_for(part).inspect(part, serial, **kw))
 
-    def observe(self, out: InspectionOutcome) -> InspectionOutcome:
+    async def observe(self, out: InspectionOutcome) -> InspectionOutcome:
         """Put a production inspection's evidence on the station's charts (its alarms
         logged and kept on the outcome)."""
         if out.state == "complete":
-            out.alarms = self._log_alarms(self.watch.observe_inspection(out.holes), out.id)
+            out.alarms = await self._log_alarms(self.watch.observe_inspection(out.holes), out.id)
         return out
 
     async def check_master(self, cert, family: PartSpec, *, seed: int = 0) -> MasterCheckOutcome:
@@ -165,23 +174,23 @@ class Session:
         checks = compare(cert, out.characteristics) if out.state == "complete" else []
         positions = [c for c in checks if c.id.endswith(".position")]
         if out.state != "complete":
-            alarms = self._log_alarms([Alarm(self.watch.index, "master", f"master check {cert.master_id} did not "
-                                                                            f"complete: {out.reason}")], out.id)
+            alarms = await self._log_alarms([Alarm(self.watch.index, "master", f"master check {cert.master_id} did "
+                                                                                  f"not complete: {out.reason}")], out.id)
         else:
-            alarms = self._log_alarms(self.watch.observe_master(positions), out.id)
+            alarms = await self._log_alarms(self.watch.observe_master(positions), out.id)
         if not alarms:
             self._out_of_control = {}
-            self.store.log_event("check", f"master check {cert.master_id} in control: the station is within its "
-                                          f"stated U", out.id)
+            await asyncio.to_thread(self.store.log_event, "check", f"master check {cert.master_id} in control: the "
+                                                                   f"station is within its stated U", out.id)
         else:
             for c in positions:
                 if c.measured is not None:
                     self._out_of_control.setdefault(c.id, []).append((c.measured - c.certified) * 1e3)
         return MasterCheckOutcome(cert.master_id, out, checks, alarms)
 
-    def _log_alarms(self, alarms: list[Alarm], inspection_id: str | None) -> list[Alarm]:
+    async def _log_alarms(self, alarms: list[Alarm], inspection_id: str | None) -> list[Alarm]:
         for a in alarms:
-            self.store.log_event("alarm", f"station needs a check: {a.reason}", inspection_id)
+            await asyncio.to_thread(self.store.log_event, "alarm", f"station needs a check: {a.reason}", inspection_id)
         return alarms
 
 

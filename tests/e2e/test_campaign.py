@@ -33,14 +33,18 @@ def test_a_knocked_datum_is_caught_named_corrected_and_logged(tmp_path):
     knock = scenario(tmp_path, "knock", '\n[world.collision]\nat_s = 45.0\nbody = "J"\nshift = { z_um = 8.0 }\n')
     res = run_campaign(knock, parts=11, master_every=3, data=tmp_path / "var", time_scale=4.0, auto_approve=True)
     errs = [r["worst_error_um"] for r in res["inspections"]]
-    first_bad = next(i for i, e in enumerate(errs, start=1) if e > 3.0)
-    assert all(e < 3.0 for e in errs[:first_bad - 1]), errs
+    # the knock's part depends on how fast this PC runs the parts: found by the data (a
+    # knock in the middle of a part's scan moves only what is measured after it)
+    first_bad = next((i for i, e in enumerate(errs, start=1) if e > 1.5), None)
+    assert first_bad is not None, (errs, res["alarms"], res["models"])
+    assert all(e < 1.0 for e in errs[:first_bad - 1]), errs
     alarms = res["alarms"]
     assert alarms and alarms[0]["chart"] == "master", res["checks"]
     caught = alarms[0]["index"]
     assert first_bad <= caught <= first_bad + 3
-    # between the knock and the new model: the block's 8 um, unseen by the station
-    assert all(7.0 < e < 10.0 for e in errs[first_bad - 1:caught]), errs
+    # between the knock and the new model: up to the block's 8 um, unseen by the station
+    assert all(1.5 < e < 10.0 for e in errs[first_bad - 1:caught]), errs
+    assert all(7.0 < e < 10.0 for e in errs[first_bad:caught]), errs
     # the proposal names the block's installation error along Z, and the fix is the knock
     (prop,) = res["proposals"]
     assert prop["index"] == caught and prop["changes"] == ["installation.J.z_um"]
