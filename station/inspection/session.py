@@ -89,7 +89,7 @@ class Session:
         if approved:
             # what engineers approved is the station's model from now on, over its configured one
             self.station.model = apply_changes(self.station.model, approved, f"+{len(approved)}")
-        #: position errors (um) of the master checks out of control since the last in control
+        #: position errors (um) of the last master check, when it was out of control
         self._out_of_control: dict[str, list[float]] = {}
 
     @property
@@ -99,8 +99,8 @@ class Session:
         return f"{self.station.model.name}@{model_fingerprint(self.station.model)[:8]}"
 
     async def propose(self, reason: str, holes_mm: dict[str, float]):
-        """A model proposal from the master checks out of control since the last one in
-        control (None when there are none); logged. Files and the store are written
+        """A model proposal from the last master check, when it was out of control (None
+        when it was not, or when its evidence is not one datum shift); logged. Files and the store are written
         off the event loop (it carries the drives' heartbeats)."""
         from station.monitor.proposals import ProposalError, datum_proposal
 
@@ -183,9 +183,10 @@ class Session:
             await asyncio.to_thread(self.store.log_event, "check", f"master check {cert.master_id} in control: the "
                                                                    f"station is within its stated U", out.id)
         else:
-            for c in positions:
-                if c.measured is not None:
-                    self._out_of_control.setdefault(c.id, []).append((c.measured - c.certified) * 1e3)
+            # the present state is the last check's: a proposal rests on it alone (an
+            # earlier check may straddle the change)
+            self._out_of_control = {c.id: [(c.measured - c.certified) * 1e3] for c in positions
+                                    if c.measured is not None}
         return MasterCheckOutcome(cert.master_id, out, checks, alarms)
 
     async def _log_alarms(self, alarms: list[Alarm], inspection_id: str | None) -> list[Alarm]:

@@ -95,14 +95,21 @@ def datum_sensitivity(model: StationModel, z_mm: float, c_deg: float, term: str 
 
 
 def datum_proposal(model: StationModel, base_version: str, reason: str,
-                   errors_um: dict[str, list[float]], holes_mm: dict[str, float]) -> Proposal:
+                   errors_um: dict[str, list[float]], holes_mm: dict[str, float],
+                   consistency_um: float = 3.0) -> Proposal:
     """A proposal from master checks' position errors (``errors_um``: characteristic
-    id -> measured - certified, um, per check since the alarm) at the holes' axial
-    places (``holes_mm``: hole id -> mm): the datum's error is their mean, corrected
-    through the model's sensitivity at each hole."""
+    id -> measured - certified, um) at the holes' axial places (``holes_mm``: hole id ->
+    mm): the datum's error is their mean, corrected through the model's sensitivity at
+    each hole. Errors further apart than ``consistency_um`` (4.5 standard
+    uncertainties of a difference of two of them) are not one datum shift: refused."""
     pooled = [e for es in errors_um.values() for e in es]
     if not pooled:
         raise ProposalError("no master check results to propose from")
+    if max(pooled) - min(pooled) > consistency_um:
+        # one datum moves every hole alike: errors this far apart are not one shift (a
+        # check the knock fell into, a dirty master): no proposal, check again
+        raise ProposalError(f"the master's position errors disagree ({min(pooled):+.2f} .. {max(pooled):+.2f} um, "
+                            f"more than {consistency_um:g} um apart): not one datum shift; check again")
     mean_um = float(np.mean(pooled))
     sens = [datum_sensitivity(model, z, 0.0) for z in holes_mm.values()]
     s = float(np.mean(sens))

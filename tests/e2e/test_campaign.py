@@ -33,15 +33,15 @@ def test_a_knocked_datum_is_caught_named_corrected_and_logged(tmp_path):
     knock = scenario(tmp_path, "knock", '\n[world.collision]\nat_s = 45.0\nbody = "J"\nshift = { z_um = 8.0 }\n')
     res = run_campaign(knock, parts=11, master_every=3, data=tmp_path / "var", time_scale=4.0, auto_approve=True)
     errs = [r["worst_error_um"] for r in res["inspections"]]
-    # the knock's part depends on how fast this PC runs the parts: found by the data (a
-    # knock in the middle of a part's scan moves only what is measured after it)
-    first_bad = next((i for i, e in enumerate(errs, start=1) if e > 1.5), None)
-    assert first_bad is not None, (errs, res["alarms"], res["models"])
-    assert all(e < 1.0 for e in errs[:first_bad - 1]), errs
     alarms = res["alarms"]
-    assert alarms and alarms[0]["chart"] == "master", res["checks"]
+    assert alarms and alarms[0]["chart"] == "master", (errs, res["checks"])
     caught = alarms[0]["index"]
-    assert first_bad <= caught <= first_bad + 3
+    # the knock's part depends on how fast this PC runs the parts, so it is found by the
+    # data: a knock mid-scan moves only what is measured after it, and one between a part
+    # and its check is caught before any part is misjudged
+    first_bad = next((i for i, e in enumerate(errs, start=1) if e > 1.5), caught + 1)
+    assert first_bad <= caught + 1 and caught - first_bad <= 3, (errs, caught)
+    assert all(e < 1.0 for e in errs[:first_bad - 1]), errs
     # between the knock and the new model: up to the block's 8 um, unseen by the station
     assert all(1.5 < e < 10.0 for e in errs[first_bad - 1:caught]), errs
     assert all(7.0 < e < 10.0 for e in errs[first_bad:caught]), errs

@@ -35,6 +35,9 @@ def test_a_datum_proposal_removes_the_mean_error_it_saw():
     assert "ISO 230-1" in c.why and "spread 0.18 um over 4 values" in c.why
     with pytest.raises(ProposalError):
         datum_proposal(m, "v0", "why", {}, HOLES)
+    # a check the knock fell into: one hole before it, one after: not one shift
+    with pytest.raises(ProposalError, match="disagree"):
+        datum_proposal(m, "v0", "why", {"hole_1.position": [0.3], "hole_2.position": [8.4]}, HOLES)
     with pytest.raises(ProposalError, match="only installation errors"):
         Change("motions.Z.EZZ", 1.0).apply(m)
 
