@@ -398,14 +398,20 @@ class StationRuntime:
         except Exception:  # noqa: BLE001 - the inspection is recorded; the charts' trouble is logged
             log.exception("putting inspection %s on the station's charts failed", outcome.id)
 
+    @staticmethod
+    def _ended_of(fut: concurrent.futures.Future) -> _Ended | None:
+        """What a finished job's future holds (an exception as its reason); None if cancelled."""
+        if fut.cancelled():
+            return None
+        if fut.exception() is not None:
+            return _Ended(reason=f"{type(fut.exception()).__name__}: {fut.exception()}")
+        return fut.result()
+
     def _inspection_ended(self, fut: concurrent.futures.Future) -> None:
         """On the API loop: the metrics and the events of a finished inspection."""
-        if fut.cancelled():
+        ended = self._ended_of(fut)
+        if ended is None:
             return
-        if fut.exception() is not None:
-            ended = _Ended(reason=f"{type(fut.exception()).__name__}: {fut.exception()}")
-        else:
-            ended = fut.result()
         outcome = ended.outcome
         if outcome is not None:
             label = outcome.result if outcome.state == "complete" else outcome.state
@@ -498,12 +504,9 @@ class StationRuntime:
 
     def _check_ended(self, fut: concurrent.futures.Future, master_id: str) -> None:
         """On the API loop: the check's record, the metrics and the events."""
-        if fut.cancelled():
+        ended = self._ended_of(fut)
+        if ended is None:
             return
-        if fut.exception() is not None:
-            ended = _Ended(reason=f"{type(fut.exception()).__name__}: {fut.exception()}")
-        else:
-            ended = fut.result()
         chk = ended.outcome
         if ended.iid is None:  # it never got as far as a record: nothing to keep
             self.hub.publish("job", event="finished", job="check", inspection_id=None, state="faulted",

@@ -125,11 +125,12 @@ class Ambient:
     def grating_c(self, t_s: float) -> float:
         return _lag(self.start_c, self.step_c, self.at_s, self.grating_tau_s, t_s)
 
-    def part_axial_mm(self, axial_20_mm: float, t_s: float) -> float:
-        return axial_20_mm * (1.0 + self.part_alpha_ppm_per_k * 1e-6 * (self.part_c(t_s) - REFERENCE_C))
-
     def part_scale(self, t_s: float) -> float:
+        """How much longer the part is than at 20 degC (about its datum face)."""
         return 1.0 + self.part_alpha_ppm_per_k * 1e-6 * (self.part_c(t_s) - REFERENCE_C)
+
+    def part_axial_mm(self, axial_20_mm: float, t_s: float) -> float:
+        return axial_20_mm * self.part_scale(t_s)
 
     def frame_shift_um(self, t_s: float) -> float:
         """How far the frame's growth carries the detection point along the bore (um, +up)."""
@@ -154,17 +155,14 @@ class Wear:
         self._lock = threading.Lock()
         self._z_travel_mm = 0.0
         self._c_travel_deg = 0.0
-        self._last = {"Z": None, "C": None}
 
-    def on_move(self, axis: str, target: float) -> None:
+    def on_move(self, axis: str, distance: float) -> None:
+        """A move of ``distance`` (mm for Z, deg for C) started."""
         with self._lock:
-            last = self._last.get(axis)
-            if last is not None:
-                if axis == "Z":
-                    self._z_travel_mm += abs(target - last)
-                else:
-                    self._c_travel_deg += abs(target - last)
-            self._last[axis] = target
+            if axis == "Z":
+                self._z_travel_mm += abs(distance)
+            else:
+                self._c_travel_deg += abs(distance)
 
     def backlash_extra_um(self) -> float:
         with self._lock:

@@ -151,9 +151,10 @@ class World:
         """A move started: the screw takes its heat, wear counts its travel, the
         repeatability draws the approach's error."""
         last = self._last_target.get(axis)
-        if axis == "Z" and last is not None:
-            self.drift.screw.on_move(target - last, time_s)
-        self.drift.wear.on_move(axis, target)
+        if last is not None:
+            if axis == "Z":
+                self.drift.screw.on_move(target - last, time_s)
+            self.drift.wear.on_move(axis, target - last)
         self._last_target[axis] = target
         self.new_approach(axis)
 

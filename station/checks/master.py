@@ -9,15 +9,13 @@ its certified position and diameter with their expanded uncertainties (k = 2, um
 
 from __future__ import annotations
 
-import re
-import tomllib
 from importlib import resources
 from pathlib import Path
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from station.monitor.watch import CharacteristicCheck
-from station.parts.loader import PartSpecError, Problem, validation_problems
+from station.parts.loader import PartSpecError, Problem, parse_toml_as
 from station.parts.spec import HOLE_ID_PATTERN, PART_NUMBER_PATTERN, PartSpec
 
 _BUILTIN = ("data", "masters")
@@ -86,16 +84,7 @@ class MasterCertificate(BaseModel):
 def parse_master(text: str, source: str = "<text>") -> MasterCertificate:
     """Validate TOML text as a master certificate; :class:`PartSpecError` lists every
     problem with its file, line and field."""
-    text = text.removeprefix("\ufeff")
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        m = re.search(r"line (\d+)", str(exc))
-        raise PartSpecError([Problem(source, int(m.group(1)) if m else None, "", f"not valid TOML: {exc}")]) from None
-    try:
-        return MasterCertificate.model_validate(data)
-    except ValidationError as exc:
-        raise PartSpecError(validation_problems(exc, text, source)) from None
+    return parse_toml_as(MasterCertificate, text, source)
 
 
 def builtin_masters() -> list[str]:

@@ -34,7 +34,6 @@ from station.kinematics.parameters import SixDof
 #: the parameter a master check names when the datum moved
 DATUM_BODY = "J"
 DATUM_TERM = f"installation.{DATUM_BODY}.z_um"
-STATES = ("proposed", "approved", "rejected")
 
 
 class ProposalError(ValueError):

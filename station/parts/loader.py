@@ -132,8 +132,9 @@ def validation_problems(exc: ValidationError, text: str, source: str) -> list[Pr
     return sorted(problems, key=lambda p: (p.line is None, p.line or 0))
 
 
-def parse_part(text: str, source: str = "<text>") -> PartSpec:
-    """Validate TOML text as a part spec; :class:`PartSpecError` lists every problem.
+def parse_toml_as(model_cls, text: str, source: str = "<text>"):
+    """Validate TOML text as ``model_cls`` (a pydantic model: a part spec, a master's
+    certificate); :class:`PartSpecError` lists every problem with its line and field.
     A UTF-8 byte-order mark (a file saved by a spreadsheet or Notepad) is dropped."""
     text = text.removeprefix("\ufeff")
     try:
@@ -142,9 +143,14 @@ def parse_part(text: str, source: str = "<text>") -> PartSpec:
         m = re.search(r"line (\d+)", str(exc))
         raise PartSpecError([Problem(source, int(m.group(1)) if m else None, "", f"not valid TOML: {exc}")]) from None
     try:
-        return PartSpec.model_validate(data)
+        return model_cls.model_validate(data)
     except ValidationError as exc:
         raise PartSpecError(validation_problems(exc, text, source)) from None
+
+
+def parse_part(text: str, source: str = "<text>") -> PartSpec:
+    """Validate TOML text as a part spec; :class:`PartSpecError` lists every problem."""
+    return parse_toml_as(PartSpec, text, source)
 
 
 def read_part_file(path: str | Path) -> PartSpec:

@@ -67,9 +67,6 @@ class CycleLedger:
     def add(self, step: Step) -> None:
         self.steps.append(step)
 
-    def __len__(self) -> int:
-        return len(self.steps)
-
 
 @dataclass(frozen=True)
 class CycleTime:
@@ -79,10 +76,6 @@ class CycleTime:
     total_s: float
     breakdown: Mapping[str, float]
     basis: str
-
-    def to_json(self) -> dict:
-        return {"machine_s": self.total_s, "basis": self.basis,
-                "breakdown": {k: self.breakdown.get(k, 0.0) for k in BREAKDOWN_KEYS}}
 
 
 def _profile_s(step: Step) -> float:

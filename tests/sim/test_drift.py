@@ -56,12 +56,10 @@ def test_ambient_step_lags_into_each_body_with_its_own_constant_and_coefficient(
 
 def test_wear_grows_with_travel_and_turns():
     w = Wear(backlash_um_per_m=0.5, runout_um_per_kturn=2.0)
-    w.on_move("Z", 0.0)  # the first target only sets where the axis is
     for _ in range(10):
         w.on_move("Z", 100.0)
-        w.on_move("Z", 0.0)
-    assert w.backlash_extra_um() == pytest.approx(0.5 * 2.0)  # 2 m of travel
-    w.on_move("C", 0.0)
+        w.on_move("Z", -100.0)
+    assert w.backlash_extra_um() == pytest.approx(0.5 * 2.0)  # 2 m of travel, both ways
     w.on_move("C", 360.0 * 500)
     assert w.runout_extra_um() == pytest.approx(2.0 * 0.5)
 
