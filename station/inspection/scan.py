@@ -236,8 +236,16 @@ def goto(model: StationModel, axial_mm: float, angle_deg: float, settings: ScanS
     moved = yield from approach({"C": c_cmd, "Z": z_cmd}, settings, motion or {}, {} if axes_at is None else axes_at)
     if moved:
         yield m.Settle(settings.settle_s)
-    ezz_um = model.motions_of("Z").z.evaluate([z_cmd], direction=[1])[0]
-    return z_cmd, c_cmd, z_cmd + ezz_um * 1e-3
+    return z_cmd, c_cmd, predicted_carriage_mm(model, z_cmd, +1)
+
+
+def predicted_carriage_mm(model: StationModel, z_cmd_mm: float, direction: int = +1) -> float:
+    """Where the station's model puts Z's carriage for the command ``z_cmd_mm`` reached
+    moving in ``direction`` (+1 up, -1 down): the command plus the model's positioning
+    error motion EZZ there. The grating's reading minus this is what the model did not
+    know (the scans' drift term, the monitors' evidence, the station's own check of Z)."""
+    ezz_um = model.motions_of("Z").z.evaluate([z_cmd_mm], direction=[direction])[0]
+    return float(z_cmd_mm + ezz_um * 1e-3)
 
 
 def combine(result: HoleResult, geo: CameraGeometry, settings: ScanSettings) -> None:
