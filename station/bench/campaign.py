@@ -51,12 +51,14 @@ async def _campaign(scenario: Path | None, parts: int, master_every: int, data: 
         proposals = []
         for i in range(1, parts + 1):
             out = await s.inspect(family, f"CAMPAIGN-{seed}-{i:04d}")
-            inspections.append({"index": i, "state": out.state, "result": out.result,
+            inspections.append({"index": i, "state": out.state, "result": out.result, "reason": out.reason,
                                 "worst_error_um": worst_error_um(out), "u_um": largest_u_um(out),
                                 "model_version": s.model_version,
                                 "machine_s": None if out.cycle is None else out.cycle["machine_s"]})
             alarms += [{"index": i, "reason": a.reason, "chart": a.chart} for a in out.alarms]
-            if master_every and i % master_every == 0:
+            # the campaign plays the plant: the master goes on every K parts, and at once
+            # when the station asks for a check (the MES reads "station needs a check")
+            if master_every and (i % master_every == 0 or out.alarms):
                 chk = await s.check_master(cert, family, seed=seed)
                 checks.append({"index": i, "in_control": chk.in_control,
                                "z": [c.z for c in chk.checks if c.id.endswith(".position")],

@@ -119,6 +119,12 @@ class ScanSettings:
     #: quadrature. The model was measured once; the world has moved on since within
     #: that (docs/world.md); the monitors watch for more
     model_u_um: float = 0.35
+    #: standard uncertainty the station's own evidence adds at the detection point along
+    #: the bore (um): what its master checks show it has not corrected (a drift since
+    #: the last check, a scale its model has no term for). Set per inspection by the
+    #: session from the checks (station.monitor.evidence; docs/monitor.md); 0 when the
+    #: checks show nothing beyond the model's stated uncertainty
+    evidence_u_um: float = 0.0
     #: standard uncertainty of one hole's centre (along the axis, y) and diameter from
     #: the vision stage (px), the Type B part the frames' scatter cannot show: the camera
     #: stays put while it takes a hole's frames, so the wall texture that moves the
@@ -269,7 +275,8 @@ def combine(result: HoleResult, geo: CameraGeometry, settings: ScanSettings) -> 
     offset_mm = abs(np.mean([(cy - f.y_px) * geo.mm_per_px for f in result.frames]))
     u_vis_c = vision_u_px([f.y_u_px for f in result.frames], settings.vision_centre_u_px) * geo.mm_per_px
     u_vis_d = vision_u_px([f.diameter_u_px for f in result.frames], settings.vision_diameter_u_px) * geo.mm_per_px
-    u_ax = math.sqrt(s_ax**2 + (geo.scale_u_rel * offset_mm) ** 2 + (settings.model_u_um * 1e-3) ** 2 + u_vis_c**2)
+    u_ax = math.sqrt(s_ax**2 + (geo.scale_u_rel * offset_mm) ** 2 + (settings.model_u_um * 1e-3) ** 2
+                     + (settings.evidence_u_um * 1e-3) ** 2 + u_vis_c**2)
     u_dia = math.sqrt(s_dia**2 + (geo.scale_u_rel * float(dia.mean())) ** 2 + u_vis_d**2)
     result.position_mm = float(ax.mean())
     result.position_u_mm = 2.0 * u_ax

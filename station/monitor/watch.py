@@ -143,7 +143,8 @@ class StationWatch:
         se_um = self.z_repeatability_um / math.sqrt(n)
         signal = self.grating.add((r_um - self.baseline_um) / se_um)
         departure_um = self.grating.z * se_um
-        if signal and abs(departure_um) > self.gate_um:
+        if signal and abs(departure_um) > self.gate_um and self.needs_check is None:
+            # once asked for, a check is not asked for again at every inspection
             return self._raise("grating", f"the grating departs from the station's model by {departure_um:+.2f} um "
                                           f"(EWMA; baseline {self.baseline_um:+.2f} um): the station's errors may "
                                           f"exceed its stated U; check it on the master")

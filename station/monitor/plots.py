@@ -1,0 +1,53 @@
+"""The proposal as a picture: the master checks' errors before and after the change.
+
+Matplotlib's Agg backend (no display on the station PC). Left: each master check's
+position error per hole (measured − certified, in the present model's frame) against
+the machine clock, with each point's ±2u bar and the station's stated U as a band;
+right: the same with the proposal's expected change applied, what the checks would have
+shown under the proposed model.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+
+def write_proposal_plot(p, path: Path) -> Path | None:
+    """``p``: a ``Proposal`` whose explanation holds ``points`` (time_s, hole,
+    error_um, u_um); None when it has none to show."""
+    pts = (p.explanation or {}).get("points") or []
+    if not pts:
+        return None
+    holes = sorted({q["hole"] for q in pts})
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4), sharey=True)
+    t0 = min(q["time_s"] for q in pts)
+    for ax, stage in zip(axes, ("before", "after")):
+        for k, h in enumerate(holes):
+            q = [x for x in pts if x["hole"] == h]
+            t = np.array([(x["time_s"] - t0) / 60.0 for x in q])
+            e = np.array([x["error_um"] for x in q])
+            if stage == "after":
+                e = e + float(p.expected_change_um.get(h, 0.0))
+            u = np.array([2.0 * x["u_um"] for x in q])
+            ax.errorbar(t + 0.02 * k, e, yerr=u, fmt="o-", ms=4, lw=0.8, capsize=2, label=h)
+        rms = float(np.sqrt(np.mean([(x["error_um"] + (p.expected_change_um.get(x["hole"], 0.0)
+                                                      if stage == "after" else 0.0)) ** 2 for x in pts])))
+        ax.axhline(0.0, color="k", lw=0.5)
+        ax.set_title(f"{stage} the change (rms {rms:.2f} um)")
+        ax.set_xlabel("machine clock since the first check shown [min]")
+        ax.grid(alpha=0.3)
+    axes[0].set_ylabel("master: measured - certified [um] (bars: 2u)")
+    axes[0].legend(loc="best", fontsize=8)
+    kind = (p.explanation or {}).get("kind", "")
+    fig.suptitle(f"proposal {p.id}: {', '.join(c.term for c in p.changes)}" + (f" ({kind})" if kind else ""),
+                 fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    return path
