@@ -9,7 +9,8 @@ alarms, ``in_control``); a check out of control makes a model proposal, as the
 campaign does. The checks are kept by the server process (the last 100); the master's
 inspection stays in the store at ``/inspections/{id}``.
 
-``/model-proposals`` lists the station's proposals (any role) and takes an engineer's
+``/model-proposals`` lists the station's proposals (any role), each with its
+before/after picture (``/model-proposals/{id}/plot``, PNG), and takes an engineer's
 decision (``approve`` / ``reject``, engineer or admin), made on the station loop and
 not while a job runs (409): approved, the station uses the changed model from its next
 inspection. Each decision is an event of the store's log (``approval`` /
@@ -129,19 +130,50 @@ def _proposal(rt, proposal_id: str):
         raise HTTPException(status.HTTP_404_NOT_FOUND, str(exc)) from None
 
 
+def _proposal_json(rt, p) -> dict:
+    """A proposal as the API shows it: its JSON and ``plot_url``, where its before/after
+    picture is (null when it has none: an old proposal, or one without checks to show)."""
+    has_plot = rt.session.proposals.plot_path(p.id).is_file()
+    return {**p.to_json(), "plot_url": f"/api/v1/model-proposals/{p.id}/plot" if has_plot else None}
+
+
+def _proposal_plot(rt, proposal_id: str) -> bytes:
+    p = _proposal(rt, proposal_id)  # 404 when there is no such proposal
+    try:
+        return rt.session.proposals.plot_path(p.id).read_bytes()
+    except FileNotFoundError:
+        raise HTTPException(status.HTTP_404_NOT_FOUND, f"proposal {p.id} has no picture (it was made without "
+                                                       f"master checks over time to show)") from None
+
+
 @router.get("/model-proposals")
 async def list_proposals(request: Request, who: auth.Principal = Depends(auth.reader)) -> dict:
     """The station's model proposals, oldest first (newest last), and the version of
     the model it uses now."""
     rt = runtime(request)
-    items = await blocking(rt.session.proposals.list)
+    items = await blocking(lambda: [_proposal_json(rt, p) for p in rt.session.proposals.list()])
     version = await blocking(lambda: rt.session.model_version)
-    return {"model_version": version, "items": [p.to_json() for p in items]}
+    return {"model_version": version, "items": items}
 
 
 @router.get("/model-proposals/{proposal_id}", responses={404: {"description": "no such proposal"}})
 async def get_proposal(proposal_id: str, request: Request, who: auth.Principal = Depends(auth.reader)) -> dict:
-    return (await blocking(_proposal, runtime(request), proposal_id)).to_json()
+    rt = runtime(request)
+    return await blocking(lambda: _proposal_json(rt, _proposal(rt, proposal_id)))
+
+
+@router.get("/model-proposals/{proposal_id}/plot", response_class=Response,
+            responses={200: {"content": {"image/png": {}},
+                             "description": "the proposal's picture: the master checks' position errors before "
+                                            "and after the change (PNG)"},
+                       404: {"description": "no such proposal, or it has no picture"}})
+async def get_proposal_plot(proposal_id: str, request: Request,
+                            who: auth.Principal = Depends(auth.reader)) -> Response:
+    """The proposal's before/after picture (``image/png``): each master check's
+    position error per hole against the machine clock, as measured and as the proposed
+    model would have read it. 404 (JSON) when the proposal does not exist or has none."""
+    data = await blocking(_proposal_plot, runtime(request), proposal_id)
+    return Response(data, media_type="image/png", headers={"Cache-Control": "private, no-cache"})
 
 
 async def _decide(request: Request, proposal_id: str, approve: bool, body: Decision | None,
@@ -160,7 +192,7 @@ async def _decide(request: Request, proposal_id: str, approve: bool, body: Decis
     with contextlib.suppress(StoreError):
         await blocking(rt.audit, who.who, f"{'approved' if approve else 'rejected'} model proposal {p.id}"
                                           + (f"; the station's model is now {version}" if approve else ""))
-    return {**p.to_json(), "model_version": version}
+    return {**(await blocking(_proposal_json, rt, p)), "model_version": version}
 
 
 DECISION_RESPONSES = {404: {"description": "no such proposal"},

@@ -5,22 +5,33 @@ discovery (model + recording). The JSON is the contract of the matching CLI comm
 Every discovery report is also kept in the data folder
 (``<data>/reports/discovery/<id>.json``: who, when, the files' names and the report),
 so the panel can list them: ``GET /reports/discovery`` (newest first, a summary each)
-and ``GET /reports/discovery/{id}``; the POST's ``Location`` header names it."""
+and ``GET /reports/discovery/{id}``; the POST's ``Location`` header names it.
+The run's pictures, the residual before and after against position, time and
+direction and the periodogram (``station.discovery.plots``, as ``station discover``
+draws them), are kept beside it (``<data>/reports/discovery/<id>/<name>.png``) and
+served by ``GET /reports/discovery/{id}/plots/{name}``: only the names the run wrote,
+as listed in its report's ``plots``."""
 
 from __future__ import annotations
 
 import json
+import logging
 import os
+import shutil
+import threading
 import tomllib
 import uuid
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Annotated
 
-from fastapi import APIRouter, Depends, File, HTTPException, Query, Request, Response, UploadFile, status
+from fastapi import APIRouter, Depends, File, HTTPException, Path as PathParam, Query, Request, Response, UploadFile, \
+    status
 
 from api import auth
 from api.routes.common import blocking, read_upload, runtime
+
+log = logging.getLogger(__name__)
 
 router = APIRouter(prefix="/api/v1/reports", tags=["reports"])
 
@@ -36,7 +47,7 @@ def _iso230(text: str, source: str) -> dict:
     return analyse(parse_recording(text, source)).to_json()
 
 
-def _discovery(model_text: str, model_source: str, rec_text: str, rec_source: str) -> dict:
+def _discovery(model_text: str, model_source: str, rec_text: str, rec_source: str):
     from station.axis_model import axis_model_from_dict
     from station.discovery import discover
     from station.recording import parse_recording
@@ -46,7 +57,7 @@ def _discovery(model_text: str, model_source: str, rec_text: str, rec_source: st
     except tomllib.TOMLDecodeError as exc:
         raise ValueError(f"{model_source}: not valid TOML: {exc}") from None
     model = axis_model_from_dict(data, model_source)
-    return discover(model, parse_recording(rec_text, rec_source)).report
+    return discover(model, parse_recording(rec_text, rec_source))
 
 
 def _unprocessable(exc: Exception) -> HTTPException:
@@ -74,6 +85,42 @@ def _save_report(folder: Path, entry: dict) -> None:
     tmp = path.with_suffix(".tmp")
     tmp.write_text(json.dumps(entry, allow_nan=False, default=str) + "\n", encoding="utf-8")
     os.replace(tmp, path)
+
+
+#: the pictures a discovery run draws (station.discovery.plots.write_plots), by file
+#: name: what each shows. A plot is served only by one of these names, and only when
+#: the run's stored report lists it (it wrote it).
+PLOT_VIEWS = {
+    "residual_position.png": "residual before and after, against position",
+    "residual_time.png": "residual before and after, against time",
+    "residual_direction.png": "residual before and after, by approach direction",
+    "spectrum.png": "periodogram of the residual before",
+}
+#: matplotlib's pyplot keeps global state: one run's pictures at a time
+_PLOT_LOCK = threading.Lock()
+
+
+def _write_discovery_plots(d, folder: Path, report_id: str) -> list[str]:
+    """The run's pictures in ``<folder>/<id>/``; their names (none when drawing failed:
+    the report stands without them, the trouble is logged)."""
+    from station.discovery.plots import write_plots
+
+    out = folder / report_id
+    try:
+        out.mkdir(parents=True, exist_ok=False)
+        with _PLOT_LOCK:
+            paths = write_plots(d, out)
+    except Exception:  # noqa: BLE001 - the numbers are the report; a picture is extra
+        log.exception("discovery report %s: its plots could not be drawn", report_id)
+        shutil.rmtree(out, ignore_errors=True)
+        return []
+    return [p.name for p in paths if p.name in PLOT_VIEWS]
+
+
+def _plot_links(entry: dict) -> list[dict]:
+    return [{"name": name, "view": PLOT_VIEWS[name],
+             "url": f"/api/v1/reports/discovery/{entry['id']}/plots/{name}"}
+            for name in entry.get("plots", []) if name in PLOT_VIEWS]
 
 
 def _summary(entry: dict) -> dict:
@@ -108,12 +155,17 @@ async def discovery_report(request: Request, response: Response,
     rec_text = await read_upload(recording, limit, "recording")
     model_name, rec_name = model.filename or "model.toml", recording.filename or "recording.csv"
     try:
-        report = await blocking(_discovery, model_text, model_name, rec_text, rec_name,
-                                timeout=DISCOVERY_TIMEOUT_S)
+        found = await blocking(_discovery, model_text, model_name, rec_text, rec_name,
+                               timeout=DISCOVERY_TIMEOUT_S)
     except (ValueError, ArithmeticError, KeyError, TypeError) as exc:
         raise _unprocessable(exc) from None
-    entry = {"id": str(uuid.uuid4()), "created_at": datetime.now(timezone.utc).isoformat(),
-             "created_by": who.name, "model_file": model_name, "recording_file": rec_name, "report": report}
+    report = found.report
+    report_id = str(uuid.uuid4())
+    plots = await blocking(_write_discovery_plots, found, discovery_folder(rt), report_id,
+                           timeout=DISCOVERY_TIMEOUT_S)
+    entry = {"id": report_id, "created_at": datetime.now(timezone.utc).isoformat(),
+             "created_by": who.name, "model_file": model_name, "recording_file": rec_name, "report": report,
+             "plots": plots}
     await blocking(_save_report, discovery_folder(rt), entry)
     response.headers["Location"] = f"/api/v1/reports/discovery/{entry['id']}"
     return report
@@ -130,10 +182,42 @@ async def list_discovery_reports(request: Request, limit: Annotated[int, Query(g
 @router.get("/discovery/{report_id}", responses={404: {"description": "no such report"}})
 async def get_discovery_report(report_id: uuid.UUID, request: Request,
                                who: auth.Principal = Depends(auth.reader)) -> dict:
-    """One stored report: who made it, when, from which files, and the report itself."""
-    path = discovery_folder(runtime(request)) / f"{report_id}.json"
+    """One stored report: who made it, when, from which files, the report itself, and
+    its pictures (``plots``: name, what it shows, url; none for a report stored before
+    the API kept them)."""
+    entry = await blocking(_read_entry, discovery_folder(runtime(request)), report_id)
+    return {**entry, "plots": _plot_links(entry)}
+
+
+def _read_entry(folder: Path, report_id: uuid.UUID) -> dict:
     try:
-        text = await blocking(path.read_text, encoding="utf-8")
+        return json.loads((folder / f"{report_id}.json").read_text(encoding="utf-8"))
     except FileNotFoundError:
         raise HTTPException(status.HTTP_404_NOT_FOUND, f"no discovery report {report_id}") from None
-    return json.loads(text)
+
+
+def _read_plot(folder: Path, report_id: uuid.UUID, name: str) -> bytes:
+    entry = _read_entry(folder, report_id)  # 404: no such report
+    if name not in PLOT_VIEWS or name not in entry.get("plots", []):
+        raise HTTPException(status.HTTP_404_NOT_FOUND, f"discovery report {report_id} has no plot {name!r} "
+                                                       f"(it has: {', '.join(entry.get('plots', [])) or 'none'})")
+    path = folder / str(report_id) / name  # both parts checked above: a UUID and a name of PLOT_VIEWS
+    try:
+        return path.read_bytes()
+    except FileNotFoundError:
+        raise HTTPException(status.HTTP_404_NOT_FOUND, f"discovery report {report_id}: plot {name} is missing "
+                                                       f"from the data folder") from None
+
+
+@router.get("/discovery/{report_id}/plots/{name}", response_class=Response,
+            responses={200: {"content": {"image/png": {}}, "description": "the plot (PNG)"},
+                       404: {"description": "no such report, or no such plot of it"},
+                       422: {"description": "not a report id, or not a plot's name"}})
+async def get_discovery_plot(report_id: uuid.UUID, request: Request,
+                             name: str = PathParam(pattern=r"^[a-z_]{1,40}\.png$",
+                                                   description="a plot's name as the report's `plots` lists it"),
+                             who: auth.Principal = Depends(auth.reader)) -> Response:
+    """One of a stored run's pictures (``image/png``): the residual before and after
+    the effects found, against position, time or direction, or the periodogram."""
+    data = await blocking(_read_plot, discovery_folder(runtime(request)), report_id, name)
+    return Response(data, media_type="image/png", headers={"Cache-Control": "private, no-cache"})

@@ -71,11 +71,13 @@ POLICY: dict[tuple[str, str], frozenset[str] | str] = {
     ("GET", "/api/v1/models/active/curves"): ANY,
     ("GET", "/api/v1/reports/discovery"): ANY,
     ("GET", "/api/v1/reports/discovery/{report_id}"): ANY,
+    ("GET", "/api/v1/reports/discovery/{report_id}/plots/{name}"): ANY,
     ("GET", "/api/v1/events"): ANY,
     ("GET", "/api/v1/camera.mjpg"): ANY,
     ("GET", "/api/v1/checks/{check_id}"): ANY,
     ("GET", "/api/v1/model-proposals"): ANY,
     ("GET", "/api/v1/model-proposals/{proposal_id}"): ANY,
+    ("GET", "/api/v1/model-proposals/{proposal_id}/plot"): ANY,
     # writes
     ("POST", "/api/v1/job-orders"): roles("mes", "operator"),
     ("POST", "/api/v1/station/{command}"): roles("operator"),
@@ -109,11 +111,14 @@ PROBES: dict[tuple[str, str], list[Probe]] = {
     ("GET", "/api/v1/inspections/{inspection_id}/qif"): [Probe(f"/api/v1/inspections/{uuid.uuid4()}/qif")],
     ("GET", "/api/v1/parts/{part_number}"): [Probe("/api/v1/parts/ZDZG-22.2-12.3851")],
     ("GET", "/api/v1/reports/discovery/{report_id}"): [Probe(f"/api/v1/reports/discovery/{uuid.uuid4()}")],
+    ("GET", "/api/v1/reports/discovery/{report_id}/plots/{name}"): [
+        Probe(f"/api/v1/reports/discovery/{uuid.uuid4()}/plots/residual_position.png")],
     # 422: no such part (the part is looked up only after the caller is admitted)
     ("POST", "/api/v1/job-orders"): [Probe("/api/v1/job-orders",
                                            {"json": {"part_number": "NO-SUCH-PART", "serial": "S"}})],
     ("GET", "/api/v1/checks/{check_id}"): [Probe(f"/api/v1/checks/{uuid.uuid4()}")],
     ("GET", "/api/v1/model-proposals/{proposal_id}"): [Probe("/api/v1/model-proposals/0123456789ab")],
+    ("GET", "/api/v1/model-proposals/{proposal_id}/plot"): [Probe("/api/v1/model-proposals/0123456789ab/plot")],
     # 422: no such kind of check; 404: no such proposal
     ("POST", "/api/v1/checks"): [Probe("/api/v1/checks", {"json": {"kind": "nonsense"}})],
     ("POST", "/api/v1/model-proposals/{proposal_id}/approve"): [Probe("/api/v1/model-proposals/0123456789ab/approve")],

@@ -14,6 +14,7 @@ import hmac
 import http.client
 import json
 import logging
+import re
 import secrets
 import socket
 import sqlite3
@@ -477,12 +478,17 @@ TRAVERSAL_ROUTES = [
     ("POST", "/api/v1/models/{version}/activate"),
     ("POST", "/api/v1/calibrations/{version}/activate"),
     ("GET", "/api/v1/reports/discovery/{report_id}"),
+    ("GET", "/api/v1/reports/discovery/{report_id}/plots/{name}"),
     ("POST", "/api/v1/station/{command}"),
     ("GET", "/api/v1/checks/{check_id}"),
     ("GET", "/api/v1/model-proposals/{proposal_id}"),
+    ("GET", "/api/v1/model-proposals/{proposal_id}/plot"),
     ("POST", "/api/v1/model-proposals/{proposal_id}/approve"),
     ("POST", "/api/v1/model-proposals/{proposal_id}/reject"),
 ]
+#: a plausible value for each path parameter of a route with several, while another one
+#: carries the payload
+PLAIN_PARAMS = {"{report_id}": "00000000-0000-4000-8000-000000000000", "{name}": "residual_position.png"}
 
 
 def test_every_path_parameter_is_tried(sec):
@@ -507,10 +513,12 @@ def test_path_parameters_never_reach_outside_the_data_folder(sec, outside, metho
 
     from api.routes.parts import is_plain_part_number
 
-    param = route[route.index("{"):route.index("}") + 1]
+    params = re.findall(r"\{[a-z_]+\}", route)
     before = _outside_state(outside, sec.data_dir)
-    for payload in _payloads(outside):
+    for param, payload in [(p, x) for p in params for x in _payloads(outside)]:
         target = route.replace(param, payload)
+        for other in set(params) - {param}:
+            target = target.replace(other, PLAIN_PARAMS[other])
         headers = {**_bearer(sec)}
         body = b""
         if method == "PUT":
@@ -595,14 +603,21 @@ def test_upload_file_names_are_only_names(sec, outside, url):
                        for p in folder.iterdir()), sorted(p.name for p in folder.iterdir())
             proposals = folder / "proposals"
             if kind == "models" and proposals.is_dir():
-                assert all(p.suffix == ".json" and p.stem.isalnum() for p in proposals.iterdir()), \
+                # each proposal's JSON and its picture (ProposalBook.plot_path)
+                assert all(p.suffix in (".json", ".png") and p.stem.isalnum() for p in proposals.iterdir()), \
                     sorted(p.name for p in proposals.iterdir())
     reports = sec.data_dir / "reports" / "discovery"
     if reports.is_dir():
         import uuid
 
+        from api.routes.reports import PLOT_VIEWS
+
         for p in reports.iterdir():
-            assert p.suffix == ".json" and str(uuid.UUID(p.stem)) == p.stem, p
+            if p.is_dir():  # a report's pictures: named by the report's id, each by the name the plots module gives it
+                assert str(uuid.UUID(p.name)) == p.name and (reports / f"{p.name}.json").is_file(), p
+                assert {q.name for q in p.iterdir()} <= set(PLOT_VIEWS), sorted(q.name for q in p.iterdir())
+            else:
+                assert p.suffix == ".json" and str(uuid.UUID(p.stem)) == p.stem, p
 
 
 # ============================================================= secrets never logged
