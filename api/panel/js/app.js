@@ -635,6 +635,18 @@ async function showDiscovery(id) {
     `(noise floor ${fmtNum(r.noise_floor, 2)}); residual white: ${r.after.white ? "yes" : "no"}. ` +
     `${r.recording ? r.recording.rows_used + " rows, " + r.recording.runs + " runs" : ""}`;
   box.appendChild(p);
+  const plots = entry.plots || [];
+  if (plots.length) {
+    const pics = document.createElement("div");
+    pics.className = "discovery-plots";
+    for (const pl of plots) appendPicture(pics, pl.url, pl.view, `plot-${pl.name.replace(/\.png$/, "")}`);
+    box.appendChild(pics);
+  } else {
+    const none = document.createElement("div");
+    none.className = "muted no-plot";
+    none.textContent = "No pictures kept with this report.";
+    box.appendChild(none);
+  }
   const t = document.createElement("table");
   t.className = "effects";
   t.appendChild(row([td("Effect"), td("Parameters (\u00b1 std. error)"), td("Why it happens")]));
@@ -679,6 +691,28 @@ function termUnit(term) {
 }
 function signed(v, digits) {
   return v === null || v === undefined || !isFinite(v) ? "-" : (v > 0 ? "+" : "") + Number(v).toFixed(digits);
+}
+
+/** A picture the API serves (a PNG of a proposal or of a discovery run) as a figure
+ * with its caption, appended to ``box``. The panel's session cookie goes with the
+ * image's request by itself (as with the camera's), so a plain <img> suffices; a
+ * picture that does not load says so in words. */
+function appendPicture(box, url, caption, cls) {
+  const fig = document.createElement("figure");
+  fig.className = `picture ${cls || ""}`.trim();
+  const img = document.createElement("img");
+  img.alt = caption;
+  img.loading = "eager";
+  const cap = document.createElement("figcaption");
+  cap.textContent = caption;
+  img.addEventListener("error", () => {
+    fig.classList.add("missing");
+    cap.textContent = `${caption}: the picture could not be loaded`;
+  });
+  img.src = url;
+  fig.append(img, cap);
+  box.appendChild(fig);
+  return fig;
 }
 
 /** A small titled table (h3 + table) appended to ``box``. */
@@ -727,6 +761,25 @@ function proposalCard(p) {
   reason.className = "proposal-reason";
   reason.textContent = `Why: ${p.reason}`;
   card.appendChild(reason);
+  const ex = p.explanation || {};
+  if (ex.kind || ex.description) {
+    const what = document.createElement("div");
+    what.className = "proposal-explanation";
+    const kind = document.createElement("span");
+    kind.className = "explanation-kind";
+    kind.textContent = (ex.kind || "unknown").toUpperCase();
+    what.append("What the checks over time say: ", kind);
+    if (ex.description) what.append(` ${ex.description}`);
+    card.appendChild(what);
+  }
+  if (p.plot_url) {
+    appendPicture(card, p.plot_url, "Master checks before and after the change (bars: 2u)", "proposal-plot");
+  } else {
+    const none = document.createElement("div");
+    none.className = "muted no-plot";
+    none.textContent = "No picture: the proposal has no master checks over time to show.";
+    card.appendChild(none);
+  }
   miniTable(card, "Changes", [["Term"], ["Change", true], ["Why"]],
     p.changes.map((c) => [td(c.term), td(`${signed(c.delta, 3)} ${termUnit(c.term)}`, "num"), td(c.why || "")]),
     "changes");
