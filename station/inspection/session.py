@@ -194,6 +194,19 @@ class Session:
             await asyncio.to_thread(self.store.log_event, "alarm", f"station needs a check: {a.reason}", inspection_id)
         return alarms
 
+    async def check_axis(self, family: PartSpec, *, settings=None, out_dir: str | Path | None = None,
+                         propose: bool = False, plots: bool = True, holes_mm: dict[str, float] | None = None):
+        """The station's own short ISO 230-2 check of Z against its grating over the
+        stroke ``family``'s scans use, and discovery on it (``station.checks.axis``;
+        ``settings``: an ``AxisCheckSettings``): the files in ``out_dir`` (default
+        ``<data>/checks/axis/<time>``), a "check" event in the log, and with ``propose``
+        a model proposal when discovery names what the model lacks. Returns an
+        ``AxisCheckOutcome``."""
+        from station.checks.axis import run_axis_check
+
+        return await run_axis_check(self, family, settings=settings, out_dir=out_dir, propose=propose, plots=plots,
+                                    holes_mm=holes_mm)
+
 
 @contextlib.asynccontextmanager
 async def open_session(config: str | Path | None = None, *, scenario: str | Path | None = None,

@@ -49,6 +49,11 @@ class Change:
     why: str = ""
 
     def apply(self, model: StationModel) -> StationModel:
+        if self.term.startswith("motion."):
+            # an error motion's effect (the station's own check of Z: station.checks.axis)
+            from station.checks.axis import apply_motion_change
+
+            return apply_motion_change(model, self)
         section, body, key = self.term.split(".")
         if section != "installation":
             raise ProposalError(f"cannot change {self.term}: only installation errors are proposed")
