@@ -1,5 +1,6 @@
-"""``station campaign`` and ``station check master``: the station judged over a production
-run on a scenario's world, and on its certified master (docs/monitor.md)."""
+"""``station campaign``, ``station check master`` and ``station check axis``: the station
+judged over a production run on a scenario's world, on its certified master, and by its
+own check of Z against its grating (docs/monitor.md)."""
 
 from __future__ import annotations
 
@@ -108,3 +109,74 @@ def register(app: typer.Typer) -> None:
             for a in res.alarms:
                 out_console.print(f"[yellow]alarm:[/] {a.reason}")
         raise typer.Exit(0 if res.in_control else (1 if res.inspection.state == "complete" else 2))
+
+    @check_app.command("axis")
+    def check_axis(
+        runs: int = typer.Option(3, "--runs", help="bidirectional runs (ISO 230-2 asks 5 of a full test)"),
+        targets: int = typer.Option(11, "--targets", help="targets over the stroke the bore scans use"),
+        out: Optional[Path] = typer.Option(None, "--out", help="folder for recording.csv, axis_model.toml and "
+                                                               "discovery's outputs (default <data>/checks/axis/<time>)"),
+        part: str = typer.Option("ZDZG-22.2-12.3851", "--part", help="the part family whose stroke is checked "
+                                                                    "(built-in part number or spec file)"),
+        config: Optional[Path] = typer.Option(None, "--config", help="station config TOML (default: simulated)"),
+        scenario: Optional[Path] = typer.Option(None, "--scenario", help="twin scenario TOML (simulation only)"),
+        data: Path = typer.Option(Path("var"), "--data", help="data folder: database, model proposals"),
+        time_scale: float = typer.Option(20.0, "--time-scale", help="simulation: moves this much faster"),
+        propose: bool = typer.Option(False, "--propose", help="add a model proposal when discovery names what the "
+                                                              "model of Z lacks"),
+        plots: bool = typer.Option(True, "--plots/--no-plots", help="discovery's residual plots (PNG)"),
+        json: bool = typer.Option(False, "--json", help="one JSON object on stdout"),
+    ) -> None:
+        """The station's own short ISO 230-2 check of Z against its grating, and discovery
+        on it (docs/monitor.md). Exit 0 when the model agrees (no-mismatch), 1 when
+        discovery finds a mismatch, 2 error."""
+        import asyncio
+
+        from drivers.interfaces import DriverError
+        from station.checks.axis import AxisCheckSettings
+        from station.inspection.session import open_session
+        from station.parts import load_part
+        from station.runtime import ConfigError
+        from station.store.errors import StoreError
+
+        if scenario is not None and not scenario.is_file():
+            fail(f"{scenario}: no such scenario file", 2)
+        try:
+            settings = AxisCheckSettings(targets=targets, runs=runs)
+            family = load_part(part)
+        except ValueError as exc:
+            fail(str(exc), 2)
+
+        async def go():
+            async with open_session(config, scenario=scenario, time_scale=time_scale, data_dir=data) as s:
+                return await s.check_axis(family, settings=settings, out_dir=out, propose=propose, plots=plots)
+
+        try:
+            res = asyncio.run(go())
+        except (ConfigError, StoreError, DriverError, OSError, ValueError) as exc:
+            fail(str(exc), 2)
+        if json:
+            print_json(res.to_json())
+        elif res.report is None:
+            out_console.print(f"[red]{res.summary()}[/]")
+        else:
+            r = res.report
+            out_console.print(f"axis check of Z ({len(res.data.points)} points, {len(res.data.targets_mm)} targets "
+                              f"{res.data.targets_mm[0]:g}..{res.data.targets_mm[-1]:g} mm, {runs} run(s) each way, "
+                              f"C held at {res.data.c_deg if res.data.c_deg is not None else '?'} deg) on "
+                              f"{res.model_version}: [bold]{r['verdict']}[/]")
+            out_console.print(f"rms of grating - model {r['before']['rms']:.3f} um before, {r['after']['rms']:.3f} um "
+                              f"after; noise floor {r['noise_floor']:.3f} um; machine time "
+                              + (f"{res.machine_s:.1f} s" if res.machine_s is not None else "unknown"))
+            for e in r["effects"]:
+                params = ", ".join(f"{k} {v:.4g}" for k, v in e["parameters"].items())
+                out_console.print(f"  effect [bold]{e['name']}[/] ({params}): {e['explanation']}")
+            for f in r["findings"]:
+                out_console.print(f"  finding ({f.get('stage', '')}): {f['description']}")
+            for c in res.changes:
+                out_console.print(f"  change {c.term} {c.delta:+.4g}")
+            if res.proposal is not None:
+                out_console.print(f"[yellow]model proposal {res.proposal.id}[/] (station model proposals; approve "
+                                  f"with station model approve {res.proposal.id} --who NAME)")
+            out_console.print(f"[dim]files in {res.out_dir}/[/]")
+        raise typer.Exit(2 if res.report is None else (0 if res.verdict == "no-mismatch" else 1))
