@@ -9,12 +9,15 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-from dataclasses import dataclass
+import math
+import time
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 from station.inspection.scan import CameraGeometry, ScanSettings
 from station.inspection.service import InspectionOutcome, InspectionService
+from station.monitor.evidence import WINDOW, Explanation, MasterRecord, explain
 from station.monitor.watch import Alarm, CharacteristicCheck, StationWatch
 from station.parts.spec import PartSpec
 from station.sequencer.engine import Devices, Engine
@@ -91,6 +94,37 @@ class Session:
             self.station.model = apply_changes(self.station.model, approved, f"+{len(approved)}")
         #: position errors (um) of the last master check, when it was out of control
         self._out_of_control: dict[str, list[float]] = {}
+        #: the master checks since the start, in the starting model's frame, and what
+        #: they say together (station.monitor.evidence)
+        self.history: list[MasterRecord] = []
+        self.explanation: Explanation | None = None
+        #: per master hole: how much the changes approved since the start moved its reading (um)
+        self.applied_um: dict[str, float] = {}
+
+    def clock_s(self) -> float:
+        """The station's machine clock (s): the host's, times the time scale its config
+        runs the drives at (1 on hardware; in simulation the drives' clock, which the
+        world's physics runs on)."""
+        return time.monotonic() * float(self.station.time_scale or 1.0)
+
+    def evidence_u_um(self, positions_mm: list[float]) -> float:
+        """The standard uncertainty (um) the master checks add for a part whose holes
+        are at ``positions_mm``: while they show a drift, the error they showed at the
+        last check and not corrected plus the drift since; a scale the model has no term
+        for, over the holes' distance from where the checks pin the datum. Each is taken
+        as a bound at k = 2."""
+        ex = self.explanation
+        if ex is None or not self.history:
+            return 0.0
+        last = self.history[-1]
+        bound_um = 0.0
+        if ex.drifting:
+            bias = abs(float(sum(ex.now_um[h] + self.applied_um.get(h, 0.0) for h in ex.now_um)) / len(ex.now_um))
+            bound_um = bias + abs(ex.rate_um_per_h) * max(0.0, self.clock_s() - last.time_s) / 3600.0
+        if ex.scale_ppm is not None and abs(ex.scale_ppm) > 3.0 * ex.scale_u_ppm and positions_mm:
+            ref = sum(last.position_mm.values()) / len(last.position_mm)
+            bound_um = math.hypot(bound_um, abs(ex.scale_ppm) * 1e-3 * max(abs(a - ref) for a in positions_mm))
+        return bound_um / 2.0
 
     @property
     def model_version(self) -> str:
@@ -107,10 +141,14 @@ class Session:
         if not self._out_of_control:
             return None
         try:
-            p = datum_proposal(self.station.model, self.model_version, reason, dict(self._out_of_control), holes_mm)
+            p = datum_proposal(self.station.model, self.model_version, reason, dict(self._out_of_control), holes_mm,
+                               explanation=self.explanation)
         except ProposalError as exc:
             await asyncio.to_thread(self.store.log_event, "alarm", f"no model proposal: {exc}")
             return None
+        # the checks it rests on, in the present model's frame: its before/after picture
+        p.explanation["points"] = [{"time_s": r.time_s, "hole": h, "error_um": e + self.applied_um.get(h, 0.0),
+                                    "u_um": r.u_um[h]} for r in self.history[-WINDOW:] for h, e in r.error_um.items()]
         await asyncio.to_thread(self.proposals.add, p)
         await asyncio.to_thread(self.store.log_event, "proposal", f"model proposal {p.id} on {p.base_version}: "
                                 + "; ".join(c.why for c in p.changes))
@@ -133,6 +171,8 @@ class Session:
             before = self.model_version
             self.station.model = new_model
             self.watch.model_changed()
+            for hole, v in p.expected_change_um.items():
+                self.applied_um[hole] = self.applied_um.get(hole, 0.0) + v
             await asyncio.to_thread(self.store.log_event, "approval", f"model proposal {p.id} approved by {who}: "
                                     f"{before} -> {self.model_version}" + (f" ({note})" if note else ""))
         else:
@@ -140,13 +180,18 @@ class Session:
                                     f"model proposal {p.id} rejected by {who}" + (f": {note}" if note else ""))
         return p
 
-    def service_for(self, part: PartSpec) -> InspectionService:
+    def service_for(self, part: PartSpec, *, evidence: bool = True) -> InspectionService:
+        """The inspection service for ``part``; ``evidence``: its stated U includes what the
+        master checks show uncorrected (production). A check on the master itself is
+        judged on the station's own U, or a drift it has to catch would hide in it."""
         st = self.station
+        extra = self.evidence_u_um([h.position.nominal for h in part.holes]) if evidence else 0.0
+        settings = replace(self.settings, evidence_u_um=extra)
         geo = CameraGeometry(st.mm_per_px, st.frame_size_px[0], st.frame_size_px[1], part.bore.diameter_mm / 2.0)
         trace = {"config_hash": st.config_hash, "mode": st.mode}
         if st.twins is not None:
             trace["scenario"] = str(st.twins.station.scenario.source)
-        return InspectionService(self.engine, self.store, st.model, geo, self.settings, traceability=trace,
+        return InspectionService(self.engine, self.store, st.model, geo, settings, traceability=trace,
                                  truth=truth_of(st.world) if st.world is not None else None,
                                  time_scale=st.time_scale)
 
@@ -170,9 +215,17 @@ class Session:
 
         spec = cert.as_part_spec(family)
         with self.station.master_on_table(cert, bore_diameter_mm=family.bore.diameter_mm, seed=seed):
-            out = await self.service_for(spec).inspect(spec, cert.master_id)
+            out = await self.service_for(spec, evidence=False).inspect(spec, cert.master_id)
         checks = compare(cert, out.characteristics) if out.state == "complete" else []
         positions = [c for c in checks if c.id.endswith(".position")]
+        recorded = bool(positions) and all(c.measured is not None and c.u_station is not None for c in positions)
+        if recorded:
+            holes = [c.id.rsplit(".", 1)[0] for c in positions]
+            self.history.append(MasterRecord(
+                self.clock_s(), self.watch.index, {h: c.certified for h, c in zip(holes, positions)},
+                {h: (c.measured - c.certified) * 1e3 - self.applied_um.get(h, 0.0) for h, c in zip(holes, positions)},
+                {h: math.hypot(c.u_station, c.u_certificate) * 1e3 for h, c in zip(holes, positions)}))
+            self.explanation = explain(self.history)
         if out.state != "complete":
             alarms = await self._log_alarms([Alarm(self.watch.index, "master", f"master check {cert.master_id} did "
                                                                                   f"not complete: {out.reason}")], out.id)
@@ -185,8 +238,14 @@ class Session:
         else:
             # the present state is the last check's: a proposal rests on it alone (an
             # earlier check may straddle the change)
-            self._out_of_control = {c.id: [(c.measured - c.certified) * 1e3] for c in positions
-                                    if c.measured is not None}
+            ex = self.explanation
+            if recorded and ex is not None:
+                # the error now as the checks together say it (less noisy than one check),
+                # in the present model's frame
+                self._out_of_control = {f"{h}.position": [v + self.applied_um.get(h, 0.0)] for h, v in ex.now_um.items()}
+            else:
+                self._out_of_control = {c.id: [(c.measured - c.certified) * 1e3] for c in positions
+                                        if c.measured is not None}
         return MasterCheckOutcome(cert.master_id, out, checks, alarms)
 
     async def _log_alarms(self, alarms: list[Alarm], inspection_id: str | None) -> list[Alarm]:

@@ -74,6 +74,8 @@ class Proposal:
     #: per hole: the expected change of its measured position with the change (um)
     expected_change_um: dict[str, float]
     state: str = "proposed"
+    #: what the checks over time say the change is (station.monitor.evidence.Explanation)
+    explanation: dict = field(default_factory=dict)
     decided_by: str | None = None
     decided_at: str | None = None
     decision_note: str | None = None
@@ -100,12 +102,14 @@ def datum_sensitivity(model: StationModel, z_mm: float, c_deg: float, term: str 
 
 def datum_proposal(model: StationModel, base_version: str, reason: str,
                    errors_um: dict[str, list[float]], holes_mm: dict[str, float],
-                   consistency_um: float = 3.0) -> Proposal:
+                   consistency_um: float = 3.0, explanation=None) -> Proposal:
     """A proposal from master checks' position errors (``errors_um``: characteristic
     id -> measured - certified, um) at the holes' axial places (``holes_mm``: hole id ->
     mm): the datum's error is their mean, corrected through the model's sensitivity at
     each hole. Errors further apart than ``consistency_um`` (4.5 standard
-    uncertainties of a difference of two of them) are not one datum shift: refused."""
+    uncertainties of a difference of two of them) are not one datum shift: refused.
+    ``explanation`` (``station.monitor.evidence.Explanation``): what the checks over
+    time say the change is (a step, a drift), which names the physics."""
     pooled = [e for es in errors_um.values() for e in es]
     if not pooled:
         raise ProposalError("no master check results to propose from")
@@ -126,10 +130,20 @@ def datum_proposal(model: StationModel, base_version: str, reason: str,
     delta = -mean_um / s
     spread = (f"spread {float(np.std(pooled, ddof=1)):.2f} um over {len(pooled)} values" if len(pooled) > 1
               else "one value")
-    change = Change(DATUM_TERM, delta, why=(
-        f"master checks: positions {mean_um:+.2f} um from the certificate on average ({spread}): the part's axial "
-        f"datum moved; the calibration block's installation error along Z (ISO 230-1: location error EZ0 of the "
-        f"workholding) changes by {delta:+.2f} um"))
+    seen = f"master checks: positions {mean_um:+.2f} um from the certificate now ({spread})"
+    kind = getattr(explanation, "kind", None)
+    if kind == "drift":
+        why = (f"{seen}; {explanation.description}. The station has no thermometer: its axial datum "
+               f"(the calibration block's installation error along Z, ISO 230-1 EZ0) is set to its present value, "
+               f"a change of {delta:+.2f} um, and its stated uncertainty covers the drift between checks while it lasts")
+    elif kind == "step":
+        why = (f"{seen}; {explanation.description}: the calibration block's installation error along Z "
+               f"(ISO 230-1: location error EZ0 of the workholding) changes by {delta:+.2f} um")
+    else:
+        why = (f"{seen}: the part's axial datum moved; the calibration block's installation error along Z (ISO "
+               f"230-1: location error EZ0 of the workholding) changes by {delta:+.2f} um"
+               + (f" ({explanation.description})" if explanation is not None else ""))
+    change = Change(DATUM_TERM, delta, why=why)
     after = change.apply(model)
     expected = {}
     for hole, z in holes_mm.items():
@@ -139,7 +153,7 @@ def datum_proposal(model: StationModel, base_version: str, reason: str,
         # the other way and the hole's image offset, the reading, by the shift itself
         expected[hole] = float((a1 - a0) * 1e3)
     return Proposal(uuid.uuid4().hex[:12], datetime.now(timezone.utc).isoformat(), base_version, reason, [change],
-                    errors_um, expected)
+                    errors_um, expected, explanation=explanation.to_json() if explanation is not None else {})
 
 
 @dataclass
@@ -166,8 +180,16 @@ class ProposalBook:
         os.replace(tmp, path)  # whole or not at all
 
     def add(self, p: Proposal) -> Proposal:
+        from station.monitor.plots import write_proposal_plot
+
+        write_proposal_plot(p, self.plot_path(p.id))
         self._write(self._path(p.id), p.to_json())
         return p
+
+    def plot_path(self, pid: str) -> Path:
+        """The proposal's before/after picture (PNG; it may not exist: a proposal without
+        check history to show has none)."""
+        return self._path(pid).with_suffix(".png")
 
     def get(self, pid: str) -> Proposal:
         path = self._path(pid)

@@ -14,6 +14,14 @@ Two kinds of evidence (docs/monitor.md):
   carries the point unseen, with the same signature as a warm screw), so it asks for a
   check on the master: the alarm is raised when the chart signals and the departure's
   estimate exceeds the model's stated standard uncertainty (``gate_um``).
+* **Every inspection: the frames' scatter.** Each hole is measured in several frames
+  from one approach; the scatter of their axial readings pooled over the inspection's
+  holes (variance ``s^2`` with ``nu`` degrees of freedom) against its Phase I value
+  ``s0^2``: ``x = (ln(s^2 / s0^2) + 1/nu) / sqrt(2/nu)`` (the log-variance chart of
+  Crowder and Hamilton, 1992: about standard normal in control) on a third EWMA. Only a
+  growth alarms (a loose endoscope, a vibrating stand, a camera out of focus: the
+  station's repeatability is no longer what its U assumes); ln chi-square's upper tail
+  is lighter than the normal's, so the stated false-alarm rate is an upper bound.
 * **Checks on the certified master**: per position characteristic,
   ``z = (measured - certified) / sqrt(u_station^2 + u_certificate^2)`` (standard
   uncertainties, k = 1); their mean times the root of their number goes on a second
@@ -77,6 +85,18 @@ class CharacteristicCheck:
         return None if z is None else z / 2.0
 
 
+def frame_scatter_um2(holes: Iterable[Any]) -> tuple[float, int] | None:
+    """The pooled variance (um^2) of the holes' frames' axial readings about each
+    hole's mean, and its degrees of freedom; None without a hole of two frames."""
+    ss, nu = 0.0, 0
+    for h in holes:
+        ax = [f.axial_mm * 1e3 for f in getattr(h, "frames", ()) if getattr(f, "axial_mm", None) is not None]
+        if len(ax) >= 2:
+            ss += float(np.sum((np.asarray(ax) - np.mean(ax)) ** 2))
+            nu += len(ax) - 1
+    return (ss / nu, nu) if nu else None
+
+
 def grating_residual_um(holes: Iterable[Any]) -> tuple[float, int] | None:
     """The mean over holes of (grating - model's carriage) averaged over each hole's
     frames (um), and the number of holes; None when no hole has both."""
@@ -107,6 +127,7 @@ class StationWatch:
     arl0_checks: float = 10000.0
     lam_inspections: float = 0.2
     lam_checks: float = 0.4
+    lam_scatter: float = 0.2
     #: Phase I: the baseline is the mean of this many inspections (its standard error,
     #: 0.05 um with two holes at 0.3 um, is small beside the gate)
     phase1_inspections: int = 20
@@ -121,6 +142,10 @@ class StationWatch:
         self.grating = EwmaChart("grating", self.lam_inspections, limit_for_arl(self.lam_inspections,
                                                                                  self.arl0_inspections))
         self.master = EwmaChart("master", self.lam_checks, limit_for_arl(self.lam_checks, self.arl0_checks))
+        self.scatter = EwmaChart("scatter", self.lam_scatter, limit_for_arl(self.lam_scatter, self.arl0_inspections))
+        self._phase1_scatter: list[tuple[float, int]] = []
+        self.scatter_ref_um2: float | None = None
+        self.last_scatter_um2: float | None = None
         self._phase1: list[float] = []
         self.baseline_um: float | None = None
         self.last_residual_um: float | None = None
@@ -130,24 +155,48 @@ class StationWatch:
     def observe_inspection(self, holes: Iterable[Any]) -> list[Alarm]:
         """One production inspection's holes (``HoleResult``s); the alarms it raises."""
         self.index += 1
+        holes = list(holes)
+        alarms = self._observe_scatter(holes)
         res = grating_residual_um(holes)
         if res is None:
-            return []
+            return alarms
         r_um, n = res
         self.last_residual_um = r_um
         if self.baseline_um is None:
             self._phase1.append(r_um)
             if len(self._phase1) >= self.phase1_inspections:
                 self.baseline_um = float(np.mean(self._phase1))
-            return []
+            return alarms
         se_um = self.z_repeatability_um / math.sqrt(n)
         signal = self.grating.add((r_um - self.baseline_um) / se_um)
         departure_um = self.grating.z * se_um
         if signal and abs(departure_um) > self.gate_um and self.needs_check is None:
             # once asked for, a check is not asked for again at every inspection
-            return self._raise("grating", f"the grating departs from the station's model by {departure_um:+.2f} um "
-                                          f"(EWMA; baseline {self.baseline_um:+.2f} um): the station's errors may "
-                                          f"exceed its stated U; check it on the master")
+            return alarms + self._raise("grating", f"the grating departs from the station's model by "
+                                                   f"{departure_um:+.2f} um (EWMA; baseline {self.baseline_um:+.2f} um): "
+                                                   f"the station's errors may exceed its stated U; check it on the master")
+        return alarms
+
+    def _observe_scatter(self, holes: list) -> list[Alarm]:
+        res = frame_scatter_um2(holes)
+        if res is None:
+            return []
+        s2, nu = res
+        self.last_scatter_um2 = s2
+        if self.scatter_ref_um2 is None:
+            self._phase1_scatter.append(res)
+            if len(self._phase1_scatter) >= self.phase1_inspections:
+                tot = sum(n for _, n in self._phase1_scatter)
+                self.scatter_ref_um2 = sum(v * n for v, n in self._phase1_scatter) / tot
+            return []
+        x = (math.log(max(s2, 1e-12) / max(self.scatter_ref_um2, 1e-12)) + 1.0 / nu) / math.sqrt(2.0 / nu)
+        signal = self.scatter.add(x)
+        if signal and self.scatter.z > 0 and self.needs_check is None:
+            ratio = math.sqrt(s2 / self.scatter_ref_um2)
+            return self._raise("scatter", f"the frames' scatter grew (EWMA {self.scatter.z:+.2f} > "
+                                          f"{self.scatter.limit:.2f}; last {math.sqrt(s2):.2f} um against "
+                                          f"{math.sqrt(self.scatter_ref_um2):.2f} um, x{ratio:.1f}): the endoscope, "
+                                          f"the stand or the focus; check the station on the master")
         return []
 
     def observe_master(self, checks: Iterable[CharacteristicCheck]) -> list[Alarm]:
@@ -181,6 +230,7 @@ class StationWatch:
             self.grating.restart()
             self._phase1 = []
             self.baseline_um = None
+            self.scatter.restart()
         return []
 
     def model_changed(self) -> None:
@@ -205,6 +255,9 @@ class StationWatch:
             "inspections_observed": self.index,
             "grating": {"baseline_um": self.baseline_um, "last_residual_um": self.last_residual_um,
                         "ewma": self.grating.z, "limit": self.grating.limit, "arl0": self.arl0_inspections},
+            "scatter": {"reference_um": None if self.scatter_ref_um2 is None else math.sqrt(self.scatter_ref_um2),
+                        "last_um": None if self.last_scatter_um2 is None else math.sqrt(self.last_scatter_um2),
+                        "ewma": self.scatter.z, "limit": self.scatter.limit},
             "master": {"last_z": self.last_master_z, "ewma": self.master.z, "limit": self.master.limit,
                        "arl0_checks": self.arl0_checks},
             "alarms": len(self.alarms),

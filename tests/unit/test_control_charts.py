@@ -131,3 +131,37 @@ def test_master_bias_within_the_stated_u_is_not_an_alarm_and_beyond_it_is():
     else:
         pytest.fail("a bias beyond the stated U went unnoticed for 10 checks")
     assert w.state()["needs_check"] and "drift from the certificate" in w.state()["reason"]
+
+
+def scattered_holes(rng, sigma_um, n_holes=2, frames=5):
+    """Holes whose frames read the axial place with ``sigma_um`` of scatter (no grating)."""
+    return [SimpleNamespace(frames=[SimpleNamespace(axial_mm=71.0 + rng.normal(0.0, sigma_um) * 1e-3, grating_mm=None,
+                                                    carriage_pred_mm=None) for _ in range(frames)])
+            for _ in range(n_holes)]
+
+
+def test_frame_scatter_chart_is_quiet_in_control_and_catches_a_doubled_scatter():
+    from station.monitor.watch import frame_scatter_um2
+
+    rng = np.random.default_rng(7)
+    s2, nu = frame_scatter_um2(scattered_holes(rng, 0.3, frames=200))
+    assert nu == 2 * 199 and abs(s2 - 0.09) < 0.02
+    w = StationWatch()
+    # Phase I, then 300 in-control inspections: nothing (ARL0 1e5 per inspection)
+    assert not any(w.observe_inspection(scattered_holes(rng, 0.3)) for _ in range(320))
+    assert w.scatter_ref_um2 is not None and abs(w.scatter_ref_um2 - 0.09) < 0.03
+    # the endoscope comes loose: twice the scatter is seen within a few inspections
+    for k in range(1, 16):
+        alarms = w.observe_inspection(scattered_holes(rng, 0.6))
+        if alarms:
+            break
+    assert alarms and alarms[0].chart == "scatter" and "scatter grew" in alarms[0].reason, k
+    assert k <= 8 and w.needs_check
+
+
+def test_a_smaller_scatter_is_not_an_alarm():
+    rng = np.random.default_rng(8)
+    w = StationWatch()
+    for _ in range(20):
+        w.observe_inspection(scattered_holes(rng, 0.3))
+    assert not any(w.observe_inspection(scattered_holes(rng, 0.1)) for _ in range(50))
