@@ -18,7 +18,6 @@ import json
 import logging
 import os
 import shutil
-import threading
 import tomllib
 import uuid
 from datetime import datetime, timezone
@@ -96,10 +95,6 @@ PLOT_VIEWS = {
     "residual_direction.png": "residual before and after, by approach direction",
     "spectrum.png": "periodogram of the residual before",
 }
-#: matplotlib's pyplot keeps global state: one run's pictures at a time
-_PLOT_LOCK = threading.Lock()
-
-
 def _write_discovery_plots(d, folder: Path, report_id: str) -> list[str]:
     """The run's pictures in ``<folder>/<id>/``; their names (none when drawing failed:
     the report stands without them, the trouble is logged)."""
@@ -108,8 +103,7 @@ def _write_discovery_plots(d, folder: Path, report_id: str) -> list[str]:
     out = folder / report_id
     try:
         out.mkdir(parents=True, exist_ok=False)
-        with _PLOT_LOCK:
-            paths = write_plots(d, out)
+        paths = write_plots(d, out)  # one picture at a time: station.discovery.plots.PLOT_LOCK
     except Exception:  # noqa: BLE001 - the numbers are the report; a picture is extra
         log.exception("discovery report %s: its plots could not be drawn", report_id)
         shutil.rmtree(out, ignore_errors=True)

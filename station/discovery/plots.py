@@ -6,6 +6,7 @@ view so a report viewer can show the one it needs.
 
 from __future__ import annotations
 
+import threading
 from pathlib import Path
 
 import matplotlib
@@ -16,12 +17,21 @@ import numpy as np  # noqa: E402
 
 _COLOURS = {1: "tab:red", -1: "tab:blue"}
 
+#: pyplot keeps global state (the current figure): one picture at a time in a process,
+#: whichever thread draws it (the API draws off its loop, the station's session too)
+PLOT_LOCK = threading.RLock()
+
 
 def _units(kind: str) -> tuple[str, str]:
     return ("um", "mm") if kind == "linear" else ("arcsec", "deg")
 
 
 def write_plots(d, out: Path) -> list[Path]:
+    with PLOT_LOCK:
+        return _write_plots(d, out)
+
+
+def _write_plots(d, out: Path) -> list[Path]:
     prep = d.prep
     du, pu = _units(prep.kind)
     paths: list[Path] = []

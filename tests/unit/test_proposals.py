@@ -9,8 +9,8 @@ import sys
 import pytest
 
 from station.kinematics.model import load_model
-from station.monitor.proposals import (DATUM_TERM, Change, ProposalBook, ProposalError, apply_changes,
-                                       datum_proposal, datum_sensitivity)
+from station.monitor.proposals import (DATUM_TERM, SCALE_TERM, Change, ProposalBook, ProposalError, apply_changes,
+                                       datum_proposal, datum_sensitivity, part_scale_ppm)
 from station.store import Store
 
 HOLES = {"hole_1": 71.03, "hole_2": 85.19}
@@ -40,6 +40,22 @@ def test_a_datum_proposal_removes_the_mean_error_it_saw():
         datum_proposal(m, "v0", "why", {"hole_1.position": [0.3], "hole_2.position": [8.4]}, HOLES)
     with pytest.raises(ProposalError, match="only installation errors"):
         Change("motions.Z.EZZ", 1.0).apply(m)
+
+
+def test_a_warm_part_is_reported_at_20_degC_and_the_datum_takes_the_rest():
+    # a part 5 K warm (115 ppm) on a datum 1 um off: the holes read 1 + 0.115 a um long
+    m = load_model()
+    err = {f"{h}.position": [1.0 + 115.0 * 1e-3 * a] for h, a in HOLES.items()}
+    p = datum_proposal(m, "v0", "why", err, HOLES, scale_ppm=115.0)
+    scale, datum = p.changes
+    assert scale.term == SCALE_TERM and scale.delta == pytest.approx(115.0)
+    assert "5.0 K" in scale.why and "ISO 1" in scale.why
+    assert datum.term == DATUM_TERM and datum.delta == pytest.approx(1.0, abs=1e-6)
+    # every hole's reading comes back by its whole error; the evidence is kept as seen
+    assert p.expected_change_um == pytest.approx({h: -err[f"{h}.position"][0] for h in HOLES}, abs=1e-6)
+    assert p.evidence == err
+    # the part's scale is not the machine's: the model is not touched by it
+    assert scale.apply(m) is m and part_scale_ppm(p.changes) == pytest.approx(115.0)
 
 
 def test_the_book_keeps_states_and_the_approved_changes_in_order(tmp_path):
