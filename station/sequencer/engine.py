@@ -261,6 +261,12 @@ class Engine:
                 self.ledger.add(Step("plan", time.perf_counter() - t0))
                 self._set(State.READY, "plan complete")
                 return done.value
+            except Exception as exc:  # noqa: BLE001 - the plan's own code raised between messages
+                # (a compensation that does not converge, a bug): nobody drives the machine
+                # any more, so it is a fault, not a run left "running"
+                self.ledger.add(Step("plan", time.perf_counter() - t0))
+                await self._fault(exc)
+                raise PlanEnded("faulted", self.reason) from exc
             self.ledger.add(Step("plan", time.perf_counter() - t0))
             try:
                 result = await self._execute(msg)

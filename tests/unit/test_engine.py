@@ -208,3 +208,23 @@ def test_estop_code_puts_engine_in_estopped():
         return eng.state
 
     assert asyncio.run(go()) == State.ESTOPPED
+
+
+def test_a_plan_that_raises_between_messages_faults_the_engine_instead_of_leaving_it_running():
+    def broken():
+        yield m.Move("Z", 5.0)
+        raise RuntimeError("compensation did not converge")
+
+    async def go():
+        eng, z, c, _ = make_engine()
+        await eng.home()
+        with pytest.raises(PlanEnded) as e:
+            await eng.run(broken())
+        state, stops = eng.state, z.stops
+        await eng.reset()
+        await eng.home()
+        return e.value, state, stops, await eng.run(scan_plan(2))
+
+    ended, state, stops, out = asyncio.run(go())
+    assert ended.outcome == "faulted" and "did not converge" in ended.reason
+    assert state == State.FAULTED and stops == 1 and out == "done"
