@@ -15,6 +15,11 @@ Conventions (from the contract):
 * ``t`` is ``time_s``; ``T`` is ``temperature_c`` (when unknown, ``t_ref``: no
   thermal expansion is assumed, and the caller should say so).
 
+Beyond the contract's table the station knows ``local_defect`` (a bump or dip in
+one stretch of the travel), ``step`` (a grating-segment joint: the error jumps
+at one position and stays) and ``abbe`` (offset times the recorded angle); they
+are documented in ``docs/discovery.md`` with their physics.
+
 Every effect is a small frozen dataclass with ``evaluate(ctx)`` vectorised over
 numpy arrays, ``parameter_names`` and ``explanation`` (plain language, for
 reports). Effects are *linear in at least some parameters*; ``jacobian`` gives
@@ -259,6 +264,31 @@ class LocalDefect(Effect):
         return self.amplitude * np.exp(-0.5 * ((ctx.x - self.centre) / w) ** 2)
 
 
+@dataclass(frozen=True)
+class Step(Effect):
+    """A jump of ``height`` at ``position`` that stays: ``height * (x >= position)``.
+
+    Not in the contract's vocabulary; defined here beside it so that a model file
+    naming ``step`` is understood by the twin and by discovery alike.  A linear
+    axis only: a rotary encoder ring closes on itself, so one jump round a turn
+    would have to be undone somewhere else.
+    """
+
+    position: float = 0.0
+    height: float = 0.0
+    name: ClassVar[str] = "step"
+    kinds: ClassVar[tuple[str, ...]] = ("linear",)
+    explanation: ClassVar[str] = (
+        "a jump in the error at one position that stays beyond it: the joint between two "
+        "segments of the scale (a spliced grating tape, two glass scales butted end to end, "
+        "a segmented screw or rack), where the second segment's graduation does not continue "
+        "the first's; height = how far the second segment is off, position = the joint"
+    )
+
+    def evaluate(self, ctx):
+        return np.where(ctx.x >= self.position, self.height, 0.0)
+
+
 #: the recording column an Abbe error reads: the angular error (pitch or yaw) that
 #: the laser's angular optics recorded at each point, arcsec
 ABBE_CHANNEL = "angle_arcsec"
@@ -289,7 +319,8 @@ class AbbeError(Effect):
 #: the contract's vocabulary by name, plus the effects the station adds to it
 VOCABULARY: dict[str, type[Effect]] = {
     cls.name: cls
-    for cls in (Offset, Scale, Backlash, Periodic, ThermalExpansion, ThermalDrift, Eccentricity, LocalDefect, AbbeError)
+    for cls in (Offset, Scale, Backlash, Periodic, ThermalExpansion, ThermalDrift, Eccentricity, LocalDefect, Step,
+                AbbeError)
 }
 
 

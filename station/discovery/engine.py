@@ -76,28 +76,40 @@ def discover(model: AxisModel, recording: Recording) -> Discovery:
         sel = forward_select(prep, W)
         noise = estimate_noise(dataclasses.replace(prep, residual=sel.fit.residual))
     fit = sel.fit
+    ctx = prep.ctx()
+    eff_idx, desc_idx = sel.effect_indices, sel.descriptor_indices
     r0 = prep.residual
     rw0 = W(r0)
     before = _summary(prep, W, r0, float(rw0 @ rw0), 0)
-    after = _summary(prep, W, fit.residual, fit.rss_w, fit.k)
+    # "after" is the recording minus the model *with the effects claimed* (what model.toml
+    # predicts); structure outside the vocabulary stays in it and is reported as findings
+    r_after = r0 - sum((fit.terms[i].effect.evaluate(ctx) for i in eff_idx), np.zeros_like(r0))
+    rw_after = W(r_after)
+    after = _summary(prep, W, r_after, float(rw_after @ rw_after), sum(len(fit.terms[i].free) + len(fit.terms[i].scanned) for i in eff_idx))
     findings_before, scan = find_signatures(prep, r0, W)
+    # the findings after: what is left beyond effects and descriptors, and each descriptor
     findings_after, _ = find_signatures(prep, fit.residual, W) if fit.terms else (findings_before, scan)
     for f in findings_before:
         f["stage"] = "before"
     for f in findings_after:
         f["stage"] = "after"
+    accepted = {d["name"]: d for d in sel.descriptors}
+    described = [_descriptor_finding(prep, fit.terms[i].effect, accepted[fit.terms[i].effect.name])
+                 for i in desc_idx]
+    findings_after = described + findings_after
     steps = {s["name"]: s for s in sel.steps}
-    effects = [_effect_entry(fit, i, steps.get(t.effect.name)) for i, t in enumerate(fit.terms)]
+    effects = [_effect_entry(fit, i, steps.get(fit.terms[i].effect.name)) for i in eff_idx]
     near_floor = after["rms"] <= NEAR_FLOOR_FACTOR * noise.sigma
-    if not effects and not findings_before and before["white"]:
+    if not effects and not described and not findings_before and before["white"]:
         verdict = "no-mismatch"
-    elif effects and after["white"] and near_floor and not findings_after:
+    elif effects and not described and after["white"] and near_floor and not findings_after:
         verdict = "explained"
     else:
         verdict = "partly-explained"
     if verdict == "partly-explained":
-        findings = findings_before + findings_after if effects else findings_before
-        remaining = findings_after if effects else findings_before
+        fitted = bool(effects or described)
+        findings = findings_before + findings_after if fitted else findings_before
+        remaining = findings_after if fitted else findings_before
         if not remaining:
             # structure remains but no single signature is significant: say so plainly
             why = []
@@ -111,7 +123,7 @@ def discover(model: AxisModel, recording: Recording) -> Discovery:
                              "range": [float(prep.x.min()), float(prep.x.max())], "direction": "both",
                              "description": "unexplained structure: " + "; ".join(why or ["see plots"])})
     else:
-        findings = findings_before + (findings_after if effects else [])
+        findings = findings_before + (findings_after if effects or described else [])
     ambiguities = list(sel.ambiguities)
     names = {e["name"] for e in effects}
     temp_ok = prep.temperature_c is not None and np.ptp(prep.temperature_c) >= 0.1
@@ -142,6 +154,7 @@ def discover(model: AxisModel, recording: Recording) -> Discovery:
         "noise": noise.to_dict(),
         "selection": {
             "steps": sel.steps,
+            "descriptors": sel.descriptors,
             "trials": [[t.to_dict() for t in step] for step in sel.trials],
             "notes": sel.notes,
         },
@@ -151,8 +164,17 @@ def discover(model: AxisModel, recording: Recording) -> Discovery:
     }
     if verdict == "no-mismatch":
         report["effects"] = []
-    new_model = model.with_effects(*[t.effect for t in fit.terms]) if verdict != "no-mismatch" else model
-    return Discovery(report, new_model, prep, r0, fit.residual, scan, sel)
+    claimed = [fit.terms[i].effect for i in eff_idx]
+    new_model = model.with_effects(*claimed) if verdict != "no-mismatch" else model
+    return Discovery(report, new_model, prep, r0, r_after, scan, sel)
+
+
+def _descriptor_finding(prep: Prepared, d, step: dict) -> dict:
+    """A descriptor as the report's finding: located, described, never an effect."""
+    unit = ("um", "mm") if prep.kind == "linear" else ("arcsec", "deg")
+    return {"signature": d.signature, "stage": "after", **d.finding(prep, unit),
+            "outside_vocabulary": True, "descriptor": d.name, "p_value": step["p_value"],
+            "delta_bic": step["delta_bic"]}
 
 
 def write_outputs(d: Discovery, out_dir: str | Path, plots: bool = True) -> list[Path]:

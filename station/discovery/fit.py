@@ -25,11 +25,18 @@ from station.discovery.noise import Whitener, lag1_autocorrelation
 
 @dataclass
 class Term:
-    """An effect in the fit: its current value, which parameters are free, their bounds."""
+    """An effect in the fit: its current value, which parameters are free, their bounds.
+
+    ``scanned`` names parameters set by a scan rather than by least squares (a step's
+    position: the misfit is flat within a gap between targets and jumps between gaps,
+    so it has no derivative); they are held here but count as parameters (BIC, the
+    residual's degrees of freedom), since the data chose them.
+    """
 
     effect: Effect
     free: tuple[str, ...]
     bounds: dict[str, tuple[float, float]] = field(default_factory=dict)
+    scanned: tuple[str, ...] = ()
 
 
 @dataclass
@@ -85,10 +92,11 @@ def fit_terms(prep: Prepared, W: Whitener, terms: list[Term], mask: np.ndarray |
     ctx = prep.ctx()
     r = prep.residual
     slots = [(i, name) for i, t in enumerate(terms) for name in t.free]
+    k_scanned = sum(len(t.scanned) for t in terms)
     if not slots:
         res = r - total([t.effect for t in terms], ctx)
         rw = W(res)
-        return FitResult(list(terms), [{} for _ in terms], float(rw @ rw), r.size, 0, res)
+        return FitResult(list(terms), [{} for _ in terms], float(rw @ rw), r.size, k_scanned, res)
     x0 = np.array([float(getattr(terms[i].effect, n)) for i, n in slots])
     lo = np.array([terms[i].bounds.get(n, (-np.inf, np.inf))[0] for i, n in slots])
     hi = np.array([terms[i].bounds.get(n, (-np.inf, np.inf))[1] for i, n in slots])
@@ -109,7 +117,7 @@ def fit_terms(prep: Prepared, W: Whitener, terms: list[Term], mask: np.ndarray |
     res = r - total(effects, ctx)
     rw = W(res)
     rss = float(rw @ rw)
-    n, k = r.size, len(slots)
+    n, k = r.size, len(slots) + k_scanned
     s2 = rss / max(n - k, 1)
     J = sol.jac
     cov = s2 * np.linalg.pinv(J.T @ J)

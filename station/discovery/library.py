@@ -17,7 +17,7 @@ import numpy as np
 
 from station.effects import (
     ABBE_CHANNEL, AbbeError, Backlash, Eccentricity, Effect, EvalContext, LocalDefect, Offset, Periodic, Scale,
-    ThermalDrift, ThermalExpansion,
+    Step, ThermalDrift, ThermalExpansion,
 )
 from station.discovery.data import Prepared
 
@@ -50,8 +50,47 @@ def local_defect_columns(prep: Prepared, centres: np.ndarray, widths: np.ndarray
 #: centres tried per width in the local-defect scan (speed bound, see local_defect_grid)
 MAX_CENTRES_PER_WIDTH = 120
 
+#: distinct targets a step needs on each side: a jump before the last target alone is
+#: one point off (an outlier or a local defect), not a joint between two segments
+MIN_STEP_SIDE = 2
+#: positions tried at once in the step scan (speed bound on dense recordings; the
+#: best one is then refined over every gap near it, see select.refine_steps)
+MAX_STEP_POSITIONS = 240
+
+
+def step_gaps(prep: Prepared) -> tuple[np.ndarray, np.ndarray]:
+    """The gaps a step may sit in: (left target, right target) of consecutive distinct
+    targets with at least ``MIN_STEP_SIDE`` distinct targets on each side.
+
+    A step between two targets fits the data equally well anywhere in the gap, so
+    the gap is what the recording resolves: the step is placed at its middle and
+    its position uncertainty covers it (select.refine_steps).
+    """
+    t = distinct_targets(prep)
+    if t.size < 2 * MIN_STEP_SIDE:
+        return np.empty(0), np.empty(0)
+    left, right = t[:-1], t[1:]
+    keep = slice(MIN_STEP_SIDE - 1, t.size - MIN_STEP_SIDE)
+    return left[keep], right[keep]
+
+
+def step_grid(prep: Prepared) -> np.ndarray:
+    """Step positions of the scan: gap middles, thinned to ``MAX_STEP_POSITIONS``."""
+    left, right = step_gaps(prep)
+    mids = (left + right) / 2.0
+    if mids.size > MAX_STEP_POSITIONS:
+        mids = mids[:: int(np.ceil(mids.size / MAX_STEP_POSITIONS))]
+    return mids
+
+
+def step_columns(prep: Prepared, positions: np.ndarray) -> np.ndarray:
+    """Unit steps at every position: the class's own formula, broadcast."""
+    ctx = EvalContext.make(prep.x[:, None], prep.kind)
+    return Step(positions[None, :], 1.0).evaluate(ctx).astype(float)
+
+
 #: Effects registered by discovery (documented in docs/discovery.md).
-EXTRA_EFFECTS = (LocalDefect,)
+EXTRA_EFFECTS = (LocalDefect, Step)
 
 
 @dataclass
@@ -163,6 +202,16 @@ def _phys_local(e: LocalDefect, prep: Prepared) -> str | None:
     return None
 
 
+def _phys_step(e: Step, prep: Prepared) -> str | None:
+    t = distinct_targets(prep)
+    below = int(np.count_nonzero(t < e.position))
+    above = int(np.count_nonzero(t >= e.position))
+    if min(below, above) < MIN_STEP_SIDE:
+        return (f"only {min(below, above)} distinct target(s) on one side of {e.position:.4g}: "
+                "an end point off, not a joint between segments")
+    return None
+
+
 def candidates(prep: Prepared, exclude: set[str] = frozenset()) -> list[Candidate]:
     """The candidates this recording can support (channels and kind permitting)."""
     out: list[Candidate] = [
@@ -204,6 +253,12 @@ def candidates(prep: Prepared, exclude: set[str] = frozenset()) -> list[Candidat
                              bounds={"width": (0.5 * widths[0], 2.0 * widths[-1]),
                                      "centre": (float(prep.x.min()), float(prep.x.max()))},
                              physical=_phys_local))
+    n_gaps = step_gaps(prep)[0].size
+    if prep.kind in Step.kinds and n_gaps >= 1:
+        # the position is scanned over the gaps (not fitted: the misfit is flat within a
+        # gap and jumps between gaps), the height is linear; Bonferroni over the gaps
+        out.append(Candidate("step", ("height",), None, "height", trials=float(n_gaps), df_single=1,
+                             physical=_phys_step))
     angle = prep.channels.get(ABBE_CHANNEL)
     if prep.kind == "linear" and angle is not None and np.ptp(angle) > 0:
         # linear in the arm: one parameter, no scan
@@ -248,6 +303,14 @@ SEPARATING_MEASUREMENT = {
     frozenset({"abbe", "scale"}):
         "a second run with the reflector at another height: the Abbe error scales with the "
         "offset, a scale error does not",
+    frozenset({"step", "local_defect"}):
+        "dense short-step runs across the suspected joint: a step stays beyond it, a defect returns",
+    frozenset({"step", "scale"}):
+        "targets spaced more finely along the whole travel: a scale error grows evenly, a joint jumps",
+    frozenset({"step", "offset"}):
+        "more targets near the travel's start: an offset is there too, a joint's jump is not",
+    frozenset({"step", "periodic"}):
+        "dense short-step runs over the whole travel: a periodic error repeats, a joint jumps once",
     frozenset({"abbe", "periodic"}):
         "a second run with the reflector at another height: the Abbe error scales with the "
         "offset, a periodic error of the scale does not",

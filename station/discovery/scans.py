@@ -86,7 +86,27 @@ def _sin_cos_grid(x: np.ndarray, f: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     return s, c
 
 
+_SCAN_CACHE: dict = {}
+_SCAN_CACHE_SIZE = 8
+
+
 def periodic_scan(x: np.ndarray, r: np.ndarray, W: Whitener, p_min: float, p_max: float,
+                  nuisance: np.ndarray | None = None) -> PeriodicScan | None:
+    """:func:`scan_periodic`, remembered for the last few arguments: the selection scans
+    the same residual for the periodic candidate, the non-sinusoidal descriptor and
+    the vocabulary alternative it is compared with."""
+    key = (hash(x.tobytes()), hash(r.tobytes()), W.phi, hash(W.prev.tobytes()), p_min, p_max,
+           None if nuisance is None else hash(nuisance.tobytes()))
+    if key in _SCAN_CACHE:
+        return _SCAN_CACHE[key]
+    out = scan_periodic(x, r, W, p_min, p_max, nuisance)
+    if len(_SCAN_CACHE) >= _SCAN_CACHE_SIZE:
+        _SCAN_CACHE.pop(next(iter(_SCAN_CACHE)))
+    _SCAN_CACHE[key] = out
+    return out
+
+
+def scan_periodic(x: np.ndarray, r: np.ndarray, W: Whitener, p_min: float, p_max: float,
                   nuisance: np.ndarray | None = None) -> PeriodicScan | None:
     """Least-squares sinusoid scan of ``r`` over periods [p_min, p_max].
 
@@ -140,9 +160,32 @@ def periodic_scan(x: np.ndarray, r: np.ndarray, W: Whitener, p_min: float, p_max
                         best_phase=float(np.arctan2(b, a)), fap=fap, n_independent=m)
 
 
-def best_column(r: np.ndarray, cols: np.ndarray, W: Whitener, nuisance: np.ndarray | None = None):
-    """Which single column (of a scan grid) explains ``r`` best; (index, coefficient, p_single)."""
-    rw, cw = project_out(W, nuisance, r, cols)
+_GRID_CACHE: dict = {}
+_GRID_CACHE_SIZE = 2
+
+
+def whitened_grid(key: tuple, make, W: Whitener, nuisance: np.ndarray | None) -> np.ndarray:
+    """``make()``'s scan columns, whitened and with the nuisance projected out, remembered
+    under ``key`` (plus the whitening): a scan grid does not change from one selection
+    step to the next, only the residual does."""
+    full = key + (W.phi, hash(W.prev.tobytes()), None if nuisance is None else hash(nuisance.tobytes()))
+    if full not in _GRID_CACHE:
+        if len(_GRID_CACHE) >= _GRID_CACHE_SIZE:
+            _GRID_CACHE.pop(next(iter(_GRID_CACHE)))
+        _GRID_CACHE[full] = project_out(W, nuisance, make())[0]
+    return _GRID_CACHE[full]
+
+
+def best_column(r: np.ndarray, cols: np.ndarray, W: Whitener, nuisance: np.ndarray | None = None,
+                projected: bool = False):
+    """Which single column (of a scan grid) explains ``r`` best; (index, coefficient, p_single).
+
+    ``projected``: ``cols`` are already whitened with the nuisance projected out
+    (:func:`whitened_grid`)."""
+    if projected:
+        rw, cw = project_out(W, nuisance, r)[0], cols
+    else:
+        rw, cw = project_out(W, nuisance, r, cols)
     cc = np.sum(cw * cw, 0)
     cc = np.where(cc > 0, cc, np.inf)
     cr = cw.T @ rw

@@ -13,7 +13,8 @@ from __future__ import annotations
 import numpy as np
 
 from station.discovery.data import Prepared
-from station.discovery.library import distinct_targets, local_defect_columns, local_defect_grid, period_limits
+from station.discovery.library import MAX_STEP_POSITIONS, distinct_targets, local_defect_columns, \
+    local_defect_grid, period_limits, step_columns, step_gaps
 from station.discovery.noise import Whitener
 from station.discovery.scans import PeriodicScan, best_column, linear_test, periodic_scan
 
@@ -98,6 +99,20 @@ def find_signatures(prep: Prepared, r: np.ndarray, W: Whitener) -> tuple[list[di
             "range": [max(whole[0], c - 2 * w), min(whole[1], c + 2 * w)], "direction": "both",
             "description": f"a local {'bump' if coef > 0 else 'dip'} of {abs(coef):.3g} {du} around "
                            f"{c:.4g} {pu} (width {w:.3g} {pu})"}))
+
+    left, right = step_gaps(prep)
+    if left.size:
+        # a jump that stays (a joint between scale segments), beyond a straight line;
+        # every gap is a hypothesis (Bonferroni)
+        every = int(np.ceil(left.size / MAX_STEP_POSITIONS))     # thinned on dense recordings
+        left, right = left[::every], right[::every]
+        mids = (left + right) / 2.0
+        k, coef, p1 = best_column(r, step_columns(prep, mids), W, np.column_stack([ones, xn]))
+        p = min(1.0, p1 * mids.size * every)
+        tests.append(("position", p, {
+            "range": [float(left[k]), float(right[k])], "direction": "both", "step_at": float(mids[k]),
+            "description": f"a step of {coef:+.3g} {du} between {left[k]:.4g} and {right[k]:.4g} {pu}: the "
+                           f"residual jumps there and stays (beyond a straight line)"}))
 
     m = max(len(tests), 1)
     findings = []

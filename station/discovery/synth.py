@@ -155,3 +155,90 @@ def rotary_campaign(**kw) -> Campaign:
     base = dict(kind="rotary", n_targets=24, span=C_RANGE_DEG, speed=10.0, sigma=0.4)
     base.update(kw)
     return Campaign(**base)
+
+
+# ----------------------------------------------------------------- structure outside the vocabulary
+
+#: kinds of structure the vocabulary has no sine, line or constant for (issue 20), and
+#: their variants; ``step`` has a vocabulary effect since, the others none
+OOV_VARIANTS: dict[str, tuple[str, ...]] = {
+    "step": ("step",),
+    "curvature": ("quadratic", "quadratic_from_zero", "cubic", "cubic_from_zero", "quadratic_cubic"),
+    "nonsine_periodic": ("sawtooth", "triangle", "square"),
+    "growing_hysteresis": ("with_position", "with_distance"),
+}
+
+
+def distance_travelled(rec: Recording) -> np.ndarray:
+    """Distance the axis has moved since the campaign's first reading (file = time order)."""
+    return np.cumsum(np.abs(np.diff(rec.target, prepend=rec.target[0])))
+
+
+@dataclass(frozen=True)
+class Structure:
+    """Structure outside the vocabulary, added to a synthetic recording.
+
+    ``amplitude`` is its peak contribution (deviation units): a step's height, a
+    curvature's largest departure, a periodic error's peak, a hysteresis' reversal
+    at the end of the travel (or of the campaign).  Variants:
+
+    * step: ``amplitude`` beyond ``position``, 0 before (a grating segment joint);
+    * curvature: over the travel ``span`` with u in [-1, 1]: ``quadratic`` u^2 (no
+      linear part), ``quadratic_from_zero`` (x / L)^2 (with one), ``cubic`` the
+      Legendre P3 (no linear part), ``cubic_from_zero`` u^3 (with one),
+      ``quadratic_cubic`` 0.6 u^2 + 0.4 u^3; scaled to peak ``amplitude``;
+    * nonsine_periodic of ``period`` and ``phase`` (fraction of a period):
+      ``sawtooth``, ``triangle``, ``square`` (tanh(4 sin), harmonics 3, 5, ...);
+    * growing_hysteresis: a reversal growing from 0 ``with_position`` along the
+      travel, or ``with_distance`` travelled since the campaign began.
+    """
+
+    kind: str
+    variant: str
+    amplitude: float
+    position: float = 0.0
+    period: float = 0.0
+    phase: float = 0.0
+    span: tuple[float, float] = Z_TRAVEL_MM
+
+    def evaluate(self, rec: Recording) -> np.ndarray:
+        x = rec.target.astype(float)
+        lo, hi = self.span
+        a = self.amplitude
+        if self.kind == "step":
+            return np.where(x >= self.position, a, 0.0)
+        if self.kind == "curvature":
+            u = (2 * x - lo - hi) / (hi - lo)
+            f = {"quadratic": u ** 2, "quadratic_from_zero": ((x - lo) / (hi - lo)) ** 2,
+                 "cubic": (5 * u ** 3 - 3 * u) / 2, "cubic_from_zero": u ** 3,
+                 "quadratic_cubic": 0.6 * u ** 2 + 0.4 * u ** 3}[self.variant]
+            return a * f
+        if self.kind == "nonsine_periodic":
+            z = x / self.period + self.phase
+            saw = 2 * (z - np.floor(z + 0.5))
+            f = {"sawtooth": saw, "triangle": 2 * np.abs(saw) - 1,
+                 "square": np.tanh(4 * np.sin(2 * np.pi * z)) / np.tanh(4)}[self.variant]
+            return a * f
+        if self.kind == "growing_hysteresis":
+            s = rec.direction.astype(float)
+            if self.variant == "with_position":
+                g = (x - lo) / (hi - lo)
+            else:
+                d = distance_travelled(rec)
+                g = d / max(d[-1], 1e-12)
+            return s * a * g / 2.0
+        raise ValueError(f"unknown structure kind {self.kind!r}")
+
+    @property
+    def where(self) -> str:
+        if self.kind == "step":
+            return f"{self.amplitude:+.3g} at {self.position:.4g}"
+        if self.kind == "nonsine_periodic":
+            return f"{self.variant} period {self.period:.4g} peak {self.amplitude:.3g}"
+        return f"{self.variant} peak {self.amplitude:.3g}"
+
+
+def with_structure(rec: Recording, structure: Structure) -> Recording:
+    """Add ``structure`` to the recording's deviation (in place, rounded as recorded); returns it."""
+    rec.deviation = np.round(rec.deviation + structure.evaluate(rec), 4)
+    return rec
