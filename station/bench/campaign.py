@@ -49,6 +49,14 @@ async def _campaign(scenario: Path | None, parts: int, master_every: int, data: 
     async with open_session(scenario=scenario, time_scale=time_scale, data_dir=data) as s:
         models = [{"index": 1, "version": s.model_version, "added": []}]
         proposals = []
+
+        async def _proposed(i: int, p) -> None:
+            proposals.append({"index": i, "id": p.id, "changes": [c.term for c in p.changes],
+                              "kind": p.explanation.get("kind"), "expected_change_um": p.expected_change_um})
+            if auto_approve:  # standing in for the engineer
+                await s.decide(p.id, True, "campaign --auto-approve")
+                models.append({"index": i + 1, "version": s.model_version, "added": [c.term for c in p.changes]})
+
         for i in range(1, parts + 1):
             out = await s.inspect(family, f"CAMPAIGN-{seed}-{i:04d}")
             inspections.append({"index": i, "state": out.state, "result": out.result, "reason": out.reason,
@@ -56,11 +64,19 @@ async def _campaign(scenario: Path | None, parts: int, master_every: int, data: 
                                 "model_version": s.model_version,
                                 "machine_s": None if out.cycle is None else out.cycle["machine_s"]})
             alarms += [{"index": i, "reason": a.reason, "chart": a.chart} for a in out.alarms]
+            if any(a.chart == "grating" for a in out.alarms):
+                # the grating departs from the model's carriage: the station checks Z against
+                # its grating by itself (no master needed) and proposes what its model lacks
+                ax = await s.check_axis(family, propose=True, plots=False)
+                checks.append({"index": i, "kind": "axis", "verdict": ax.verdict, "machine_s": ax.machine_s,
+                               "effects": [e["name"] for e in (ax.report or {}).get("effects", [])]})
+                if ax.proposal is not None:
+                    await _proposed(i, ax.proposal)
             # the campaign plays the plant: the master goes on every K parts, and at once
             # when the station asks for a check (the MES reads "station needs a check")
             if master_every and (i % master_every == 0 or out.alarms):
                 chk = await s.check_master(cert, family, seed=seed)
-                checks.append({"index": i, "in_control": chk.in_control,
+                checks.append({"index": i, "kind": "master", "in_control": chk.in_control,
                                "z": [c.z for c in chk.checks if c.id.endswith(".position")],
                                "worst_error_um": worst_error_um(chk.inspection)})
                 alarms += [{"index": i, "reason": a.reason, "chart": a.chart} for a in chk.alarms]
@@ -68,12 +84,7 @@ async def _campaign(scenario: Path | None, parts: int, master_every: int, data: 
                     holes_mm = {h.id: h.position_mm for h in cert.holes}
                     p = await s.propose(chk.alarms[0].reason, holes_mm)
                     if p is not None:
-                        proposals.append({"index": i, "id": p.id, "changes": [c.term for c in p.changes],
-                                          "expected_change_um": p.expected_change_um})
-                        if auto_approve:  # standing in for the engineer
-                            await s.decide(p.id, True, "campaign --auto-approve")
-                            models.append({"index": i + 1, "version": s.model_version,
-                                           "added": [c.term for c in p.changes]})
+                        await _proposed(i, p)
             if progress:
                 progress()
         state = s.watch.state()

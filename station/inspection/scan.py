@@ -125,6 +125,11 @@ class ScanSettings:
     #: session from the checks (station.monitor.evidence; docs/monitor.md); 0 when the
     #: checks show nothing beyond the model's stated uncertainty
     evidence_u_um: float = 0.0
+    #: the part's expansion the master checks show (ppm): a hole's axial place from the
+    #: part's datum face is reported at 20 degC, ``a (1 - ppm 1e-6)`` (ISO 1), the master
+    #: (of the parts' material, at their temperature) standing in for a thermometer.
+    #: Approved as a change ``part.scale_ppm`` (station.monitor.proposals)
+    part_scale_ppm: float = 0.0
     #: standard uncertainty of one hole's centre (along the axis, y) and diameter from
     #: the vision stage (px), the Type B part the frames' scatter cannot show: the camera
     #: stays put while it takes a hole's frames, so the wall texture that moves the
@@ -278,7 +283,7 @@ def combine(result: HoleResult, geo: CameraGeometry, settings: ScanSettings) -> 
     u_ax = math.sqrt(s_ax**2 + (geo.scale_u_rel * offset_mm) ** 2 + (settings.model_u_um * 1e-3) ** 2
                      + (settings.evidence_u_um * 1e-3) ** 2 + u_vis_c**2)
     u_dia = math.sqrt(s_dia**2 + (geo.scale_u_rel * float(dia.mean())) ** 2 + u_vis_d**2)
-    result.position_mm = float(ax.mean())
+    result.position_mm = float(ax.mean()) * (1.0 - settings.part_scale_ppm * 1e-6)
     result.position_u_mm = 2.0 * u_ax
     result.diameter_mm = float(dia.mean())
     result.diameter_u_mm = 2.0 * u_dia

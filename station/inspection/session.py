@@ -82,7 +82,7 @@ class Session:
     watch: StationWatch | None = None
 
     def __post_init__(self):
-        from station.monitor.proposals import ProposalBook, apply_changes
+        from station.monitor.proposals import ProposalBook, apply_changes, part_scale_ppm
 
         if self.watch is None:
             self.watch = StationWatch(gate_um=self.settings.model_u_um)
@@ -92,6 +92,7 @@ class Session:
         if approved:
             # what engineers approved is the station's model from now on, over its configured one
             self.station.model = apply_changes(self.station.model, approved, f"+{len(approved)}")
+            self.settings = replace(self.settings, part_scale_ppm=self.settings.part_scale_ppm + part_scale_ppm(approved))
         #: position errors (um) of the last master check, when it was out of control
         self._out_of_control: dict[str, list[float]] = {}
         #: the master checks since the start, in the starting model's frame, and what
@@ -100,6 +101,8 @@ class Session:
         self.explanation: Explanation | None = None
         #: per master hole: how much the changes approved since the start moved its reading (um)
         self.applied_um: dict[str, float] = {}
+        #: the part expansion (ppm) the changes approved since the start correct
+        self.applied_scale_ppm = 0.0
 
     def clock_s(self) -> float:
         """The station's machine clock (s): the host's, times the time scale its config
@@ -120,11 +123,25 @@ class Session:
         bound_um = 0.0
         if ex.drifting:
             bias = abs(float(sum(ex.now_um[h] + self.applied_um.get(h, 0.0) for h in ex.now_um)) / len(ex.now_um))
-            bound_um = bias + abs(ex.rate_um_per_h) * max(0.0, self.clock_s() - last.time_s) / 3600.0
-        if ex.scale_ppm is not None and abs(ex.scale_ppm) > 3.0 * ex.scale_u_ppm and positions_mm:
+            rate = abs(ex.rate_um_per_h) + 2.0 * (ex.rate_u_um_per_h or 0.0)  # the rate's own bound, k = 2
+            bound_um = bias + rate * max(0.0, self.clock_s() - last.time_s) / 3600.0
+        scale = self.uncorrected_scale()
+        if ex.scale_ppm is not None and positions_mm and (scale is not None or self.applied_scale_ppm):
+            # a scale seen and not corrected, or the one corrected with its own uncertainty,
+            # over the holes' distance from where the checks pin the datum
             ref = sum(last.position_mm.values()) / len(last.position_mm)
-            bound_um = math.hypot(bound_um, abs(ex.scale_ppm) * 1e-3 * max(abs(a - ref) for a in positions_mm))
+            s_ppm = math.hypot(scale or 0.0, 2.0 * ex.scale_u_ppm)
+            bound_um = math.hypot(bound_um, s_ppm * 1e-3 * max(abs(a - ref) for a in positions_mm))
         return bound_um / 2.0
+
+    def uncorrected_scale(self) -> float | None:
+        """The part expansion (ppm) the checks show beyond 3 u and the present settings do
+        not correct; None when there is none (or fewer than three checks to pool)."""
+        ex = self.explanation
+        if ex is None or ex.scale_ppm is None or ex.checks < 3:
+            return None
+        s = ex.scale_ppm - self.applied_scale_ppm
+        return s if abs(s) > 3.0 * ex.scale_u_ppm else None
 
     @property
     def model_version(self) -> str:
@@ -142,7 +159,7 @@ class Session:
             return None
         try:
             p = datum_proposal(self.station.model, self.model_version, reason, dict(self._out_of_control), holes_mm,
-                               explanation=self.explanation)
+                               explanation=self.explanation, scale_ppm=self.uncorrected_scale())
         except ProposalError as exc:
             await asyncio.to_thread(self.store.log_event, "alarm", f"no model proposal: {exc}")
             return None
@@ -159,7 +176,7 @@ class Session:
         uses the changed model from its next inspection and its charts start again.
         The changed model is made before the decision is recorded, so a change that
         cannot be applied is refused and nothing is recorded."""
-        from station.monitor.proposals import apply_changes
+        from station.monitor.proposals import apply_changes, part_scale_ppm
 
         new_model = None
         if approve:
@@ -173,6 +190,9 @@ class Session:
             self.watch.model_changed()
             for hole, v in p.expected_change_um.items():
                 self.applied_um[hole] = self.applied_um.get(hole, 0.0) + v
+            scale = part_scale_ppm(p.changes)
+            self.applied_scale_ppm += scale
+            self.settings = replace(self.settings, part_scale_ppm=self.settings.part_scale_ppm + scale)
             await asyncio.to_thread(self.store.log_event, "approval", f"model proposal {p.id} approved by {who}: "
                                     f"{before} -> {self.model_version}" + (f" ({note})" if note else ""))
         else:

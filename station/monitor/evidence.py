@@ -37,6 +37,10 @@ WINDOW = 8
 DECISIVE = 6.0
 #: a drift whose rate is this many standard uncertainties from zero is a drift
 SIGNIFICANT = 3.0
+#: a drift's value now and its rate come from the latest this many checks: a thermal
+#: drift slows as the bodies settle (a first-order lag), and a line through a long
+#: window would miss where it is now
+RECENT = 4
 
 
 @dataclass(frozen=True)
@@ -161,8 +165,11 @@ def explain(records: list[MasterRecord]) -> Explanation:
         return Explanation("steady", per_hole(mean_now), f"{len(recs)} checks steady at {mean_now:+.2f} um on average",
                            len(recs), rate, rate_u, chi2=chi2, **scale)
     if chi_lin + DECISIVE <= chi_step and abs(rate) >= SIGNIFICANT * rate_u:
+        k = min(RECENT, len(recs))
+        coef, cov, _ = _wls(np.column_stack([ones[-k:], (t[-k:] - t[-1]) / 3600.0]), m[-k:], u[-k:])
+        rate, rate_u = float(coef[1]), float(math.sqrt(cov[1, 1]))
         return Explanation("drift", per_hole(float(coef[0])),
-                           f"{len(recs)} checks over {span_h * 60.0:.0f} min drift steadily at {rate:+.1f} +/- "
+                           f"{len(recs)} checks over {span_h * 60.0:.0f} min drift, lately at {rate:+.1f} +/- "
                            f"{rate_u:.1f} um/h: the part, the frame or the grating warming or cooling",
                            len(recs), rate, rate_u, chi2=chi2, **scale)
     if chi_step + DECISIVE <= chi_lin:

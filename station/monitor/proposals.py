@@ -34,6 +34,8 @@ from station.kinematics.parameters import SixDof
 #: the parameter a master check names when the datum moved
 DATUM_BODY = "J"
 DATUM_TERM = f"installation.{DATUM_BODY}.z_um"
+#: the part's expansion from its datum face (ppm), the master standing in for a thermometer
+SCALE_TERM = "part.scale_ppm"
 
 
 class ProposalError(ValueError):
@@ -54,6 +56,8 @@ class Change:
             from station.checks.axis import apply_motion_change
 
             return apply_motion_change(model, self)
+        if self.term == SCALE_TERM:
+            return model  # the part's, not the machine's: ``part_scale_ppm`` (session settings)
         section, body, key = self.term.split(".")
         if section != "installation":
             raise ProposalError(f"cannot change {self.term}: only installation errors are proposed")
@@ -102,14 +106,18 @@ def datum_sensitivity(model: StationModel, z_mm: float, c_deg: float, term: str 
 
 def datum_proposal(model: StationModel, base_version: str, reason: str,
                    errors_um: dict[str, list[float]], holes_mm: dict[str, float],
-                   consistency_um: float = 3.0, explanation=None) -> Proposal:
+                   consistency_um: float = 3.0, explanation=None, scale_ppm: float | None = None) -> Proposal:
     """A proposal from master checks' position errors (``errors_um``: characteristic
     id -> measured - certified, um) at the holes' axial places (``holes_mm``: hole id ->
     mm): the datum's error is their mean, corrected through the model's sensitivity at
     each hole. Errors further apart than ``consistency_um`` (4.5 standard
     uncertainties of a difference of two of them) are not one datum shift: refused.
     ``explanation`` (``station.monitor.evidence.Explanation``): what the checks over
-    time say the change is (a step, a drift), which names the physics."""
+    time say the change is (a step, a drift), which names the physics. ``scale_ppm``:
+    the part's expansion the checks show and the station has not corrected: corrected
+    first (``part.scale_ppm``, about the part's datum face), the datum then takes the
+    rest."""
+    evidence = {cid: list(es) for cid, es in errors_um.items()}
     pooled = [e for es in errors_um.values() for e in es]
     if not pooled:
         raise ProposalError("no master check results to propose from")
@@ -118,6 +126,18 @@ def datum_proposal(model: StationModel, base_version: str, reason: str,
         # check the knock fell into, a dirty master): no proposal, check again
         raise ProposalError(f"the master's position errors disagree ({min(pooled):+.2f} .. {max(pooled):+.2f} um, "
                             f"more than {consistency_um:g} um apart): not one datum shift; check again")
+    scale_change = None
+    if scale_ppm:
+        # a hole at a mm from the face reads scale * 1e-3 * a um long; reported times
+        # (1 - scale 1e-6), it reads that much less
+        shrink = {h: -scale_ppm * 1e-3 * a for h, a in holes_mm.items()}
+        errors_um = {cid: [e + shrink.get(cid.rsplit(".", 1)[0], 0.0) for e in es] for cid, es in errors_um.items()}
+        pooled = [e for es in errors_um.values() for e in es]
+        scale_change = Change(SCALE_TERM, float(scale_ppm), why=(
+            f"the holes read long in proportion to their distance from the part's datum face by {scale_ppm:+.0f} ppm "
+            f"(the part {'warmer' if scale_ppm > 0 else 'colder'} than 20 degC by about {abs(scale_ppm) / 23.0:.1f} K at an "
+            f"aluminium alloy's 23 ppm/K; thermal expansion, ISO 1): reported at 20 degC, the master of the parts' "
+            f"material standing in for a thermometer"))
     mean_um = float(np.mean(pooled))
     sens = [datum_sensitivity(model, z, 0.0) for z in holes_mm.values()]
     s = float(np.mean(sens))
@@ -152,8 +172,11 @@ def datum_proposal(model: StationModel, base_version: str, reason: str,
         # compensation cancels the model's predicted shift, so the world's point moves
         # the other way and the hole's image offset, the reading, by the shift itself
         expected[hole] = float((a1 - a0) * 1e3)
-    return Proposal(uuid.uuid4().hex[:12], datetime.now(timezone.utc).isoformat(), base_version, reason, [change],
-                    errors_um, expected, explanation=explanation.to_json() if explanation is not None else {})
+        if scale_change is not None:
+            expected[hole] += -scale_change.delta * 1e-3 * z
+    changes = [change] if scale_change is None else [scale_change, change]
+    return Proposal(uuid.uuid4().hex[:12], datetime.now(timezone.utc).isoformat(), base_version, reason, changes,
+                    evidence, expected, explanation=explanation.to_json() if explanation is not None else {})
 
 
 @dataclass
@@ -217,6 +240,11 @@ class ProposalBook:
     def approved_changes(self) -> list[Change]:
         f = self.folder / "approved.json"
         return [Change(**c) for c in json.loads(f.read_text())] if f.is_file() else []
+
+
+def part_scale_ppm(changes: Iterable[Change]) -> float:
+    """The part's expansion the approved changes correct (ppm)."""
+    return float(sum(c.delta for c in changes if c.term == SCALE_TERM))
 
 
 def apply_changes(model: StationModel, changes: Iterable[Change], name_suffix: str = "") -> StationModel:

@@ -29,7 +29,9 @@ Two kinds of evidence (docs/monitor.md):
   alarm is raised when the chart signals and its smoothed mean z is beyond 2 (the
   difference beyond the combined expanded uncertainty: E_n > 1), or at once when any
   single ``|z| > z_single`` (a knocked datum shows as a large step at the first check
-  after it).
+  after it), or when the check's pooled statistic (mean z times the root of their
+  number) is beyond ``z_single`` (every hole a little off the same way: a drift the
+  chart, restarted at the last correction, has not yet smoothed in).
 
 Each chart's limit is set from the wanted in-control average run length by the
 Markov-chain computation of ``station.monitor.ewma``: the false-alarm rate is stated,
@@ -217,9 +219,14 @@ class StationWatch:
         # beyond the combined expanded uncertainty as well (ISO 13528's E_n > 1): a bias
         # the station's U covers is not "outside its stated U"
         signal = self.master.add(stat) and abs(self.master.z / root_n) > 2.0
-        if abs(worst) > self.z_single or signal:
-            why = (f"{worst_id} is {worst:+.1f} combined standard uncertainties from its certificate"
-                   if abs(worst) > self.z_single else f"the results drift from the certificate (EWMA {self.master.z:+.2f})")
+        if abs(worst) > self.z_single or abs(stat) > self.z_single or signal:
+            if abs(worst) > self.z_single:
+                why = f"{worst_id} is {worst:+.1f} combined standard uncertainties from its certificate"
+            elif abs(stat) > self.z_single:
+                why = (f"its {len(zs)} positions are {stat / root_n:+.1f} combined standard uncertainties from their "
+                       f"certificate on average (pooled {stat:+.1f})")
+            else:
+                why = f"the results drift from the certificate (EWMA {self.master.z:+.2f})"
             # the alarm is raised; the next check is judged afresh (a step put right is not a drift)
             self.master.restart()
             return self._raise("master", f"master check: {why}: the station is outside its stated U")
