@@ -119,12 +119,14 @@ class ScanSettings:
     #: quadrature. The model was measured once; the world has moved on since within
     #: that (docs/world.md); the monitors watch for more
     model_u_um: float = 0.35
-    #: standard uncertainty the station's own evidence adds at the detection point along
-    #: the bore (um): what its master checks show it has not corrected (a drift since
-    #: the last check, a scale its model has no term for). Set per inspection by the
-    #: session from the checks (station.monitor.evidence; docs/monitor.md); 0 when the
-    #: checks show nothing beyond the model's stated uncertainty
-    evidence_u_um: float = 0.0
+    #: what the station's own evidence shows it has not corrected at the detection point
+    #: along the bore (um, a bound): a drift since the last master check, a scale its
+    #: model has no term for. Known systematic errors left uncorrected are added to the
+    #: expanded uncertainty linearly, not in quadrature (the "SUMU" practice for an
+    #: uncorrected bias): U = 2 u + bound. Set per inspection by the session from the
+    #: checks (station.monitor.evidence; docs/monitor.md); 0 when they show nothing
+    #: beyond the model's stated uncertainty
+    evidence_bound_um: float = 0.0
     #: the part's expansion the master checks show (ppm): a hole's axial place from the
     #: part's datum face is reported at 20 degC, ``a (1 - ppm 1e-6)`` (ISO 1), the master
     #: (of the parts' material, at their temperature) standing in for a thermometer.
@@ -280,11 +282,10 @@ def combine(result: HoleResult, geo: CameraGeometry, settings: ScanSettings) -> 
     offset_mm = abs(np.mean([(cy - f.y_px) * geo.mm_per_px for f in result.frames]))
     u_vis_c = vision_u_px([f.y_u_px for f in result.frames], settings.vision_centre_u_px) * geo.mm_per_px
     u_vis_d = vision_u_px([f.diameter_u_px for f in result.frames], settings.vision_diameter_u_px) * geo.mm_per_px
-    u_ax = math.sqrt(s_ax**2 + (geo.scale_u_rel * offset_mm) ** 2 + (settings.model_u_um * 1e-3) ** 2
-                     + (settings.evidence_u_um * 1e-3) ** 2 + u_vis_c**2)
+    u_ax = math.sqrt(s_ax**2 + (geo.scale_u_rel * offset_mm) ** 2 + (settings.model_u_um * 1e-3) ** 2 + u_vis_c**2)
     u_dia = math.sqrt(s_dia**2 + (geo.scale_u_rel * float(dia.mean())) ** 2 + u_vis_d**2)
     result.position_mm = float(ax.mean()) * (1.0 - settings.part_scale_ppm * 1e-6)
-    result.position_u_mm = 2.0 * u_ax
+    result.position_u_mm = 2.0 * u_ax + settings.evidence_bound_um * 1e-3
     result.diameter_mm = float(dia.mean())
     result.diameter_u_mm = 2.0 * u_dia
     result.angle_deg = float(np.mean([f.angle_deg for f in result.frames]))

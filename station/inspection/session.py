@@ -110,12 +110,13 @@ class Session:
         world's physics runs on)."""
         return time.monotonic() * float(self.station.time_scale or 1.0)
 
-    def evidence_u_um(self, positions_mm: list[float]) -> float:
-        """The standard uncertainty (um) the master checks add for a part whose holes
-        are at ``positions_mm``: while they show a drift, the error they showed at the
-        last check and not corrected plus the drift since; a scale the model has no term
-        for, over the holes' distance from where the checks pin the datum. Each is taken
-        as a bound at k = 2."""
+    def evidence_bound_um(self, positions_mm: list[float]) -> float:
+        """What the master checks show the station has not corrected (um, a bound added
+        to the expanded U) for a part whose holes are at ``positions_mm``: while they
+        show a drift, the error they showed at the last check and not corrected plus the
+        drift since; a scale seen and not corrected (or the one corrected, at twice its
+        standard uncertainty), over the holes' distance from where the checks pin the
+        datum."""
         ex = self.explanation
         if ex is None or not self.history:
             return 0.0
@@ -131,8 +132,8 @@ class Session:
             # over the holes' distance from where the checks pin the datum
             ref = sum(last.position_mm.values()) / len(last.position_mm)
             s_ppm = math.hypot(scale or 0.0, 2.0 * ex.scale_u_ppm)
-            bound_um = math.hypot(bound_um, s_ppm * 1e-3 * max(abs(a - ref) for a in positions_mm))
-        return bound_um / 2.0
+            bound_um += s_ppm * 1e-3 * max(abs(a - ref) for a in positions_mm)
+        return bound_um
 
     def uncorrected_scale(self) -> float | None:
         """The part expansion (ppm) the checks show beyond 3 u and the present settings do
@@ -205,8 +206,8 @@ class Session:
         master checks show uncorrected (production). A check on the master itself is
         judged on the station's own U, or a drift it has to catch would hide in it."""
         st = self.station
-        extra = self.evidence_u_um([h.position.nominal for h in part.holes]) if evidence else 0.0
-        settings = replace(self.settings, evidence_u_um=extra)
+        extra = self.evidence_bound_um([h.position.nominal for h in part.holes]) if evidence else 0.0
+        settings = replace(self.settings, evidence_bound_um=extra)
         geo = CameraGeometry(st.mm_per_px, st.frame_size_px[0], st.frame_size_px[1], part.bore.diameter_mm / 2.0)
         trace = {"config_hash": st.config_hash, "mode": st.mode}
         if st.twins is not None:

@@ -83,3 +83,26 @@ def test_campaign_cli_prints_one_json_object_and_refuses_nonsense(tmp_path):
     bad = subprocess.run([sys.executable, "-m", "station.cli", "campaign", "--parts", "0"],
                          capture_output=True, text=True, timeout=60, cwd=tmp_path)
     assert bad.returncode == 2 and "at least one part" in bad.stderr
+
+
+def test_a_warming_shop_is_caught_named_a_drift_and_the_station_stays_within_its_u(tmp_path):
+    # the air steps 8 K warmer 30 s after power-on: the part (23 ppm/K, 10 min lag), the
+    # frame and the grating follow, each at its pace; no sensor of the station reads a
+    # temperature, only the master (of the parts' material) shows it
+    warm = scenario(tmp_path, "warm", "").read_text().replace("start_c = 20.0\nstep_c = 0.0",
+                                                                "start_c = 20.0\nstep_c = 8.0\nat_s = 30.0", 1)
+    (tmp_path / "warm.toml").write_text(warm)
+    res = run_campaign(tmp_path / "warm.toml", parts=30, master_every=3, data=tmp_path / "var", time_scale=4.0,
+                       auto_approve=True)
+    rows = res["inspections"]
+    assert all(r["state"] == "complete" for r in rows), [r["reason"] for r in rows]
+    first_over = next(r["index"] for r in rows if r["worst_error_um"] > r["u_um"])
+    assert res["alarms"] and 0 <= res["alarms"][0]["index"] - first_over <= 10, (first_over, res["alarms"])
+    # the checks read together name a drift (not a knock), and the loop corrects it
+    kinds = [p["kind"] for p in res["proposals"]]
+    assert "drift" in kinds and "step" not in kinds, res["proposals"]
+    assert len(res["models"]) >= 3
+    # after the loop: the last 10 within 3 um of the truth and within their stated U
+    last = rows[-10:]
+    assert all(r["worst_error_um"] <= 3.0 and r["worst_error_um"] <= r["u_um"] for r in last), \
+        [(r["index"], r["worst_error_um"], r["u_um"]) for r in last]
