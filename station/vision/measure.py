@@ -215,7 +215,12 @@ def _fine(image: np.ndarray, cx: float, cy: float, r_min: float, r_max: float, n
     pad = r_max + KERNEL_RADIUS_PX + 3
     x0, x1 = max(int(np.floor(cx - pad)), 0), min(int(np.ceil(cx + pad)) + 1, w)
     y0, y1 = max(int(np.floor(cy - pad)), 0), min(int(np.ceil(cy + pad)) + 1, h)
-    gx, gy = gradient(image[y0:y1, x0:x1])
+    if x1 - x0 < 2 * KERNEL_RADIUS_PX + 3 or y1 - y0 < 2 * KERNEL_RADIUS_PX + 3:
+        # a centre (a refinement that ran off) so far past the border that no ray fits
+        # in the frame: no edges, the hole cut by the border (and rejected as such)
+        gx = gy = np.zeros((max(y1 - y0, 0), max(x1 - x0, 0)), np.float32)
+    else:
+        gx, gy = gradient(image[y0:y1, x0:x1])
     return ray_edges(gx, gy, (x0, y0), (h, w), (cx, cy), r_min, r_max, n_rays, step_px)
 
 

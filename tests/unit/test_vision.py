@@ -438,3 +438,19 @@ def test_warm_up_measures_its_synthetic_hole():
     from station.vision.measure import warm_up
 
     assert warm_up() == 1
+
+
+def test_a_centre_that_ran_off_the_frame_gives_no_edges_not_an_opencv_error():
+    # a refinement that diverged far past the border left an empty region of interest,
+    # and OpenCV refused it ("!_src.empty()"): the inspection faulted instead of the
+    # candidate being rejected as cut by the border
+    from station.vision.measure import _fine
+
+    image = np.full((256, 320), 120, np.uint8)
+    for cx, cy in ((-500.0, 100.0), (100.0, 900.0), (1e4, -1e4)):
+        edges = _fine(image, cx, cy, 20.0, 40.0, 72)
+        assert edges.points.shape == (0, 2) and edges.cut_by_border
+    # one just inside still reads its edges
+    yy, xx = np.mgrid[0:256, 0:320]
+    image[(xx - 160) ** 2 + (yy - 128) ** 2 < 30**2] = 20
+    assert len(_fine(image, 160.0, 128.0, 20.0, 40.0, 72).points) > 60
