@@ -180,6 +180,8 @@ class ServoAxisPhysics:
             if self._homing:
                 self._homing = False
                 self._homed = True
+                # the count is set at the mark (a rotary table's mark repeats every turn)
+                self._rest = self._target = float(self.config.home_position)
 
     def _motor_at(self, t: float) -> float:
         if self._stuck_at is not None:
@@ -288,13 +290,19 @@ class ServoAxisPhysics:
             self._target = self._rest
 
     def home(self) -> bool:
-        """Move to the reference mark at the homing velocity; HOMED is set when it arrives."""
+        """Move to the reference mark at the homing velocity; HOMED is set when it arrives.
+        A rotary table's encoder has a mark every turn: it homes to the nearest one and
+        its count is set to ``home_position`` there, as a drive's homing sets its actual
+        position (a table wound up many turns by an endless scan does not unwind them)."""
         with self._lock:
             t = self.now()
             self._advance(t)
             if not self._enabled or self._fault_code:
                 return False
-            self._start(self.config.home_position, self.config.homing_velocity, 0.0, t)
+            mark = self.config.home_position
+            if self.config.kind == "rotary":
+                mark += 360.0 * round((self._motor_at(t) - mark) / 360.0)
+            self._start(mark, self.config.homing_velocity, 0.0, t)
             self._homing = True
             return True
 

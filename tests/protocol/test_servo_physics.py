@@ -160,3 +160,25 @@ def test_offset_from_an_error_curve_converts_um_to_mm_and_uses_direction():
     p.start_move(40.0, 10.0, 1000.0)
     clock.t += 10.0
     assert p.carriage_position() == pytest.approx(40.0 + 0.004 - 0.002)
+
+
+def test_a_wound_up_rotary_table_homes_to_the_nearest_mark_and_its_count_is_set_there():
+    # an endless scan wound the table up 20 turns and a bit: homing does not unwind them
+    p, clock = _physics(kind="rotary", initial_position=7200.0 + 3.0, homing_velocity=30.0)
+    p.enable(True)
+    p.home()
+    clock.t += 1.0  # 3 deg at 30 deg/s (and its ramps): not 7203 deg (240 s)
+    s = p.snapshot()
+    assert s.homed and s.in_position and s.motor_position == 0.0
+    # from just below a mark it goes up to it
+    p2, clock2 = _physics(kind="rotary", initial_position=-718.0, homing_velocity=30.0)
+    p2.enable(True)
+    p2.home()
+    clock2.t += 1.0
+    assert p2.snapshot().homed and p2.snapshot().motor_position == 0.0
+    # a linear axis has one mark
+    p3, clock3 = _physics(initial_position=361.0, homing_velocity=30.0)
+    p3.enable(True)
+    p3.home()
+    clock3.t += 1.0
+    assert not p3.snapshot().homed
