@@ -89,6 +89,12 @@ class Devices:
         raise ValueError(f"unknown axis {name!r}")
 
 
+#: a rotary table wound this far is re-referenced before the next inspection (its drive's
+#: 32-bit count holds about 596 turns at 0.0001 deg per count; homing to the nearest of
+#: its once-per-turn marks costs at most half a turn)
+C_WIND_LIMIT_DEG = 100 * 360.0
+
+
 @dataclass
 class Timeouts:
     #: a move whose profile is known gets twice its trapezoid plus ``move_margin_s``
@@ -421,6 +427,10 @@ class Engine:
                 return f"{name} is not enabled"
             if not st.homed:
                 return f"{name} is not referenced"
+            if ax is self.devices.c and abs(st.position) > C_WIND_LIMIT_DEG:
+                # an endless table turns on from part to part; its drive counts in 32 bits
+                # (596 turns at 0.0001 deg): homed at its nearest mark, the count starts again
+                return f"{name} has wound {abs(st.position) / 360.0:.0f} turns"
         return None
 
     async def _with_retries(self, call: Callable[[], Awaitable[Any]], what: str) -> Any:

@@ -228,3 +228,18 @@ def test_a_plan_that_raises_between_messages_faults_the_engine_instead_of_leavin
     ended, state, stops, out = asyncio.run(go())
     assert ended.outcome == "faulted" and "did not converge" in ended.reason
     assert state == State.FAULTED and stops == 1 and out == "done"
+
+
+def test_a_table_wound_up_by_many_parts_is_a_problem_to_re_reference_before_the_next():
+    from station.sequencer.engine import C_WIND_LIMIT_DEG
+
+    async def go():
+        eng, z, c, _ = make_engine()
+        await eng.home()
+        c.position = C_WIND_LIMIT_DEG - 1.0
+        ok = await eng.axes_problem()
+        c.position = C_WIND_LIMIT_DEG + 360.0
+        return ok, await eng.axes_problem()
+
+    ok, wound = asyncio.run(go())
+    assert ok is None and wound == "C has wound 101 turns"
