@@ -19,9 +19,9 @@ clock, in simulation the drives' scaled clock, the one the world's physics runs 
 Along with the kind: the present value of the error per hole (from the fit, less noisy
 than the last check alone), the drift rate with its standard uncertainty, and the
 scale the holes show against their distance from the datum face (a part expanding
-from its face reads long in proportion; the model has no term for a part's
-temperature, so the scale is reported and covered by the stated uncertainty, not
-corrected).
+from its face reads long in proportion: the session proposes it as the part's
+expansion, ``part.scale_ppm``, the master of the parts' material standing in for a
+thermometer, and covers it in the stated uncertainty until then).
 """
 
 from __future__ import annotations
