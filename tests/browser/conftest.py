@@ -14,6 +14,7 @@ from __future__ import annotations
 import contextlib
 import os
 import re
+import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterator
@@ -128,3 +129,32 @@ def screenshot(page, name: str) -> Path:
     print(f"screenshot: {path}")
     return path
 
+
+
+#: a world whose calibration block was knocked 8 um along the bore at power-on
+KNOCK = '\n[world.collision]\nat_s = 0.0\nbody = "J"\nshift = { z_um = 8.0 }\n'
+
+
+@pytest.fixture(scope="module")
+def knocked_station(tmp_path_factory) -> Station:
+    """A served station on the default scenario with a knocked datum (one per module)."""
+    data = tmp_path_factory.mktemp("panel-knocked")
+    scenario = data / "knocked.toml"
+    scenario.write_text((Path(__file__).resolve().parents[2] / "sim" / "scenarios" / "default.toml").read_text()
+                        + KNOCK)
+    with serve_station(data, ["--scenario", str(scenario)]) as st:
+        yield st
+
+
+def check_master_over_rest(station: Station) -> dict:
+    """A check on the master as the operator's REST client starts it, polled to its end."""
+    with station.client("operator") as client:
+        r = client.post("/api/v1/checks", json={"kind": "master"})
+        assert r.status_code == 202, r.text
+        deadline = time.monotonic() + INSPECTION_TIMEOUT_MS / 1000
+        while True:
+            body = client.get(f"/api/v1/checks/{r.json()['id']}").json()
+            if body["state"] != "running":
+                return body
+            assert time.monotonic() < deadline, "the check did not end"
+            time.sleep(0.2)

@@ -12,39 +12,10 @@ control again.
 from __future__ import annotations
 
 import re
-import time
-from pathlib import Path
 
-import pytest
 from playwright.sync_api import expect
 
-from tests.browser.conftest import INSPECTION_TIMEOUT_MS, login, open_page, screenshot, serve_station
-
-REPO = Path(__file__).resolve().parents[2]
-KNOCK = '\n[world.collision]\nat_s = 0.0\nbody = "J"\nshift = { z_um = 8.0 }\n'
-
-
-@pytest.fixture(scope="module")
-def knocked_station(tmp_path_factory):
-    data = tmp_path_factory.mktemp("panel-knocked")
-    scenario = data / "knocked.toml"
-    scenario.write_text((REPO / "sim" / "scenarios" / "default.toml").read_text() + KNOCK)
-    with serve_station(data, ["--scenario", str(scenario)]) as st:
-        yield st
-
-
-def _check_over_rest(station) -> dict:
-    """A check on the master as the operator's REST client starts it, polled to its end."""
-    with station.client("operator") as c:
-        r = c.post("/api/v1/checks", json={"kind": "master"})
-        assert r.status_code == 202, r.text
-        deadline = time.monotonic() + INSPECTION_TIMEOUT_MS / 1000
-        while True:
-            body = c.get(f"/api/v1/checks/{r.json()['id']}").json()
-            if body["state"] != "running":
-                return body
-            assert time.monotonic() < deadline, "the check did not end"
-            time.sleep(0.2)
+from tests.browser.conftest import INSPECTION_TIMEOUT_MS, check_master_over_rest, login, open_page, screenshot
 
 
 def test_the_banner_asks_for_a_check_and_the_engineer_approves_the_proposal(browser, knocked_station):
@@ -56,7 +27,7 @@ def test_the_banner_asks_for_a_check_and_the_engineer_approves_the_proposal(brow
         expect(eng.locator("#tab-proposals")).to_be_visible()
 
         # a check out of control (the knock): the banner appears on its own (SSE)
-        check = _check_over_rest(st)
+        check = check_master_over_rest(st)
         assert check["in_control"] is False and check["proposal_id"], check
         expect(banner).to_be_visible()
         expect(eng.locator("#check-text")).to_have_text(re.compile(r"^Station needs a check: master check"))

@@ -10,42 +10,15 @@ station proposes the block's installation error, with the checks it rests on dra
 from __future__ import annotations
 
 import re
-import time
 import uuid
 from datetime import datetime, timezone
-from pathlib import Path
 
-import pytest
 from playwright.sync_api import expect
 
-from tests.browser.conftest import INSPECTION_TIMEOUT_MS, login, open_page, screenshot, serve_station
+from tests.browser.conftest import check_master_over_rest, login, open_page, screenshot
 
-REPO = Path(__file__).resolve().parents[2]
-KNOCK = '\n[world.collision]\nat_s = 0.0\nbody = "J"\nshift = { z_um = 8.0 }\n'
 #: an <img> that loaded a picture: complete, and decoded to a size
 LOADED = "img => img.complete && img.naturalWidth > 0 && img.naturalHeight > 0"
-
-
-@pytest.fixture(scope="module")
-def knocked_station(tmp_path_factory):
-    data = tmp_path_factory.mktemp("panel-plots")
-    scenario = data / "knocked.toml"
-    scenario.write_text((REPO / "sim" / "scenarios" / "default.toml").read_text() + KNOCK)
-    with serve_station(data, ["--scenario", str(scenario)]) as st:
-        yield st
-
-
-def _check_over_rest(station) -> dict:
-    with station.client("operator") as c:
-        r = c.post("/api/v1/checks", json={"kind": "master"})
-        assert r.status_code == 202, r.text
-        deadline = time.monotonic() + INSPECTION_TIMEOUT_MS / 1000
-        while True:
-            body = c.get(f"/api/v1/checks/{r.json()['id']}").json()
-            if body["state"] != "running":
-                return body
-            assert time.monotonic() < deadline, "the check did not end"
-            time.sleep(0.2)
 
 
 def _wait_loaded(page, img) -> dict:
@@ -59,7 +32,7 @@ def test_the_proposals_page_shows_the_proposals_picture(browser, knocked_station
     from station.monitor.proposals import Change, Proposal, ProposalBook
 
     st = knocked_station
-    check = _check_over_rest(st)
+    check = check_master_over_rest(st)
     assert check["in_control"] is False and check["proposal_id"], check
     pid = check["proposal_id"]
     with st.client("engineer") as c:
