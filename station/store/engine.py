@@ -31,6 +31,10 @@ DEFAULT_DB_NAME = "station.db"
 DEFAULT_BUSY_TIMEOUT_S = 5.0
 #: execution option that marks a connection as used for writing
 WRITE_OPTION = "station_store_write"
+#: PostgreSQL advisory-lock class of the store's locks (an arbitrary 32-bit number,
+#: "STOR"); the second key names what is locked: the schema's migration, or a station
+ADVISORY_LOCK_CLASS = 0x53544F52
+MIGRATION_LOCK_KEY = 0
 
 
 def default_url(data_dir: str | Path) -> str:
@@ -54,10 +58,45 @@ def make_engine(url: str, *, busy_timeout_s: float = DEFAULT_BUSY_TIMEOUT_S) -> 
     """An engine for the URL; for a SQLite file its folder is created."""
     if (f := sqlite_file(url)) is not None:
         f.parent.mkdir(parents=True, exist_ok=True)
-    engine = create_engine(url, future=True)
+    kw = {}
+    if make_url(url).get_backend_name() == "postgresql":
+        kw = postgresql_options(busy_timeout_s)
+    engine = create_engine(url, future=True, **kw)
     if engine.dialect.name == "sqlite":
         _configure_sqlite(engine, busy_timeout_s)
     return engine
+
+
+#: PostgreSQL: longest wait for the server to accept a connection (s)
+PG_CONNECT_TIMEOUT_S = 10
+#: PostgreSQL: longest any one statement may run (ms); the store's statements are
+#: small (one inspection, one page of a list), so a minute means something is wrong
+PG_STATEMENT_TIMEOUT_MS = 60_000
+
+
+def postgresql_options(busy_timeout_s: float) -> dict:
+    """Engine options for PostgreSQL (psycopg 3), the counterparts of the SQLite pragmas:
+
+    * ``synchronous_commit=on`` per connection, whatever the server's default: a commit
+      is on the server's disk (and a synchronous standby's, if any) before it returns,
+      which is the store's "committed before reported".
+    * ``lock_timeout`` = the busy timeout: a write waiting for a row or table lock
+      fails after that long (a :class:`StoreUnavailable` naming the lock), as SQLite's
+      ``busy_timeout``; ``statement_timeout`` bounds everything else.
+    * ``connect_timeout`` and TCP keepalives: a server that is gone, or a network that
+      dropped the connection, is found in seconds, not after the kernel's two hours.
+    * ``pool_pre_ping``: a connection the server closed (a restart, a failover) is
+      replaced before use instead of failing the station's next write.
+    """
+    lock_ms = max(1, int(round(busy_timeout_s * 1000)))
+    options = (f"-c synchronous_commit=on -c lock_timeout={lock_ms} "
+               f"-c statement_timeout={PG_STATEMENT_TIMEOUT_MS} -c idle_in_transaction_session_timeout=300000")
+    return {
+        "pool_pre_ping": True,
+        "connect_args": {"connect_timeout": PG_CONNECT_TIMEOUT_S, "options": options, "keepalives": 1,
+                         "keepalives_idle": 30, "keepalives_interval": 10, "keepalives_count": 3,
+                         "application_name": "bore-station"},
+    }
 
 
 def _configure_sqlite(engine: Engine, busy_timeout_s: float) -> None:

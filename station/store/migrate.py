@@ -15,7 +15,7 @@ from alembic.runtime.migration import MigrationContext
 from alembic.script import ScriptDirectory
 from sqlalchemy import Connection, Engine
 
-from station.store.engine import WRITE_OPTION, make_engine
+from station.store.engine import ADVISORY_LOCK_CLASS, MIGRATION_LOCK_KEY, WRITE_OPTION, make_engine
 
 MIGRATIONS_DIR = Path(__file__).resolve().parent / "migrations"
 
@@ -39,10 +39,15 @@ def current_revision(connection: Connection) -> str | None:
 
 
 def upgrade_engine(engine: Engine) -> None:
-    """Bring the engine's database to the newest revision, in one write transaction
-    (on SQLite the write lock is taken first, so two processes opening a fresh store at
-    once migrate one after the other; the second finds nothing to do)."""
+    """Bring the engine's database to the newest revision, in one write transaction.
+
+    Several stations may start at once on one database: the migration runs once. On
+    SQLite the write lock is taken at BEGIN; on PostgreSQL a transaction-level
+    advisory lock is taken before Alembic reads the current revision (and released by
+    the commit). Either way the second process waits, then finds nothing to do."""
     with engine.connect().execution_options(**{WRITE_OPTION: True}) as conn:
+        if conn.dialect.name == "postgresql":
+            conn.exec_driver_sql(f"SELECT pg_advisory_xact_lock({ADVISORY_LOCK_CLASS}, {MIGRATION_LOCK_KEY})")
         cfg = alembic_config()
         cfg.attributes["connection"] = conn
         command.upgrade(cfg, "head")

@@ -103,6 +103,9 @@ class Inspection(Base):
     __tablename__ = "inspection"
 
     id: Mapped[str] = mapped_column(String(ID_LEN), primary_key=True)
+    #: the station that made it (its config's ``station_id``); None for records written
+    #: before stations had ids (migration 0004)
+    station_id: Mapped[str | None] = mapped_column(String(NAME_LEN))
     part_number: Mapped[str] = mapped_column(String(NAME_LEN))
     serial: Mapped[str | None] = mapped_column(String(NAME_LEN))
     order_id: Mapped[str | None] = mapped_column(String(NAME_LEN))
@@ -135,6 +138,7 @@ class Inspection(Base):
         # a running inspection has no end; a finished one has
         CheckConstraint("(state = 'running') = (finished_at IS NULL)", name="finished_iff_not_running"),
         Index(None, "started_at"),
+        Index(None, "station_id", "started_at"),
         Index(None, "part_number", "started_at"),
         Index(None, "serial"),
         Index(None, "state"),
@@ -229,11 +233,13 @@ class Event(Base):
     id: Mapped[int] = mapped_column(Integer, primary_key=True, autoincrement=True)
     #: None for station-wide events (an alarm between inspections)
     inspection_id: Mapped[str | None] = mapped_column(ForeignKey("inspection.id"))
+    #: the station that logged it (None: before migration 0004)
+    station_id: Mapped[str | None] = mapped_column(String(NAME_LEN))
     at: Mapped[datetime] = mapped_column(UTCDateTime())
     kind: Mapped[str] = mapped_column(String(32))
     message: Mapped[str] = mapped_column(Text)
 
-    __table_args__ = (Index(None, "inspection_id"), Index(None, "at"))
+    __table_args__ = (Index(None, "inspection_id"), Index(None, "at"), Index(None, "station_id"))
 
 
 #: API token roles (docs/api.md): mes starts job orders, operator commands the
@@ -258,8 +264,15 @@ class ApiToken(Base):
     created_at: Mapped[datetime] = mapped_column(UTCDateTime())
     #: set when the token is revoked; a revoked token is refused, its row kept for the audit
     revoked_at: Mapped[datetime | None] = mapped_column(UTCDateTime())
+    #: when the token stops working (None: never); a rotation sets it to the end of the
+    #: grace, and only ever earlier than it was (migration 0005)
+    expires_at: Mapped[datetime | None] = mapped_column(UTCDateTime())
+    #: the token that replaced this one by a rotation (None: not rotated); a rotated
+    #: token cannot be rotated again, and it always has an end
+    replaced_by: Mapped[int | None] = mapped_column(ForeignKey("api_token.id"))
 
     __table_args__ = (
         UniqueConstraint("prefix"),
         CheckConstraint(_in("role", TOKEN_ROLES), name="role"),
+        CheckConstraint("replaced_by IS NULL OR expires_at IS NOT NULL", name="replaced_token_expires"),
     )

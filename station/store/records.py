@@ -189,10 +189,12 @@ class InspectionSummary:
     #: machine time of the inspection (s) and how it divides; None when unknown
     machine_s: float | None = None
     cycle: Mapping[str, Any] | None = None
+    #: the station that made it; None for records older than station ids
+    station_id: str | None = None
 
     def to_json(self) -> dict[str, Any]:
         return {
-            "id": self.id, "part_number": self.part_number, "serial": self.serial, "order_id": self.order_id,
+            "id": self.id, "station_id": self.station_id, "part_number": self.part_number, "serial": self.serial, "order_id": self.order_id,
             "state": self.state, "result": self.result, "reason": self.reason,
             "started_at": _iso(self.started_at), "finished_at": _iso(self.finished_at),
             "traceability": dict(self.traceability), "idempotency_key": self.idempotency_key,
@@ -231,6 +233,8 @@ class EventRecord:
     at: datetime
     kind: str
     message: str
+    #: the station that logged it; None for events older than station ids
+    station_id: str | None = None
 
     def to_json(self) -> dict[str, Any]:
         return {**asdict(self), "at": _iso(self.at)}

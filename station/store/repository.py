@@ -27,8 +27,10 @@ import fcntl
 import json
 import math
 import os
+import re
 import threading
 import uuid
+import zlib
 from contextlib import contextmanager
 from dataclasses import asdict
 from datetime import datetime
@@ -36,14 +38,22 @@ from pathlib import Path
 from typing import Any, Iterable, Iterator, Mapping
 
 from sqlalchemy import event as sa_event
-from sqlalchemy import func, select
+from sqlalchemy import Connection, func, or_, select
 from sqlalchemy.engine import make_url
 from alembic.util.exc import CommandError
 from sqlalchemy.exc import DBAPIError, IntegrityError, OperationalError, SQLAlchemyError
 from sqlalchemy.orm import Session, selectinload, sessionmaker
 
 from station.store import images as img
-from station.store.engine import DEFAULT_BUSY_TIMEOUT_S, WRITE_OPTION, default_url, make_engine, sqlite_file
+from station.store.engine import (
+    ADVISORY_LOCK_CLASS,
+    DEFAULT_BUSY_TIMEOUT_S,
+    MIGRATION_LOCK_KEY,
+    WRITE_OPTION,
+    default_url,
+    make_engine,
+    sqlite_file,
+)
 from station.store.errors import (
     DuplicateIdempotencyKey,
     InspectionNotFound,
@@ -124,7 +134,12 @@ class Store:
     """
 
     def __init__(self, url: str | None = None, *, data_dir: str | Path = DEFAULT_DATA_DIR,
-                 busy_timeout_s: float = DEFAULT_BUSY_TIMEOUT_S, migrate: bool = True):
+                 busy_timeout_s: float = DEFAULT_BUSY_TIMEOUT_S, migrate: bool = True,
+                 station_id: str | None = None):
+        check_station_id(station_id)
+        #: stamped on every inspection and event this store writes (docs/plant.md);
+        #: None for readers and for a single station that has none
+        self.station_id = station_id
         self.data_dir = Path(data_dir).resolve()
         self.url = url or default_url(self.data_dir)
         self.busy_timeout_s = busy_timeout_s
@@ -133,6 +148,7 @@ class Store:
         self._write_sessions = sessionmaker(self.engine.execution_options(**{WRITE_OPTION: True}),
                                             class_=_StoreSession, expire_on_commit=False)
         self._lock_fd: int | None = None
+        self._owner_conn: Connection | None = None
         #: incremented after every committed change to an inspection's record (begin,
         #: characteristics, images, finish, recovery; not the event log). A reader that
         #: noted it before a read knows the record it read is current while it is
@@ -151,14 +167,16 @@ class Store:
 
     @classmethod
     def open(cls, url: str | None = None, *, data_dir: str | Path = DEFAULT_DATA_DIR,
-             busy_timeout_s: float = DEFAULT_BUSY_TIMEOUT_S) -> Store:
+             busy_timeout_s: float = DEFAULT_BUSY_TIMEOUT_S, station_id: str | None = None) -> Store:
         """The station's store: migrated, owned by this process, recovered.
 
-        Raises :class:`StoreLocked` when another process owns the data folder.
+        Raises :class:`StoreLocked` when another process owns the data folder, or (on a
+        shared server database) when another live process holds the same station id.
         """
-        store = cls(url, data_dir=data_dir, busy_timeout_s=busy_timeout_s)
+        store = cls(url, data_dir=data_dir, busy_timeout_s=busy_timeout_s, station_id=station_id)
         try:
             store._acquire_owner_lock()
+            store._acquire_station_lock()
             store.recover_interrupted()
         except BaseException:
             store.close()
@@ -166,7 +184,13 @@ class Store:
         return store
 
     def close(self) -> None:
-        """Release the owner lock and the connections (idempotent)."""
+        """Release the owner locks and the connections (idempotent)."""
+        if self._owner_conn is not None:
+            try:
+                self._owner_conn.close()  # ends the session: the server drops its advisory lock
+            except SQLAlchemyError:
+                pass  # the server is gone, and the lock with it
+            self._owner_conn = None
         self.engine.dispose()
         if self._lock_fd is not None:
             os.close(self._lock_fd)  # closing the descriptor releases the flock
@@ -192,6 +216,32 @@ class Store:
         os.write(fd, f"{os.getpid()}\n".encode())  # for a person wondering who holds it
         self._lock_fd = fd
 
+    def _acquire_station_lock(self) -> None:
+        """On a server database shared by several stations (PostgreSQL), the right to
+        recover a station's interrupted inspections belongs to the one live process with
+        that station id: a session-level advisory lock keyed by the id, held on a
+        connection of its own for the store's life. The server drops it when that
+        session ends, however the process ended (SIGKILL, power cut: the connection
+        closes). On SQLite the data folder's file lock is the owner lock."""
+        if self.engine.dialect.name != "postgresql":
+            return
+        key = station_lock_key(self.station_id)
+        conn = None
+        try:
+            conn = self.engine.connect()
+            got = conn.exec_driver_sql(f"SELECT pg_try_advisory_lock({ADVISORY_LOCK_CLASS}, {key})").scalar()
+            conn.commit()
+        except (OperationalError, DBAPIError) as exc:
+            if conn is not None:
+                conn.close()
+            raise StoreUnavailable(self._explain(exc, "take the station's lock")) from exc
+        if not got:
+            conn.close()
+            raise StoreLocked(f"results store {self._where()}: another live station process has station id "
+                              f"{self.station_id!r}; every station on a shared database needs its own id "
+                              "(station_id in its config, or serve --station-id)")
+        self._owner_conn = conn
+
     # -- transactions and errors --------------------------------------------------------------
 
     def _where(self) -> str:
@@ -201,15 +251,18 @@ class Store:
     def _explain(self, exc: DBAPIError, what: str) -> str:
         text = str(exc.orig) if exc.orig is not None else str(exc)
         low = text.lower()
-        if "locked" in low or "busy" in low:
+        if "locked" in low or "busy" in low or "lock timeout" in low:
             why = (f"the database is locked by another process (waited {self.busy_timeout_s:g} s); "
                    "is a long report or a second station running?")
         elif "full" in low or "no space" in low:
             why = "the disk holding the database is full (free space, then retry)"
         elif "readonly" in low or "read-only" in low:
-            why = "the database is read-only (check the file's permissions)"
+            why = ("the database is read-only (check the file's permissions; on a server, that this is "
+                   "the primary and not a standby)")
         elif "unable to open" in low:
             why = "the database file cannot be opened (check the folder exists and is writable)"
+        elif "connection" in low and ("refused" in low or "timeout" in low or "closed" in low or "failed" in low):
+            why = f"the database server does not answer ({text.strip().splitlines()[0]}); is it running and reachable?"
         else:
             why = text
         return f"results store {self._where()}: cannot {what}: {why}"
@@ -283,12 +336,12 @@ class Store:
         try:
             with self._transaction("begin an inspection") as s:
                 s.add(Inspection(
-                    id=inspection_id, part_number=part_number, serial=serial, order_id=order_id,
+                    id=inspection_id, station_id=self.station_id, part_number=part_number, serial=serial, order_id=order_id,
                     state="running", result=None, reason=None, started_at=started_at or utcnow(),
                     finished_at=None, traceability=trace, idempotency_key=idempotency_key,
                 ))
                 s.flush()  # the inspection row first: the event refers to it
-                s.add(Event(inspection_id=inspection_id, at=utcnow(), kind="state",
+                s.add(Event(inspection_id=inspection_id, station_id=self.station_id, at=utcnow(), kind="state",
                             message=f"running: part {part_number}" + (f", serial {serial}" if serial else "")))
             self._bump_records()
         except StoreIntegrityError:
@@ -409,23 +462,29 @@ class Store:
                     raise ValueError(f"inspection {inspection_id}: a pass needs characteristics that all passed "
                                      f"({n_all} recorded, {n_failed} failed)")
             insp.state, insp.result, insp.reason, insp.finished_at = state, result, reason, utcnow()
-            s.add(Event(inspection_id=inspection_id, at=utcnow(), kind="state",
+            s.add(Event(inspection_id=inspection_id, station_id=self.station_id, at=utcnow(), kind="state",
                         message=f"{state}" + (f": {result}" if result else "") + (f" ({reason})" if reason else "")))
         self._bump_records()
         return self.get(inspection_id)
 
     def recover_interrupted(self, reason: str | None = None) -> list[str]:
-        """Mark every ``running`` inspection ``interrupted`` (with a reason and an event)
-        and return their ids. Call only from the process that owns the store
-        (:meth:`open` does): a running inspection of a live process would be cut off."""
+        """Mark every ``running`` inspection of this station ``interrupted`` (with a
+        reason and an event) and return their ids. Call only from the process that owns
+        the store (:meth:`open` does): a running inspection of a live process would be
+        cut off. With a station id, only that station's inspections (and those older
+        than station ids) are this process's to recover; without one, all are."""
         reason = reason or (f"the station process stopped before the inspection finished "
                             f"(found running when process {os.getpid()} opened the store)")
         with self._transaction("recover interrupted inspections") as s:
-            stale = s.scalars(select(Inspection).where(Inspection.state == "running").with_for_update()).all()
+            q = select(Inspection).where(Inspection.state == "running")
+            if self.station_id is not None:
+                q = q.where(or_(Inspection.station_id == self.station_id, Inspection.station_id.is_(None)))
+            stale = s.scalars(q.with_for_update()).all()
             now = utcnow()
             for insp in stale:
                 insp.state, insp.result, insp.reason, insp.finished_at = "interrupted", None, reason, now
-                s.add(Event(inspection_id=insp.id, at=now, kind="state", message=f"interrupted: {reason}"))
+                s.add(Event(inspection_id=insp.id, station_id=self.station_id, at=now, kind="state",
+                            message=f"interrupted: {reason}"))
             ids = [i.id for i in stale]
         self._bump_records()
         return ids
@@ -438,7 +497,8 @@ class Store:
         with self._transaction("log an event") as s:
             if inspection_id is not None and s.get(Inspection, inspection_id) is None:
                 raise InspectionNotFound(f"no inspection {inspection_id!r}")
-            ev = Event(inspection_id=inspection_id, at=utcnow(), kind=kind, message=message)
+            ev = Event(inspection_id=inspection_id, station_id=self.station_id, at=utcnow(), kind=kind,
+                       message=message)
             s.add(ev)
             s.flush()
             return _event_record(ev)
@@ -468,7 +528,7 @@ class Store:
             return s.scalar(select(Inspection.id).where(Inspection.idempotency_key == key))
 
     @staticmethod
-    def _filters(since, until, part_number, serial, result, state) -> list:
+    def _filters(since, until, part_number, serial, result, state, station=None) -> list:
         _aware("since", since)
         _aware("until", until)
         if result is not None and result not in RESULTS:
@@ -481,19 +541,22 @@ class Store:
         if until is not None:
             conds.append(Inspection.started_at < until)
         for column, value in ((Inspection.part_number, part_number), (Inspection.serial, serial),
-                              (Inspection.result, result), (Inspection.state, state)):
+                              (Inspection.result, result), (Inspection.state, state),
+                              (Inspection.station_id, station)):
             if value is not None:
                 conds.append(column == value)
         return conds
 
     def list_inspections(self, *, since: datetime | None = None, until: datetime | None = None,
                          part_number: str | None = None, serial: str | None = None, result: str | None = None,
-                         state: str | None = None, limit: int = 50, offset: int = 0) -> list[InspectionSummary]:
-        """Inspections newest first (by start time), filtered; ``since`` is inclusive,
-        ``until`` exclusive. Page with ``limit`` (1..1000) and ``offset``."""
+                         state: str | None = None, station: str | None = None, limit: int = 50,
+                         offset: int = 0) -> list[InspectionSummary]:
+        """Inspections newest first (by start time), filtered (``station``: one
+        station's id); ``since`` is inclusive, ``until`` exclusive. Page with ``limit``
+        (1..1000) and ``offset``."""
         if not 1 <= limit <= MAX_PAGE or offset < 0:
             raise ValueError(f"limit must be 1..{MAX_PAGE} and offset >= 0 (got {limit}, {offset})")
-        conds = self._filters(since, until, part_number, serial, result, state)
+        conds = self._filters(since, until, part_number, serial, result, state, station)
         with self._transaction("list inspections", write=False) as s:
             rows = s.scalars(select(Inspection).where(*conds)
                              # id breaks ties of equal start times, so pages never overlap
@@ -503,18 +566,27 @@ class Store:
 
     def count_inspections(self, *, since: datetime | None = None, until: datetime | None = None,
                           part_number: str | None = None, serial: str | None = None, result: str | None = None,
-                          state: str | None = None) -> int:
+                          state: str | None = None, station: str | None = None) -> int:
         """How many inspections :meth:`list_inspections` would page through."""
-        conds = self._filters(since, until, part_number, serial, result, state)
+        conds = self._filters(since, until, part_number, serial, result, state, station)
         with self._transaction("count inspections", write=False) as s:
             return s.scalar(select(func.count()).select_from(Inspection).where(*conds))
 
+    def stations(self) -> list[str]:
+        """The ids of the stations that have written inspections here, sorted."""
+        with self._transaction("list stations", write=False) as s:
+            return sorted(s.scalars(select(Inspection.station_id).where(Inspection.station_id.is_not(None))
+                                    .distinct()))
+
     def events(self, inspection_id: str | None = None, *, kind: str | None = None, limit: int = 100,
-               offset: int = 0, newest_first: bool = False) -> list[EventRecord]:
-        """Events in the order they were logged (or newest first), of one inspection or all."""
+               offset: int = 0, newest_first: bool = False, station: str | None = None) -> list[EventRecord]:
+        """Events in the order they were logged (or newest first), of one inspection or
+        all (``station``: of one station)."""
         if not 1 <= limit <= MAX_PAGE or offset < 0:
             raise ValueError(f"limit must be 1..{MAX_PAGE} and offset >= 0 (got {limit}, {offset})")
         q = select(Event)
+        if station is not None:
+            q = q.where(Event.station_id == station)
         if inspection_id is not None:
             q = q.where(Event.inspection_id == inspection_id)
         if kind is not None:
@@ -533,9 +605,28 @@ def _summary_fields(insp: Inspection) -> dict[str, Any]:
                 state=insp.state, result=insp.result, reason=insp.reason, started_at=insp.started_at,
                 finished_at=insp.finished_at, traceability=dict(insp.traceability or {}),
                 idempotency_key=insp.idempotency_key, machine_s=insp.machine_s,
-                cycle=None if insp.cycle is None else dict(insp.cycle))
+                cycle=None if insp.cycle is None else dict(insp.cycle), station_id=insp.station_id)
 
 
 def _event_record(e: Event) -> EventRecord:
-    return EventRecord(e.id, e.inspection_id, e.at, e.kind, e.message)
+    return EventRecord(e.id, e.inspection_id, e.at, e.kind, e.message, e.station_id)
+
+
+_STATION_ID = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,63}")
+
+
+def check_station_id(station_id: str | None) -> None:
+    """A station id is 1-64 letters, digits, '.', '_' or '-' (it appears in URLs,
+    file names and OPC UA node names), starting with a letter or digit."""
+    if station_id is not None and (not isinstance(station_id, str) or not _STATION_ID.fullmatch(station_id)):
+        raise ValueError(f"station id must be 1-64 letters, digits, '.', '_' or '-' starting with a letter "
+                         f"or digit, not {station_id!r}")
+
+
+def station_lock_key(station_id: str | None) -> int:
+    """The advisory lock's second key for a station id: a signed 32-bit CRC, never
+    the migration lock's key (a CRC of 0 moves to 1)."""
+    crc = zlib.crc32((station_id or "").encode())
+    key = crc - (1 << 32) if crc >= (1 << 31) else crc
+    return key if key != MIGRATION_LOCK_KEY else 1
 

@@ -246,11 +246,11 @@ def test_one_owner_per_data_folder_and_readers_do_not_recover(store, tmp_path):
         assert reader.get(iid).state == "running"  # the live inspection is not cut off
 
 
-def _child(data_dir: Path, body: str) -> subprocess.Popen:
+def _child(data_dir: Path, body: str, url: str | None = None) -> subprocess.Popen:
     code = textwrap.dedent(f"""
         import sys
         from station.store import Store, Measurement
-        store = Store.open(data_dir={str(data_dir)!r})
+        store = Store.open({url!r}, data_dir={str(data_dir)!r})
         iid = store.begin_inspection("{PART}", serial="killed")
         print(iid, flush=True)
     """) + textwrap.dedent(body)
@@ -263,14 +263,31 @@ def _kill(proc: subprocess.Popen) -> None:
     proc.stdout.close()
 
 
-def _integrity(data_dir: Path) -> str:
-    with sqlite3.connect(data_dir / "station.db") as con:
-        return con.execute("PRAGMA integrity_check").fetchone()[0]
+def _integrity(data_dir: Path, url: str) -> str:
+    """SQLite's own check of the file; on PostgreSQL (whose server was never killed, only
+    its client) every row of every table read back through the store's models."""
+    if url.startswith("sqlite"):
+        with sqlite3.connect(data_dir / "station.db") as con:
+            return con.execute("PRAGMA integrity_check").fetchone()[0]
+    from sqlalchemy import select
+    from sqlalchemy.orm import Session
+
+    from station.store.models import Base
+
+    engine = make_engine(url)
+    try:
+        with Session(engine) as s:
+            for mapper in Base.registry.mappers:
+                s.scalars(select(mapper.class_)).all()
+    finally:
+        engine.dispose()
+    return "ok"
 
 
-def test_killed_process_leaves_an_interrupted_inspection(tmp_path):
+def test_killed_process_leaves_an_interrupted_inspection(tmp_path, db_url):
     data = tmp_path / "data"
-    proc = _child(data, """
+    url = db_url(data)
+    proc = _child(data, url=url, body="""
         for i in range(3):
             store.record_characteristic(iid, Measurement(f"c{i}", 1.0, 0.5, 1.5, 1.0 + i / 10, True))
         print("recorded", flush=True)
@@ -292,14 +309,15 @@ def test_killed_process_leaves_an_interrupted_inspection(tmp_path):
         assert [c.characteristic_id for c in rec.characteristics] == ["c0", "c1", "c2"]
         assert [e.message.split(":")[0] for e in store.events(iid, kind="state")] == ["running", "interrupted"]
         assert store.recover_interrupted() == []  # nothing left to recover
-    assert _integrity(data) == "ok"
+    assert _integrity(data, url) == "ok"
 
 
-def test_kill_while_writing_keeps_every_reported_result(tmp_path):
+def test_kill_while_writing_keeps_every_reported_result(tmp_path, db_url):
     """A process killed in the middle of a stream of commits: every result it reported
     (printed after the call returned) is in the store, and the database is sound."""
     data = tmp_path / "data"
-    proc = _child(data, """
+    url = db_url(data)
+    proc = _child(data, url=url, body="""
         i = 0
         while True:
             store.record_characteristic(iid, Measurement(f"c{i}", 1.0, 0.5, 1.5, 1.0, True))
@@ -313,7 +331,7 @@ def test_kill_while_writing_keeps_every_reported_result(tmp_path):
             reported.append(proc.stdout.readline().strip())
     finally:
         _kill(proc)
-    assert _integrity(data) == "ok"
+    assert _integrity(data, url) == "ok"
     with Store.open(data_dir=data) as store:
         rec = store.get(iid)
         stored = [c.characteristic_id for c in rec.characteristics]
@@ -322,14 +340,14 @@ def test_kill_while_writing_keeps_every_reported_result(tmp_path):
         assert rec.state == "interrupted"
 
 
-def test_migrated_schema_equals_the_models(tmp_path):
-    url = f"sqlite:///{tmp_path / 'm.db'}"
+def test_migrated_schema_equals_the_models(tmp_path, empty_db_url):
+    url = empty_db_url(tmp_path / "m")
     upgrade_to_head(url)
     upgrade_to_head(url)  # a second run has nothing to do
     engine = make_engine(url)
     try:
         with engine.connect() as conn:
-            assert current_revision(conn) == head_revision() == "0003"
+            assert current_revision(conn) == head_revision()
             ctx = MigrationContext.configure(conn, opts={"compare_type": True, "compare_server_default": True})
             assert compare_metadata(ctx, Base.metadata) == []
             assert set(inspect(conn).get_table_names()) == set(Base.metadata.tables) | {"alembic_version"}
@@ -349,37 +367,58 @@ def test_migrated_schema_equals_the_models(tmp_path):
         engine.dispose()
 
 
-def test_locked_database_raises_store_error(tmp_path):
+def test_locked_database_raises_store_error(tmp_path, db_backend):
+    """Another process holds the lock a write needs: the store waits its busy timeout,
+    then raises StoreUnavailable naming the database; nothing is written, and the store
+    works once the lock is gone. SQLite: an exclusive transaction on the file;
+    PostgreSQL: an exclusive lock on the table (lock_timeout)."""
     data = tmp_path / "data"
     with Store(data_dir=data, busy_timeout_s=0.05) as store:
         iid = store.begin_inspection(PART)
-        other = sqlite3.connect(data / "station.db", isolation_level=None, timeout=0.05)
-        try:
+        if db_backend == "sqlite":
+            other = sqlite3.connect(data / "station.db", isolation_level=None, timeout=0.05)
             other.execute("BEGIN EXCLUSIVE")
+            release = lambda: (other.execute("ROLLBACK"), other.close())  # noqa: E731
+            where = str(data / "station.db")
+        else:
+            other_engine = make_engine(store.url)
+            other = other_engine.connect()
+            other.exec_driver_sql("LOCK TABLE characteristic_result, inspection IN ACCESS EXCLUSIVE MODE")
+            release = lambda: (other.rollback(), other.close(), other_engine.dispose())  # noqa: E731
+            where = store._where()
+        try:
             with pytest.raises(StoreUnavailable, match="locked by another process") as info:
                 store.record_characteristic(iid, Measurement("c", 1.0, 0.5, 1.5, 1.0, True))
-            assert isinstance(info.value, StoreError) and str(data / "station.db") in str(info.value)
+            assert isinstance(info.value, StoreError) and where in str(info.value)
             with pytest.raises(StoreUnavailable, match="locked"):
                 store.finish(iid, "aborted")
         finally:
-            other.execute("ROLLBACK")
-            other.close()
+            release()
         assert store.get(iid).characteristics == ()  # the refused call wrote nothing
         store.finish(iid, "aborted")  # and the store works once the lock is gone
         assert store.get(iid).state == "aborted"
 
 
-def test_full_database_raises_store_error(tmp_path):
-    """SQLite's max_page_count caps the file, which fails exactly as a full disk does."""
+def test_full_or_read_only_database_raises_store_error(tmp_path, db_backend):
+    """SQLite: max_page_count caps the file, which fails exactly as a full disk does.
+    PostgreSQL: the database turned read-only (as a standby after a failover is), which
+    fails every write the same way. Either: StoreUnavailable saying why, nothing written."""
     with Store(data_dir=tmp_path / "data") as store:
         store.engine.dispose()  # new connections get the cap
+        if db_backend == "sqlite":
+            @event.listens_for(store.engine, "connect")
+            def _cap(dbapi_conn, _rec):
+                pages = dbapi_conn.execute("PRAGMA page_count").fetchone()[0]
+                dbapi_conn.execute(f"PRAGMA max_page_count = {pages}")
+            why = "full"
+        else:
+            @event.listens_for(store.engine, "connect")
+            def _read_only(dbapi_conn, _rec):
+                dbapi_conn.execute("SET SESSION CHARACTERISTICS AS TRANSACTION READ ONLY")
+                dbapi_conn.commit()
+            why = "read-only"
 
-        @event.listens_for(store.engine, "connect")
-        def _cap(dbapi_conn, _rec):
-            pages = dbapi_conn.execute("PRAGMA page_count").fetchone()[0]
-            dbapi_conn.execute(f"PRAGMA max_page_count = {pages}")
-
-        with pytest.raises(StoreUnavailable, match="full"):
+        with pytest.raises(StoreUnavailable, match=why):
             store.log_event("info", "x" * 200_000)
         assert store.events() == []
 
@@ -412,23 +451,36 @@ def test_cli_results_list_and_show(tmp_path, spec):
     assert not (tmp_path / "none").exists()  # reading never creates a store
 
 
-def test_sqlite_connections_are_durable_and_writes_lock_early(store):
-    """WAL, synchronous=FULL, foreign keys on; writes begin IMMEDIATE (the write lock is
-    waited for at BEGIN), reads plain BEGIN (they never block the station)."""
-    with store.engine.connect() as conn:
-        pragma = {p: conn.exec_driver_sql(f"PRAGMA {p}").scalar() for p in ("journal_mode", "synchronous",
-                                                                             "foreign_keys", "busy_timeout")}
-    assert pragma == {"journal_mode": "wal", "synchronous": 2, "foreign_keys": 1, "busy_timeout": 5000}
-    begins = []
+def test_connections_are_durable_and_writes_lock_early(store, db_backend):
+    """SQLite: WAL, synchronous=FULL, foreign keys on; writes begin IMMEDIATE (the write
+    lock is waited for at BEGIN), reads plain BEGIN (they never block the station).
+    PostgreSQL: every connection commits synchronously whatever the server's default
+    (the test cluster's is off), waits for a lock no longer than the busy timeout, and
+    bounds every statement; the rows a write changes are locked FOR UPDATE."""
+    seen = []
 
     @event.listens_for(store.engine, "before_cursor_execute")
     def _seen(_conn, _cur, statement, *_args):
-        if statement.startswith("BEGIN"):
-            begins.append(statement)
+        seen.append(statement)
 
-    iid = store.begin_inspection(PART)
-    store.get(iid)
-    assert begins == ["BEGIN IMMEDIATE", "BEGIN"]
+    if db_backend == "sqlite":
+        with store.engine.connect() as conn:
+            pragma = {p: conn.exec_driver_sql(f"PRAGMA {p}").scalar() for p in ("journal_mode", "synchronous",
+                                                                                 "foreign_keys", "busy_timeout")}
+        assert pragma == {"journal_mode": "wal", "synchronous": 2, "foreign_keys": 1, "busy_timeout": 5000}
+        seen.clear()
+        iid = store.begin_inspection(PART)
+        store.get(iid)
+        assert [b for b in seen if b.startswith("BEGIN")] == ["BEGIN IMMEDIATE", "BEGIN"]
+    else:
+        with store.engine.connect() as conn:
+            shown = {p: conn.exec_driver_sql(f"SHOW {p}").scalar() for p in ("synchronous_commit", "lock_timeout",
+                                                                              "statement_timeout")}
+        assert shown == {"synchronous_commit": "on", "lock_timeout": "5s", "statement_timeout": "1min"}
+        iid = store.begin_inspection(PART)
+        seen.clear()
+        store.record_characteristic(iid, Measurement("c", 1.0, 0.5, 1.5, 1.0, True))
+        assert any("FOR UPDATE" in q for q in seen)
 
 
 def test_database_of_a_newer_station_and_odd_traceability_are_refused(tmp_path):
@@ -439,8 +491,7 @@ def test_database_of_a_newer_station_and_odd_traceability_are_refused(tmp_path):
         with pytest.raises(ValueError, match="naive"):
             store.begin_inspection(PART, started_at=datetime(2025, 1, 1))
         assert store.count_inspections() == 0
-    with sqlite3.connect(data / "station.db") as con:
-        con.execute("UPDATE alembic_version SET version_num = '0999'")  # as a newer station would leave it
-    con.close()
+        with store.engine.begin() as conn:  # as a newer station would leave it
+            conn.exec_driver_sql("UPDATE alembic_version SET version_num = '0999'")
     with pytest.raises(StoreError, match="schema up to date: Can't locate revision"):
         Store(data_dir=data)
