@@ -7,6 +7,10 @@ commits (:attr:`station.store.Store.record_generation`), so a record read at
 generation *g* is exactly current while the store is still at *g*: no time-to-live,
 no stale answers. Reads that miss are shared by concurrent callers (single flight).
 
+Several stations on one database: only this station's commits move the generation, so
+a record another station is still writing is never cached (read afresh each time),
+while a finished record, which never changes, is served from the cache whoever wrote it.
+
 Race: the generation is noted *before* the read. A commit landing during the read
 moves the store past the noted value, so that possibly older record is never served
 after the commit: the next request reads again.
@@ -36,16 +40,29 @@ class RecordCache:
     async def get(self, inspection_id: str):
         now = self._store.record_generation
         kept = self._records.get(inspection_id)
-        if kept is not None and kept[0] == now:
+        if kept is not None and (kept[0] == now or self._final_elsewhere(kept[1])):
             self._records.move_to_end(inspection_id)
             self.hits += 1
             return kept[1]
         self.misses += 1
         return await self._flights.run(("record", inspection_id, now), lambda: self._fetch(inspection_id))
 
+    def _final_elsewhere(self, record) -> bool:
+        """A finished record never changes (the store's "final means final"), whoever
+        wrote it; it stays served after this station's own commits move on."""
+        return getattr(record, "state", "running") != "running"
+
+    def _cacheable(self, record) -> bool:
+        """Only this station's commits move the generation: a record another station
+        (sharing the database) is still writing is read afresh every time."""
+        mine = getattr(self._store, "station_id", None)
+        return getattr(record, "state", "running") != "running" or getattr(record, "station_id", mine) == mine
+
     async def _fetch(self, inspection_id: str):
         generation = self._store.record_generation  # before the read (see the module's note)
         record = await self._read(self._store.get, inspection_id)
+        if not self._cacheable(record):
+            return record
         self._records[inspection_id] = (generation, record)
         self._records.move_to_end(inspection_id)
         while len(self._records) > KEPT:

@@ -67,6 +67,25 @@ log = logging.getLogger(__name__)
 CONNECT_ATTEMPTS = 2
 
 
+#: the station id of a config that names none (and has no name)
+DEFAULT_STATION_ID = "station"
+
+
+def config_station_id(data: dict[str, Any], source: str) -> str:
+    """The station's id on a shared database: the config's top-level ``station_id``,
+    else its ``name``; checked (letters, digits, '.', '_', '-'; it names the station in
+    URLs, file names and OPC UA nodes)."""
+    from station.store.repository import check_station_id
+
+    value = data.get("station_id", data.get("name", DEFAULT_STATION_ID))
+    key = "station_id" if "station_id" in data else "name"
+    try:
+        check_station_id(value)
+    except ValueError as exc:
+        raise ConfigError(f"{source}: {key}: {exc}") from None
+    return value
+
+
 class ConfigError(ValueError):
     """A station config that cannot be used; names the file and the key."""
 
@@ -91,6 +110,9 @@ class Station:
     twins: Any = None  # sim.twins.TwinsThread when simulated
     world: Any = None  # sim.world.World when simulated
     endpoints: dict[str, Any] = field(default_factory=dict)
+    #: this station's id on a shared database (docs/plant.md): the config's
+    #: ``station_id``, else its ``name``
+    station_id: str = DEFAULT_STATION_ID
 
     @contextlib.contextmanager
     def master_on_table(self, cert, *, bore_diameter_mm: float, seed: int = 0):
@@ -238,7 +260,8 @@ def build_station(config_path: str | Path | None = None, *, scenario: str | Path
                 except (TypeError, ValueError) as exc:
                     raise ConfigError(f"{source}: [hardware.camera] exposure_s / readout_s: {exc}") from None
             scale = float(k["mm_per_px"])
-        return Station(z, c, enc, model, mode, chash, camera=cam, mm_per_px=scale, frame_size_px=size)
+        return Station(z, c, enc, model, mode, chash, camera=cam, mm_per_px=scale, frame_size_px=size,
+                       station_id=config_station_id(data, source))
 
     if mode != "simulated":
         raise ConfigError(f"{source}: [station] mode must be 'simulated' or 'hardware', not {mode!r}")
@@ -284,4 +307,4 @@ def build_station(config_path: str | Path | None = None, *, scenario: str | Path
         raise
     return Station(axes["Z"], axes["C"], enc, model, mode, chash, camera=cam, mm_per_px=optics.mm_per_px,
                    frame_size_px=(optics.params.width_px, optics.params.height_px), time_scale=scen.time_scale,
-                   twins=twins, world=world, endpoints=endpoints)
+                   twins=twins, world=world, endpoints=endpoints, station_id=config_station_id(data, source))

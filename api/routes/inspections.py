@@ -72,8 +72,8 @@ def job_response(rec) -> dict:
     """An inspection record as the API shows it (the twin's truth stays out: simulation
     bookkeeping, not a measurement)."""
     out = {
-        "id": rec.id, "part_number": rec.part_number, "serial": rec.serial, "order_id": rec.order_id,
-        "state": rec.state, "result": rec.result, "reason": rec.reason,
+        "id": rec.id, "station_id": rec.station_id, "part_number": rec.part_number, "serial": rec.serial,
+        "order_id": rec.order_id, "state": rec.state, "result": rec.result, "reason": rec.reason,
         "started_at": rec.started_at.isoformat(), "finished_at": rec.finished_at and rec.finished_at.isoformat(),
         "traceability": dict(rec.traceability),
         # the plan's machine time (s) and how it divides; null while running or when unknown
@@ -152,6 +152,9 @@ async def list_inspections(
     serial: Annotated[str | None, Query(max_length=64)] = None,
     result: Literal["pass", "fail"] | None = None,
     state: Literal["running", "complete", "aborted", "faulted", "interrupted"] | None = None,
+    station: Annotated[str | None, Query(max_length=64, pattern=r"^[A-Za-z0-9][A-Za-z0-9._-]*$",
+                                         description="only this station's inspections (its station id); "
+                                                     "default: every station writing this database")] = None,
     limit: Annotated[int, Query(ge=1, le=1000)] = 50,
     offset: Annotated[int, Query(ge=0, le=10**9)] = 0,
     who: auth.Principal = Depends(auth.reader),
@@ -161,7 +164,15 @@ async def list_inspections(
             raise HTTPException(status.HTTP_422_UNPROCESSABLE_CONTENT,
                                 f"{name} needs a time zone (e.g. 2024-05-01T08:00:00Z)")
     store = runtime(request).store
-    filters = dict(since=since, until=until, part_number=part_number, serial=serial, result=result, state=state)
+    filters = dict(since=since, until=until, part_number=part_number, serial=serial, result=result, state=state,
+                   station=station)
     total = await blocking(store.count_inspections, **filters)
     items = await blocking(store.list_inspections, **filters, limit=limit, offset=offset)
     return {"total": total, "limit": limit, "offset": offset, "items": [job_response(r) for r in items]}
+
+
+@router.get("/stations")
+async def list_stations(request: Request, who: auth.Principal = Depends(auth.reader)) -> dict:
+    """The stations whose inspections this database holds, and this one's id."""
+    store = runtime(request).store
+    return {"this": store.station_id, "stations": await blocking(store.stations)}

@@ -44,8 +44,10 @@ async def readyz(request: Request) -> JSONResponse:
 @router.get("/metrics", response_class=Response, responses={200: {"content": {"text/plain": {}}}})
 async def metrics(request: Request, who: auth.Principal = Depends(auth.reader)) -> Response:
     rt = runtime(request)
-    passed = await blocking(rt.store.count_inspections, state="complete", result="pass")
-    complete = await blocking(rt.store.count_inspections, state="complete")
+    # this station's pass rate, not the plant's: several stations may share the database
+    mine = rt.store.station_id
+    passed = await blocking(rt.store.count_inspections, state="complete", result="pass", station=mine)
+    complete = await blocking(rt.store.count_inspections, state="complete", station=mine)
     rt.metrics.pass_rate.set(passed / complete if complete else 0.0)
     rt.update_monitor_metrics()  # as it is now, whatever changed it
     return Response(generate_latest(rt.metrics.registry), media_type=CONTENT_TYPE_LATEST)

@@ -36,7 +36,11 @@ def register(app: typer.Typer) -> None:
         scenario: Optional[Path] = typer.Option(None, "--scenario", help="twin scenario TOML (simulation only)"),
         data: Path = typer.Option(Path("var"), "--data", help="data folder: database, images, parts, models"),
         time_scale: Optional[float] = typer.Option(None, "--time-scale", help="simulation: moves run this much faster"),
-        db: Optional[str] = typer.Option(None, "--db", help="database URL (default: SQLite in the data folder)"),
+        db: Optional[str] = typer.Option(None, "--db", envvar="STATION_DB_URL",
+                                         help="database URL (default: SQLite in the data folder); also from "
+                                              "$STATION_DB_URL, which keeps a password out of the process list"),
+        station_id: Optional[str] = typer.Option(None, "--station-id", help="this station's id on a shared "
+                                                 "database (default: the config's station_id, else its name)"),
         cookie_secure: bool = typer.Option(False, "--cookie-secure", help="mark the panel's session cookie Secure "
                                            "(https only): for a station behind a TLS reverse proxy (docs/security.md)"),
     ) -> None:
@@ -48,7 +52,15 @@ def register(app: typer.Typer) -> None:
 
         if time_scale is not None and not time_scale > 0:
             fail("--time-scale must be positive")
+        if station_id is not None:
+            from station.store.repository import check_station_id
+
+            try:
+                check_station_id(station_id)
+            except ValueError as exc:
+                fail(f"--station-id: {exc}")
         settings = Settings(config=config, scenario=scenario, data_dir=data, db_url=db, time_scale=time_scale,
+                            station_id=station_id,
                             cookie_secure=cookie_secure)
         # uvicorn takes SIGTERM over while it serves and restores this handler before
         # re-raising the signal after its graceful shutdown (module docstring)

@@ -291,11 +291,13 @@ class Session:
 @contextlib.asynccontextmanager
 async def open_session(config: str | Path | None = None, *, scenario: str | Path | None = None,
                        time_scale: float | None = None, data_dir: str | Path = "var", db_url: str | None = None,
-                       settings: ScanSettings | None = None, world=None, model: str | Path | None = None):
+                       settings: ScanSettings | None = None, world=None, model: str | Path | None = None,
+                       station_id: str | None = None):
     """Build the station, connect it, open the store (recovering interrupted
     inspections); close everything on the way out, whatever happened. ``model``: the
     station's model file (its belief), instead of the config's; ``world``: a caller's
-    world whose part replaces the scenario's."""
+    world whose part replaces the scenario's; ``station_id``: the station's id on the
+    database, instead of the config's."""
     from station.runtime import build_station
     from station.store import Store
 
@@ -305,7 +307,9 @@ async def open_session(config: str | Path | None = None, *, scenario: str | Path
         if world is not None and station.world is not None:
             # a caller's world (a test's or a study's part) replaces the scenario's
             station.world.part = world.part
-        store = Store.open(db_url, data_dir=data_dir)
+        if station_id is not None:
+            station.station_id = station_id
+        store = Store.open(db_url, data_dir=data_dir, station_id=station.station_id)
         await station.connect()
         devices = Devices(station.z, station.c, station.encoder, station.camera, measure=vision_measure(station.mm_per_px))
         yield Session(station, store, Engine(devices), settings or ScanSettings())

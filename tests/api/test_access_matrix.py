@@ -59,6 +59,7 @@ POLICY: dict[tuple[str, str], frozenset[str] | str] = {
     ("GET", "/api/v1/session"): ANY,
     ("DELETE", "/api/v1/session"): ANY,
     ("GET", "/api/v1/inspections"): ANY,
+    ("GET", "/api/v1/stations"): ANY,
     ("GET", "/api/v1/inspections/{inspection_id}"): ANY,
     ("GET", "/api/v1/inspections/{inspection_id}/qif"): ANY,
     ("GET", "/api/v1/station"): ANY,
@@ -92,6 +93,8 @@ POLICY: dict[tuple[str, str], frozenset[str] | str] = {
     ("POST", "/api/v1/calibrations/{version}/activate"): roles("engineer"),
     ("POST", "/api/v1/reports/iso230"): roles("engineer"),
     ("POST", "/api/v1/reports/discovery"): roles("engineer"),
+    # a client swaps its own token (a panel session has none of its own: 400)
+    ("POST", "/api/v1/tokens/rotate"): ANY,
 }
 
 
@@ -136,6 +139,8 @@ PROBES: dict[tuple[str, str], list[Probe]] = {
     ("POST", "/api/v1/reports/iso230"): [Probe("/api/v1/reports/iso230", {"files": {"recording": ("r.csv", "x")}})],
     # 422: the recording is missing (found before the discovery code is even loaded)
     ("POST", "/api/v1/reports/discovery"): [Probe("/api/v1/reports/discovery", {"files": {"model": ("m.toml", "= =")}})],
+    # 422: a negative grace (the matrix's tokens are not rotated)
+    ("POST", "/api/v1/tokens/rotate"): [Probe("/api/v1/tokens/rotate", {"json": {"grace_s": -1}})],
 }
 
 #: what an admitted write answers (it is refused for its content: nothing changes);

@@ -15,6 +15,7 @@ const panel = {
   current: null, // inspection id shown as the current part
   events: null, // EventSource
   resultsOffset: 0,
+  thisStation: null, // this station's id (GET /stations); the results page may show others too
   view: "operation",
   busyClick: false,
 };
@@ -242,7 +243,7 @@ async function refreshStation() {
   if (job && ["inspection", "check"].includes(job.kind) && job.inspection_id) {
     await showInspection(job.inspection_id);
   } else if (!panel.current) {
-    const last = await api("GET", "/api/v1/inspections?limit=1");
+    const last = await api("GET", `/api/v1/inspections?${ownStation({ limit: "1" })}`);
     if (last.items.length) await showInspection(last.items[0].id);
   }
 }
@@ -472,8 +473,37 @@ function resultCell(rec) {
   return td(o.text, o.cls === "fail" ? "res-fail" : o.cls === "other" ? "res-other" : o.cls === "pass" ? "res-pass" : "");
 }
 
+// query of this station's own inspections: the operation page shows this station's
+// parts even when other stations write the same database
+function ownStation(params) {
+  const q = new URLSearchParams(params);
+  if (panel.thisStation) q.set("station", panel.thisStation);
+  return q;
+}
+
+async function loadStations() {
+  const data = await api("GET", "/api/v1/stations");
+  panel.thisStation = data.this;
+  const sel = $("filter-station");
+  const chosen = sel.value;
+  clear(sel);
+  const all = document.createElement("option");
+  all.value = "";
+  all.textContent = "all";
+  sel.appendChild(all);
+  const ids = new Set(data.stations);
+  if (data.this) ids.add(data.this);
+  for (const id of [...ids].sort()) {
+    const o = document.createElement("option");
+    o.value = id;
+    o.textContent = id === data.this ? `${id} (this station)` : id;
+    sel.appendChild(o);
+  }
+  sel.value = [...ids].includes(chosen) ? chosen : "";
+}
+
 async function refreshRecent() {
-  const data = await api("GET", "/api/v1/inspections?limit=8");
+  const data = await api("GET", `/api/v1/inspections?${ownStation({ limit: "8" })}`);
   const tbody = $("recent").querySelector("tbody");
   clear(tbody);
   for (const rec of data.items) {
@@ -490,11 +520,12 @@ async function refreshResults() {
   if ($("filter-result").value) q.set("result", $("filter-result").value);
   if ($("filter-serial").value.trim()) q.set("serial", $("filter-serial").value.trim());
   if ($("filter-part").value.trim()) q.set("part_number", $("filter-part").value.trim());
+  if ($("filter-station").value) q.set("station", $("filter-station").value);
   const data = await api("GET", `/api/v1/inspections?${q}`);
   const tbody = $("results").querySelector("tbody");
   clear(tbody);
   for (const rec of data.items) {
-    const r = row([td(fmtTime(rec.started_at)), td(rec.part_number), td(rec.serial || "-"), td(rec.order_id || "-"),
+    const r = row([td(fmtTime(rec.started_at)), td(rec.station_id || "-"), td(rec.part_number), td(rec.serial || "-"), td(rec.order_id || "-"),
       td(rec.state), resultCell(rec)]);
     r.addEventListener("click", () => showResultDetail(rec.id).catch(() => {}));
     tbody.appendChild(r);
@@ -519,7 +550,8 @@ async function showResultDetail(id) {
   box.appendChild(v);
   const p = document.createElement("div");
   p.className = "part-info";
-  p.textContent = `${rec.part_number}, serial ${rec.serial || "-"}, order ${rec.order_id || "-"}; ` +
+  p.textContent = `${rec.part_number}, serial ${rec.serial || "-"}, order ${rec.order_id || "-"}, ` +
+    `station ${rec.station_id || "-"}; ` +
     `${fmtTime(rec.started_at)} to ${fmtTime(rec.finished_at)}` + (rec.reason ? `; ${rec.reason}` : "");
   box.appendChild(p);
   const t = $("chars").cloneNode(true);
@@ -857,7 +889,7 @@ async function refreshProposals() {
 // ------------------------------------------------------------------ views
 const VIEWS = {
   operation: () => Promise.all([refreshRecent(), refreshAlarms()]),
-  results: refreshResults,
+  results: () => loadStations().catch(() => {}).then(refreshResults),
   alarms: refreshAlarms,
   errors: refreshErrors,
   discovery: refreshDiscovery,
@@ -903,6 +935,7 @@ async function main() {
   $("tab-proposals").classList.toggle("hidden", !hasRole(DECIDE_ROLES));
   if (hasRole(DECIDE_ROLES)) refreshProposals().catch(() => {});
   updateButtons();
+  await loadStations().catch(() => {});
   await loadParts().catch((err) => say("job-message", `Part list: ${err.message}`, true));
   await refreshStation().catch(() => {});
   connectEvents();
