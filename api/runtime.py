@@ -40,6 +40,7 @@ from typing import Any, Callable
 
 from api.events import EventHub
 from api.metrics import Metrics
+from api.ratelimit import WriteLimiter
 from api.sessions import SessionStore
 from api.singleflight import SingleFlight
 from api.settings import Settings
@@ -227,6 +228,8 @@ class StationRuntime:
         self.verified_tokens: dict[str, object] = {}
         #: token id -> monotonic time its revocation was last read as "not revoked"
         self.token_checked: dict[int, float] = {}
+        #: writes per token (api/ratelimit.py), applied by api.auth.authenticate
+        self.write_limiter = WriteLimiter(settings.write_rate_per_s, settings.write_burst)
         self.records = None
         #: the station's own loop and thread (api/station_thread.py)
         self.thread = StationThread()

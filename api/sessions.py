@@ -15,8 +15,10 @@ session in memory:
   request that changes something; :func:`api.auth.authenticate` refuses a cookie
   write without it (403);
 * a session ends after ``IDLE_S`` without a request, after ``ABSOLUTE_S`` in any
-  case (a shift), at logout, when the server restarts (log in again), and within
-  ``RECHECK_S`` of its API token being revoked.
+  case (a shift), at logout, when the server restarts (log in again), within
+  ``RECHECK_S`` of its API token being revoked, and when its API token expires (at
+  the token's ``expires_at``; within ``RECHECK_S`` when a rotation brings that
+  forward).
 """
 
 from __future__ import annotations
@@ -53,9 +55,22 @@ class BrowserSession:
     checked: float = field(default_factory=time.monotonic)
 
     @property
+    def token_expires(self) -> float | None:
+        """Wall time (epoch s) when the session's API token ends (None: never)."""
+        end = getattr(self.principal, "expires_at", None)
+        return None if end is None else end.timestamp()
+
+    @property
     def expires_at(self) -> float:
-        """Wall time (epoch s) when the session ends at the latest."""
-        return self.created + ABSOLUTE_S
+        """Wall time (epoch s) when the session ends at the latest: a shift after
+        login, or its token's end if that comes first."""
+        end = self.created + ABSOLUTE_S
+        token_end = self.token_expires
+        return end if token_end is None else min(end, token_end)
+
+    def token_expired(self, wall: float | None = None) -> bool:
+        end = self.token_expires
+        return end is not None and (time.time() if wall is None else wall) >= end
 
     def csrf_ok(self, sent: str | None) -> bool:
         return bool(sent) and hmac.compare_digest(sent.encode(), self.csrf_token.encode())
@@ -112,17 +127,22 @@ class SessionStore:
     def _expire(self) -> None:
         now, wall = time.monotonic(), time.time()
         for k in [k for k, s in self._sessions.items()
-                  if now - s.last_seen > self.idle_s or wall - s.created > self.absolute_s]:
+                  if now - s.last_seen > self.idle_s or wall - s.created > self.absolute_s
+                  or s.token_expired(wall)]:
             del self._sessions[k]
 
     def __len__(self) -> int:
         return len(self._sessions)
 
 
-def token_is_active(store, token_id: int) -> bool:
-    """True while the API token ``token_id`` exists and is not revoked."""
-    from station.store.models import ApiToken
+def read_token(store, token_id: int):
+    """The API token ``token_id``'s stored record (revocation, expiry), or None."""
+    from station.store.tokens import TokenRepository
 
-    with store._transaction("check an API token's revocation", write=False) as s:
-        row = s.get(ApiToken, token_id)
-        return row is not None and row.revoked_at is None
+    return TokenRepository(store).get(token_id)
+
+
+def token_is_active(store, token_id: int) -> bool:
+    """True while the API token ``token_id`` exists, is not revoked and has not expired."""
+    record = read_token(store, token_id)
+    return record is not None and record.active()

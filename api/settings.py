@@ -36,6 +36,15 @@ class Settings:
     sse_keepalive_s: float = 15.0
     #: longest a station command (reset, a driver read) may take before the API gives up
     command_timeout_s: float = 10.0
+    #: writes (POST/PUT/PATCH/DELETE) per API token: a bucket of ``write_burst`` that
+    #: refills at ``write_rate_per_s`` (api/ratelimit.py; 0 turns the limit off). A
+    #: station does one inspection at a time, so an MES sends a job order per part
+    #: (tens of seconds each), a retry now and then and a burst of part specs at a
+    #: changeover; an operator clicks a button or two a second. 5/s sustained with 60 at
+    #: once is many times that, and caps a runaway client's writes (each one a
+    #: transaction, an audit row, maybe a 1 MiB parse) at a small share of the two cores
+    write_rate_per_s: float = 5.0
+    write_burst: int = 60
     #: tests and studies only: a sim.world.World whose part replaces the scenario's
     world: Any = None
     extra: dict[str, Any] = field(default_factory=dict)

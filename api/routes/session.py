@@ -56,7 +56,8 @@ def _session_json(who: auth.Principal, sess) -> dict:
 async def login(body: Login, request: Request, response: Response) -> dict:
     """Log in to the panel with an API token: sets the session cookie (HttpOnly,
     SameSite=Strict, Secure over https or with the setting ``cookie_secure``) and
-    returns the CSRF token to send as ``X-CSRF-Token`` with every write."""
+    returns the CSRF token to send as ``X-CSRF-Token`` with every write. The session
+    ends no later than the token (``expires_at``); an expired token gets 401."""
     if not _origin_ok(request):
         raise HTTPException(status.HTTP_403_FORBIDDEN, "login from another site's page refused")
     rt = runtime(request)
@@ -66,7 +67,9 @@ async def login(body: Login, request: Request, response: Response) -> dict:
         raise HTTPException(status.HTTP_401_UNAUTHORIZED, "this token is not valid (unknown, mistyped or revoked)")
     rt.sessions.drop(request.cookies.get(SESSION_COOKIE))  # a new login replaces the old session
     session_id, sess = rt.sessions.create(who)
-    response.set_cookie(SESSION_COOKIE, session_id, max_age=int(ABSOLUTE_S), path="/", httponly=True,
+    # the browser forgets the cookie when the session ends: a shift, or the token's end
+    max_age = max(1, int(min(ABSOLUTE_S, sess.expires_at - time.time())))
+    response.set_cookie(SESSION_COOKIE, session_id, max_age=max_age, path="/", httponly=True,
                         samesite="strict", secure=_secure(request))
     response.headers["Cache-Control"] = "no-store"
     await blocking(rt.store.log_event, "audit", f"{who.who}: logged in to the panel")

@@ -295,6 +295,7 @@ BODY_ROUTES = {
     ("POST", "/api/v1/checks"): "json",
     ("POST", "/api/v1/model-proposals/{proposal_id}/approve"): "json",
     ("POST", "/api/v1/model-proposals/{proposal_id}/reject"): "json",
+    ("POST", "/api/v1/tokens/rotate"): "json",
 }
 #: every file field of every upload
 FILE_FIELDS = [("/api/v1/models", "file"), ("/api/v1/calibrations", "file"),
