@@ -42,9 +42,23 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             await rt.close()
             raise
         app.state.runtime = rt
+        # the OPC UA face (api/opcua.py): after the station opens, stopped before it closes
+        app.state.opcua = None
+        if settings.opcua_endpoint:
+            from api.opcua import OpcUaServer
+
+            try:
+                opcua = OpcUaServer(rt, settings.opcua_endpoint, cert=settings.opcua_cert, key=settings.opcua_key)
+                await opcua.start()
+            except BaseException:
+                await rt.close()
+                raise
+            app.state.opcua = opcua
         try:
             yield
         finally:
+            if app.state.opcua is not None:
+                await app.state.opcua.stop()
             await rt.close()
 
     app = FastAPI(title="Bore inspection station: MES API", version=__version__, lifespan=lifespan,

@@ -30,6 +30,12 @@ class Settings:
     #: plain http on 127.0.0.1 or a segmented station network. A request that arrives
     #: as https (directly or through a trusted proxy) gets ``Secure`` either way.
     cookie_secure: bool = False
+    #: the OPC UA server beside REST, ``opc.tcp://HOST:PORT`` (None: none; api/opcua.py,
+    #: docs/opcua.md), and its certificate and private key (PEM or DER; both or neither:
+    #: with them Basic256Sha256 is offered besides SecurityPolicy None)
+    opcua_endpoint: str | None = None
+    opcua_cert: str | Path | None = None
+    opcua_key: str | Path | None = None
     #: how often the camera stream grabs a frame while no inspection runs
     idle_camera_hz: float = 2.0
     #: SSE keep-alive comment interval (proxies close silent connections)
