@@ -43,8 +43,14 @@ def register(app: typer.Typer) -> None:
                                                  "database (default: the config's station_id, else its name)"),
         cookie_secure: bool = typer.Option(False, "--cookie-secure", help="mark the panel's session cookie Secure "
                                            "(https only): for a station behind a TLS reverse proxy (docs/security.md)"),
+        opcua: Optional[str] = typer.Option(None, "--opcua", help="also serve OPC UA at opc.tcp://HOST:PORT "
+                                            "(docs/opcua.md)"),
+        opcua_cert: Optional[Path] = typer.Option(None, "--opcua-cert", help="OPC UA server certificate (PEM or "
+                                                  "DER): offers Basic256Sha256 besides SecurityPolicy None"),
+        opcua_key: Optional[Path] = typer.Option(None, "--opcua-key", help="the OPC UA certificate's private key"),
     ) -> None:
-        """Run the REST API (docs/api.md). Create a token first: station token create --role mes."""
+        """Run the REST API (docs/api.md), and with --opcua an OPC UA server beside it (docs/opcua.md).
+        Create a token first: station token create --role mes."""
         import uvicorn
 
         from api.app import create_app
@@ -59,9 +65,25 @@ def register(app: typer.Typer) -> None:
                 check_station_id(station_id)
             except ValueError as exc:
                 fail(f"--station-id: {exc}")
+        if opcua is not None:
+            from api.opcua import OpcUaStartError, check_endpoint_free, parse_endpoint
+
+            try:
+                parse_endpoint(opcua)
+                check_endpoint_free(opcua)
+            except (ValueError, OpcUaStartError) as exc:
+                fail(f"--opcua: {exc}")
+        if (opcua_cert is None) != (opcua_key is None):
+            fail("--opcua-cert and --opcua-key go together")
+        if opcua_cert is not None and opcua is None:
+            fail("--opcua-cert needs --opcua opc.tcp://HOST:PORT")
+        for option, path in (("--opcua-cert", opcua_cert), ("--opcua-key", opcua_key)):
+            if path is not None and not path.is_file():
+                fail(f"{option}: no file {path}")
         settings = Settings(config=config, scenario=scenario, data_dir=data, db_url=db, time_scale=time_scale,
                             station_id=station_id,
-                            cookie_secure=cookie_secure)
+                            cookie_secure=cookie_secure, opcua_endpoint=opcua, opcua_cert=opcua_cert,
+                            opcua_key=opcua_key)
         # uvicorn takes SIGTERM over while it serves and restores this handler before
         # re-raising the signal after its graceful shutdown (module docstring)
         previous = signal.signal(signal.SIGTERM, _exit_cleanly)
