@@ -333,3 +333,43 @@ def test_a_token_revoked_after_login_may_no_longer_call(served):
                 await call(c, "Stop")
 
     run(main())
+
+
+def test_with_a_certificate_a_token_session_runs_over_basic256sha256(tmp_path):
+    """--opcua-cert/--opcua-key: the server offers Basic256Sha256 (signed and encrypted)
+    beside None; a client with its own certificate logs in with a token over it."""
+    from asyncua.crypto.cert_gen import setup_self_signed_certificate
+    from cryptography.x509.oid import ExtendedKeyUsageOID
+
+    async def make(name: str, uri: str, use):
+        key, cert = tmp_path / f"{name}-key.pem", tmp_path / f"{name}-cert.der"
+        await setup_self_signed_certificate(key, cert, uri, "127.0.0.1", [use], {"commonName": name})
+        return key, cert
+
+    data = tmp_path / "data"
+    data.mkdir()
+    url = f"opc.tcp://127.0.0.1:{free_port()}"
+    skey, scert = run(make("server", "urn:bore-station:default", ExtendedKeyUsageOID.SERVER_AUTH))
+    ckey, ccert = run(make("client", "urn:bore-station:test-client", ExtendedKeyUsageOID.CLIENT_AUTH))
+    srv, server, thread = start_server(data, opcua_endpoint=url, opcua_cert=scert, opcua_key=skey)
+    try:
+        async def main():
+            async with client(url) as plain:
+                endpoints = await plain.get_endpoints()
+            offered = {(e.SecurityPolicyUri.rsplit("#", 1)[-1], e.SecurityMode) for e in endpoints}
+            assert ("None", ua.MessageSecurityMode.None_) in offered
+            assert ("Basic256Sha256", ua.MessageSecurityMode.SignAndEncrypt) in offered
+            secure = client(url, srv.tokens["operator"])
+            secure.application_uri = "urn:bore-station:test-client"
+            await secure.set_security_string(f"Basic256Sha256,SignAndEncrypt,{ccert},{ckey}")
+            async with secure as c:
+                assert c.security_policy.Mode == ua.MessageSecurityMode.SignAndEncrypt
+                assert await value(c, *M, "Identification", "SoftwareRevision") == __version__
+                with pytest.raises(UaStatusCodeError) as err:  # admitted; nothing runs to stop
+                    await call(c, "Stop")
+                assert err.value.code == ua.StatusCodes.BadInvalidState
+
+        run(main())
+    finally:
+        stop_server(server, thread)
+    check_endpoint_free(url)
