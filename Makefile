@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: run inspect test install chromium clean bench demo paper
+.PHONY: run inspect test install chromium postgres clean bench demo paper
 
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
@@ -59,8 +59,24 @@ chromium:
 	    || echo "WARNING: could not install chromium: the browser tests will fail"; \
 	fi
 
-test: $(STAMP) chromium
+# The store's tests run on PostgreSQL too, on a throwaway cluster the tests start
+# themselves (tests/pgcluster.py): Debian's server programs, installed here when missing
+# (when that fails the PostgreSQL tests fail, never skip).
+PG_INITDB := $(firstword $(wildcard /usr/lib/postgresql/*/bin/initdb))
+postgres:
+	@if [ -z "$(PG_INITDB)" ]; then \
+	  echo "installing Debian's PostgreSQL server for the store's tests (tests/pgcluster.py)"; \
+	  SUDO=; [ "$$(id -u)" = 0 ] || SUDO="sudo -n"; \
+	  { $$SUDO apt-get update -q && DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -q postgresql; } \
+	    || echo "WARNING: could not install postgresql: the PostgreSQL tests will fail"; \
+	fi
+
+# Everything on SQLite (the plant test on PostgreSQL), then the store, API and
+# reliability tests again with every store on PostgreSQL.
+PG_TESTS := tests/unit/test_store.py tests/unit/test_record_cache.py tests/api tests/reliability
+test: $(STAMP) chromium postgres
 	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q --db postgresql $(PG_TESTS)
 
 bench: $(STAMP)
 	$(BIN)/station bench kinematics

@@ -250,7 +250,7 @@ class StationRuntime:
         self._to_api = to_loop(self.api_loop)
         self.session = await self.thread.start(
             lambda: open_session(s.config, scenario=s.scenario, time_scale=s.time_scale, data_dir=s.data_dir,
-                                 db_url=s.db_url, world=s.world),
+                                 db_url=s.db_url, world=s.world, station_id=s.station_id),
             self._setup_station)
         self.store = self.session.store
         from api.records import RecordCache

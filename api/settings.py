@@ -21,6 +21,9 @@ class Settings:
     data_dir: str | Path = "var"
     #: database URL (None: SQLite in the data folder)
     db_url: str | None = None
+    #: this station's id on a shared database (None: the config's ``[station] id``
+    #: or name; docs/plant.md)
+    station_id: str | None = None
     #: simulation: moves run this much faster than real time
     time_scale: float | None = None
     max_upload_bytes: int = MAX_UPLOAD_BYTES

@@ -72,13 +72,16 @@ DEFAULT_STATION_ID = "station"
 
 
 def config_station_id(data: dict[str, Any], source: str) -> str:
-    """The station's id on a shared database: the config's top-level ``station_id``,
-    else its ``name``; checked (letters, digits, '.', '_', '-'; it names the station in
-    URLs, file names and OPC UA nodes)."""
+    """The station's id on a shared database: the config's ``[station] id``, else its
+    ``name``, else "station"; checked (letters, digits, '.', '_', '-'; it names the
+    station in URLs, file names and OPC UA nodes)."""
     from station.store.repository import check_station_id
 
-    value = data.get("station_id", data.get("name", DEFAULT_STATION_ID))
-    key = "station_id" if "station_id" in data else "name"
+    table = data.get("station") if isinstance(data.get("station"), dict) else {}
+    if "id" in table:
+        value, key = table["id"], "[station] id"
+    else:
+        value, key = data.get("name", DEFAULT_STATION_ID), "name"
     try:
         check_station_id(value)
     except ValueError as exc:
@@ -111,7 +114,7 @@ class Station:
     world: Any = None  # sim.world.World when simulated
     endpoints: dict[str, Any] = field(default_factory=dict)
     #: this station's id on a shared database (docs/plant.md): the config's
-    #: ``station_id``, else its ``name``
+    #: ``[station] id``, else its ``name``
     station_id: str = DEFAULT_STATION_ID
 
     @contextlib.contextmanager

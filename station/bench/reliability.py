@@ -521,9 +521,10 @@ CRASH_CHILD = textwrap.dedent(
     from station.inspection.session import open_session
     from station.parts import load_part
 
-    async def main(data, n, prefix):
+    async def main(data, n, prefix, url):
         spec = load_part(%r)
-        async with open_session(time_scale=%r, data_dir=data, settings=ScanSettings(frames_per_hole=3)) as s:
+        async with open_session(time_scale=%r, data_dir=data, db_url=url,
+                                settings=ScanSettings(frames_per_hole=3)) as s:
             optics = small_optics()
             s.station.camera.optics = optics
             s.station.frame_size_px = (optics.params.width_px, optics.params.height_px)
@@ -532,7 +533,7 @@ CRASH_CHILD = textwrap.dedent(
                 out = await s.inspect(spec, f"{prefix}-{i:02d}")
                 print("done", out.id, out.state, out.result, flush=True)
 
-    asyncio.run(main(sys.argv[1], int(sys.argv[2]), sys.argv[3]))
+    asyncio.run(main(sys.argv[1], int(sys.argv[2]), sys.argv[3], sys.argv[4] if len(sys.argv) > 4 else None))
     """
 ) % (PART, TIME_SCALE)
 
@@ -555,19 +556,21 @@ class CrashReport:
         return dataclasses.asdict(self)
 
 
-def check_store(data_dir: Path, acknowledged: dict[str, str]) -> tuple[dict[str, int], list[str], list[str]]:
+def check_store(data_dir: Path, acknowledged: dict[str, str],
+                db_url: str | None = None) -> tuple[dict[str, int], list[str], list[str]]:
     """Open the store as the station does (recovery), check every record; returns counts,
     lost acknowledged ids and problems."""
     from station.store import Store
 
     problems: list[str] = []
     counts = {"inspections": 0, "complete": 0, "interrupted": 0, "faulted": 0}
-    store = Store.open(data_dir=data_dir)
+    store = Store.open(db_url, data_dir=data_dir)
     try:
-        with store.engine.connect() as conn:
-            ok = conn.exec_driver_sql("PRAGMA integrity_check").scalar()
-            if ok != "ok":
-                problems.append(f"integrity_check: {ok}")
+        if store.engine.dialect.name == "sqlite":  # a server database is the server's to keep sound
+            with store.engine.connect() as conn:
+                ok = conn.exec_driver_sql("PRAGMA integrity_check").scalar()
+                if ok != "ok":
+                    problems.append(f"integrity_check: {ok}")
         total = store.count_inspections()
         summaries = store.list_inspections(limit=max(total, 1))
         counts["inspections"] = len(summaries)
@@ -604,8 +607,10 @@ def check_store(data_dir: Path, acknowledged: dict[str, str]) -> tuple[dict[str,
 
 
 def crash_trials(n: int, data_dir: str | Path, *, seed: int = 0, max_delay_s: float = 6.0,
-                 per_child: int = 20, log: Callable[[str], None] | None = None) -> CrashReport:
-    """``n`` times: start the child, SIGKILL it after a random delay, recover and check."""
+                 per_child: int = 20, log: Callable[[str], None] | None = None,
+                 db_url: str | None = None) -> CrashReport:
+    """``n`` times: start the child, SIGKILL it after a random delay, recover and check
+    (``db_url``: the database, default SQLite in ``data_dir``)."""
     rng = random.Random(seed)
     data_dir = Path(data_dir)
     rep = CrashReport()
@@ -613,7 +618,8 @@ def crash_trials(n: int, data_dir: str | Path, *, seed: int = 0, max_delay_s: fl
     env = dict(os.environ, PYTHONUNBUFFERED="1")
     for trial in range(n):
         delay = rng.uniform(0.3, max_delay_s)
-        proc = subprocess.Popen([sys.executable, "-c", CRASH_CHILD, str(data_dir), str(per_child), f"K{trial:03d}"],
+        args = [str(data_dir), str(per_child), f"K{trial:03d}"] + ([db_url] if db_url else [])
+        proc = subprocess.Popen([sys.executable, "-c", CRASH_CHILD, *args],
                                 stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, env=env)
         lines: list[str] = []
         reader = threading.Thread(target=lambda: lines.extend(iter(proc.stdout.readline, "")), daemon=True)
@@ -636,7 +642,7 @@ def crash_trials(n: int, data_dir: str | Path, *, seed: int = 0, max_delay_s: fl
             parts = line.split()
             if len(parts) >= 3 and parts[0] == "done":
                 acknowledged[parts[1]] = parts[2]
-        counts, lost, problems = check_store(data_dir, acknowledged)
+        counts, lost, problems = check_store(data_dir, acknowledged, db_url)
         rep.lost = lost
         rep.problems += [f"kill {trial}: {p}" for p in problems]
         if log is not None:

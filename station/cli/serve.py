@@ -40,7 +40,7 @@ def register(app: typer.Typer) -> None:
                                          help="database URL (default: SQLite in the data folder); also from "
                                               "$STATION_DB_URL, which keeps a password out of the process list"),
         station_id: Optional[str] = typer.Option(None, "--station-id", help="this station's id on a shared "
-                                                 "database (default: the config's station_id, else its name)"),
+                                                 "database (default: the config's [station] id)"),
         cookie_secure: bool = typer.Option(False, "--cookie-secure", help="mark the panel's session cookie Secure "
                                            "(https only): for a station behind a TLS reverse proxy (docs/security.md)"),
         opcua: Optional[str] = typer.Option(None, "--opcua", help="also serve OPC UA at opc.tcp://HOST:PORT "

@@ -239,7 +239,7 @@ class Store:
             conn.close()
             raise StoreLocked(f"results store {self._where()}: another live station process has station id "
                               f"{self.station_id!r}; every station on a shared database needs its own id "
-                              "(station_id in its config, or serve --station-id)")
+                              "([station] id in its config, or serve --station-id)")
         self._owner_conn = conn
 
     # -- transactions and errors --------------------------------------------------------------

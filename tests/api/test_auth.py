@@ -41,13 +41,10 @@ def test_a_token_revoked_while_in_use_is_refused_within_the_check_interval(api):
 
 
 def test_tokens_are_stored_hashed(api):
-    import sqlite3
+    from tests.dbtools import rows as db_rows
 
-    con = sqlite3.connect(api.data_dir / "station.db")
-    try:
-        rows = con.execute("SELECT salt, token_hash, prefix FROM api_token").fetchall()
-    finally:
-        con.close()
+    rows = db_rows(api.data_dir, "SELECT salt, token_hash, prefix FROM api_token")
+    assert rows
     dump = repr(rows)
     for token in api.tokens.values():
         secret = token[len("st_") + 16 + 1:]  # the part after the public prefix

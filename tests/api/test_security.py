@@ -17,7 +17,6 @@ import logging
 import re
 import secrets
 import socket
-import sqlite3
 import time
 from importlib import resources
 from pathlib import Path
@@ -28,6 +27,7 @@ import pytest
 
 from api.sessions import CSRF_HEADER, SESSION_COOKIE
 from tests.api.conftest import start_server, stop_server, wait_idle
+from tests.dbtools import rows as db_rows
 
 SENTINEL = "SENTINEL-" + secrets.token_hex(8)  # in files outside the data folder only
 
@@ -131,11 +131,7 @@ def test_token_create_stores_only_a_salted_slow_hash(sec):
         if path.is_file():
             blob = path.read_bytes()
             assert token.encode() not in blob and secret.encode() not in blob, path
-    con = sqlite3.connect(sec.data_dir / "station.db")
-    try:
-        salt, stored = con.execute("SELECT salt, token_hash FROM api_token WHERE prefix = ?", (prefix,)).fetchone()
-    finally:
-        con.close()
+    ((salt, stored),) = db_rows(sec.data_dir, "SELECT salt, token_hash FROM api_token WHERE prefix = :p", p=prefix)
     assert len(bytes.fromhex(salt)) >= 16 and PBKDF2_ITERATIONS >= 10_000
     assert stored == hashlib.pbkdf2_hmac("sha256", token.encode(), bytes.fromhex(salt), PBKDF2_ITERATIONS).hex()
     with httpx.Client(base_url=sec.url, headers={"Authorization": f"Bearer {token}"}) as c:
@@ -162,11 +158,7 @@ def test_tokens_are_compared_in_constant_time(sec, compare_spy):
     from station.store.tokens import TokenRepository
 
     record, token = TokenRepository(sec.runtime.store).create("mes", name="timing")
-    con = sqlite3.connect(sec.data_dir / "station.db")
-    try:
-        (stored,) = con.execute("SELECT token_hash FROM api_token WHERE id = ?", (record.id,)).fetchone()
-    finally:
-        con.close()
+    ((stored,),) = db_rows(sec.data_dir, "SELECT token_hash FROM api_token WHERE id = :i", i=record.id)
     with httpx.Client(base_url=sec.url) as c:
         # the right token: its hash is compared with the stored one by compare_digest
         assert c.get("/api/v1/station", headers={"Authorization": f"Bearer {token}"}).status_code == 200

@@ -3,12 +3,12 @@ crash; once the lock is gone the station orders and stores again."""
 
 from __future__ import annotations
 
-import sqlite3
 import time
 
 import pytest
 
 from tests.api.conftest import start_server, stop_server
+from tests.dbtools import write_lock_held
 
 PART = "ZDZG-22.2-12.3851"
 
@@ -24,9 +24,7 @@ def lone_server(tmp_path):
 
 def test_a_database_locked_by_another_program_gives_503_then_recovers(lone_server):
     srv = lone_server
-    holder = sqlite3.connect(srv.data_dir / "station.db", timeout=1.0, isolation_level=None)
-    try:
-        holder.execute("BEGIN EXCLUSIVE")  # another program (a backup tool, a sqlite3 shell) holds the write lock
+    with write_lock_held(srv.data_dir):  # another program holds the write lock
         with srv.client("mes") as c:
             t0 = time.monotonic()
             r = c.post("/api/v1/job-orders", json={"part_number": PART, "serial": "LOCKED-1"})
@@ -34,9 +32,6 @@ def test_a_database_locked_by_another_program_gives_503_then_recovers(lone_serve
         assert r.status_code == 503, r.text
         assert "locked" in r.json()["detail"]
         assert waited < 30.0
-    finally:
-        holder.execute("ROLLBACK")
-        holder.close()
     with srv.client("mes") as c:
         r = c.post("/api/v1/job-orders", json={"part_number": PART, "serial": "LOCKED-2"})
         assert r.status_code == 202, r.text

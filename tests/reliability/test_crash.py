@@ -5,7 +5,8 @@ only after ``inspect`` returned (after the commit). It is killed with SIGKILL af
 random delay (from start-up through homing, scanning, committing), then the store is
 opened as the station opens it (recovery) and checked:
 
-* ``PRAGMA integrity_check`` is ok;
+* ``PRAGMA integrity_check`` is ok (SQLite; under ``--db postgresql`` the same trials
+  run on a PostgreSQL database, whose server is never the one killed);
 * every inspection is complete and correct (4 characteristics, result consistent with
   them, values within 3 um of the twin's truth) or ``interrupted`` (with its reason);
   none is left ``running``;
@@ -25,9 +26,9 @@ KILLS = 8
 
 
 @pytest.mark.timeout(290)
-def test_sigkill_at_random_points_loses_nothing(tmp_path):
+def test_sigkill_at_random_points_loses_nothing(tmp_path, db_url):
     # up to 10 s: an inspection of the standard sample with its datum survey takes about 6 s here
-    rep = crash_trials(KILLS, tmp_path, seed=1234, max_delay_s=10.0)
+    rep = crash_trials(KILLS, tmp_path, seed=1234, max_delay_s=10.0, db_url=db_url(tmp_path))
     assert rep.kills == KILLS
     assert rep.problems == []
     assert rep.lost == [], f"acknowledged results missing: {rep.lost}"
