@@ -13,12 +13,14 @@ and a stop that was asked for and done would read as death by a signal.
 
 from __future__ import annotations
 
+import math
 import signal
 from pathlib import Path
 from typing import Optional
 
 import typer
 
+from api.settings import Settings
 from station.cli.common import fail
 
 
@@ -48,13 +50,17 @@ def register(app: typer.Typer) -> None:
         opcua_cert: Optional[Path] = typer.Option(None, "--opcua-cert", help="OPC UA server certificate (PEM or "
                                                   "DER): offers Basic256Sha256 besides SecurityPolicy None"),
         opcua_key: Optional[Path] = typer.Option(None, "--opcua-key", help="the OPC UA certificate's private key"),
+        write_rate: float = typer.Option(Settings.write_rate_per_s, "--write-rate",
+                                         help="writes per second per API token, sustained (0: no limit; "
+                                              "docs/api.md, Limit on writes)"),
+        write_burst: int = typer.Option(Settings.write_burst, "--write-burst",
+                                        help="writes per API token at once before the rate applies"),
     ) -> None:
         """Run the REST API (docs/api.md), and with --opcua an OPC UA server beside it (docs/opcua.md).
         Create a token first: station token create --role mes."""
         import uvicorn
 
         from api.app import create_app
-        from api.settings import Settings
 
         if time_scale is not None and not time_scale > 0:
             fail("--time-scale must be positive")
@@ -73,6 +79,10 @@ def register(app: typer.Typer) -> None:
                 check_endpoint_free(opcua)
             except (ValueError, OpcUaStartError) as exc:
                 fail(f"--opcua: {exc}")
+        if not (math.isfinite(write_rate) and write_rate >= 0):
+            fail("--write-rate must be 0 (no limit) or a positive number of writes per second")
+        if write_burst < 1:
+            fail("--write-burst must be at least 1")
         if (opcua_cert is None) != (opcua_key is None):
             fail("--opcua-cert and --opcua-key go together")
         if opcua_cert is not None and opcua is None:
@@ -83,7 +93,7 @@ def register(app: typer.Typer) -> None:
         settings = Settings(config=config, scenario=scenario, data_dir=data, db_url=db, time_scale=time_scale,
                             station_id=station_id,
                             cookie_secure=cookie_secure, opcua_endpoint=opcua, opcua_cert=opcua_cert,
-                            opcua_key=opcua_key)
+                            opcua_key=opcua_key, write_rate_per_s=write_rate, write_burst=write_burst)
         # uvicorn takes SIGTERM over while it serves and restores this handler before
         # re-raising the signal after its graceful shutdown (module docstring)
         previous = signal.signal(signal.SIGTERM, _exit_cleanly)

@@ -111,3 +111,29 @@ def test_a_rotation_does_not_buy_a_fresh_burst(api):
     limiter = api.runtime.write_limiter
     assert refused.status_code == 429
     assert admitted <= limiter.rate_per_s * (int(refused.headers["retry-after"]) + took_s + 1.0) < limiter.burst
+
+
+def test_station_serve_sets_the_limit(monkeypatch):
+    import typer
+    import uvicorn
+    from typer.testing import CliRunner
+
+    import api.app
+    from api.settings import Settings
+    from station.cli import serve
+
+    seen = []
+    monkeypatch.setattr(api.app, "create_app", lambda settings: seen.append(settings) or object())
+    monkeypatch.setattr(uvicorn, "run", lambda *a, **kw: None)
+    app = typer.Typer()
+    serve.register(app)
+    for args, want in (([], (Settings.write_rate_per_s, Settings.write_burst)),
+                       (["--write-rate", "0.5", "--write-burst", "10"], (0.5, 10)),
+                       (["--write-rate", "0"], (0.0, Settings.write_burst))):
+        result = CliRunner().invoke(app, args)
+        assert result.exit_code == 0, result.output
+        assert (seen[-1].write_rate_per_s, seen[-1].write_burst) == want
+    for args, says in ((["--write-rate", "-1"], "--write-rate"), (["--write-rate", "nan"], "--write-rate"),
+                       (["--write-burst", "0"], "--write-burst")):
+        result = CliRunner().invoke(app, args)
+        assert result.exit_code == 2 and says in result.stderr, result.output
