@@ -93,6 +93,18 @@ REVOCATION_CHECK_S = 1.0
 
 async def verify_token(request: Request, token: str) -> Principal | None:
     """The principal of a valid API token, or None; an expired one raises 401 saying so.
+    (:func:`known_token` does the checking.)"""
+    known = await known_token(request.app.state.runtime, token)
+    if known is None:
+        return None
+    if known.expired(utcnow()):
+        raise expired("the API token", known.expires_at)
+    return _principal(known)
+
+
+async def known_token(rt, token: str):
+    """The record of an API token that exists and is not revoked (expired or not: the
+    caller compares the expiry with its clock), or None. For REST and OPC UA alike.
 
     The salted PBKDF2 check runs once per token and process; after it, the token's
     SHA-256 finds the record (256 random bits: a fast hash is enough to look it up,
@@ -102,7 +114,6 @@ async def verify_token(request: Request, token: str) -> Principal | None:
     share that read (api/singleflight.py). The expiry itself is compared with the
     clock on every request.
     """
-    rt = request.app.state.runtime
     key = hashlib.sha256(token.encode()).hexdigest()
     known = rt.verified_tokens.get(key)
     if known is None:
@@ -125,9 +136,7 @@ async def verify_token(request: Request, token: str) -> Principal | None:
                 known = dataclasses.replace(known, expires_at=stored.expires_at, replaced_by=stored.replaced_by)
                 rt.verified_tokens[key] = known
             rt.token_checked[known.id] = now
-    if known.expired(utcnow()):
-        raise expired("the API token", known.expires_at)
-    return _principal(known)
+    return known
 
 
 async def _from_session(request: Request, session_id: str) -> Principal:

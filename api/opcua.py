@@ -57,6 +57,7 @@ from asyncua.server.internal_session import InternalSession
 from asyncua.server.user_managers import UserManager
 from pydantic import ValidationError
 
+from api.auth import known_token
 from api.routes.common import in_api_thread
 from api.routes.inspections import JobOrder, job_response
 from api.routes.parts import load_by_number
@@ -64,6 +65,7 @@ from api.runtime import Busy, StationRuntime
 from station import __version__
 from station.parts import PartSpecError
 from station.sequencer.engine import EngineStateError, State
+from station.store.models import utcnow
 
 log = logging.getLogger("api.opcua")
 
@@ -349,6 +351,7 @@ class OpcUaServer:
         server.set_security_policy(policies, permission_ruleset=StationRuleset())
         self.idx = await server.register_namespace(NAMESPACE_URI)
         await self._build()
+        self._pending_result = await self._last_finished()
         await self._refresh()
         try:
             await asyncio.wait_for(server.start(), timeout=SERVER_START_TIMEOUT_S)
@@ -533,6 +536,21 @@ class OpcUaServer:
             if d.get("inspection_id"):
                 self._pending_result = d["inspection_id"]
 
+    async def _last_finished(self) -> str | None:
+        """This station's last finished inspection in the store (several stations may
+        share it): LastResult shows it from the start, as after a restart the MES
+        expects, not only once the next inspection ends. None when there is none, or the
+        store does not answer in time (LastResult then fills with the next result)."""
+        store = self.rt.store
+        try:
+            recent = await asyncio.wait_for(
+                in_api_thread(lambda: store.list_inspections(station=store.station_id, limit=20)),
+                timeout=IO_TIMEOUT_S)
+        except Exception:  # noqa: BLE001 - a store in trouble leaves LastResult empty, the server starts
+            log.exception("OPC UA: the last result could not be read from the store")
+            return None
+        return next((r.id for r in recent if r.state != "running"), None)
+
     async def _record(self, iid: str):
         return await asyncio.wait_for(self.rt.records.get(iid), timeout=IO_TIMEOUT_S)
 
@@ -682,12 +700,21 @@ class OpcUaServer:
                         ", ".join(sorted(roles)))
             return ua.StatusCode(ua.StatusCodes.BadUserAccessDenied)
         try:
-            record = await asyncio.wait_for(in_api_thread(self.rt.tokens.verify, user.token), timeout=IO_TIMEOUT_S)
+            # the REST API's check: the slow hash once per token, then its revocation and
+            # expiry (read at most every second)
+            record = await asyncio.wait_for(known_token(self.rt, user.token), timeout=IO_TIMEOUT_S)
         except asyncio.TimeoutError:
             return ua.StatusCode(ua.StatusCodes.BadTimeout)
-        if record is None or record.role not in roles:
+        if record is None or record.expired(utcnow()) or record.role not in roles:
             log.warning("OPC UA %s refused: the session's token is no longer valid", what)
             return ua.StatusCode(ua.StatusCodes.BadUserAccessDenied)
+        # a method call is a write: it takes from the same bucket as the token's REST
+        # writes (api/ratelimit.py), so OPC UA is no way around the limit
+        wait_s = self.rt.write_limiter.take(record.id)
+        if wait_s > 0:
+            log.warning("OPC UA %s refused: too many writes with token %s (%s); retry after %.1f s", what,
+                        record.id, self.rt.write_limiter.describe(), wait_s)
+            return ua.StatusCode(ua.StatusCodes.BadTooManyOperations)
         return f"{record.name} (token {record.id}, {record.role}) over OPC UA"
 
     async def _start_job(self, parent, *args):

@@ -20,6 +20,7 @@ import pwd
 import shutil
 import socket
 import subprocess
+import tempfile
 import threading
 import time
 from pathlib import Path
@@ -102,6 +103,9 @@ class PgCluster:
         return self
 
     def stop(self) -> None:
+        log = self.root / "server.log"
+        if log.exists():  # kept for a person wondering what the server said
+            shutil.copyfile(log, Path(tempfile.gettempdir()) / "station-tests-postgresql.log")
         if (self.data / "postmaster.pid").exists():
             try:
                 self._run(str(self.bin / "pg_ctl"), "-D", str(self.data), "-m", "immediate", "-w", "-t", "30", "stop")

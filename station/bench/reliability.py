@@ -359,18 +359,28 @@ class Injector:
     def _fill_disk(self) -> None:
         """The disk holding the database is full: from now on every INSERT INTO event (the
         last statement of ``finish``'s transaction, after its characteristics and the
-        state change) fails as SQLite fails it, "database or disk is full", so the
-        transaction must roll back whole. (SQLite's max_page_count cannot show this: the
-        few rows of a finish fit in the free space of pages the database already has.)"""
-        import sqlite3
-
+        state change) fails as the database fails it, so the transaction must roll back
+        whole: SQLite's "database or disk is full", PostgreSQL's "could not extend file
+        ...: No space left on device" (SQLSTATE 53100), each raised as its own driver's
+        exception. (SQLite's max_page_count cannot show this: the few rows of a finish
+        fit in the free space of pages the database already has.)"""
         from sqlalchemy import event
 
         engine = self.s.store.engine
+        if engine.dialect.name == "postgresql":
+            import psycopg.errors
+
+            def error():
+                return psycopg.errors.DiskFull('could not extend file "base/16384/16390": No space left on device')
+        else:
+            import sqlite3
+
+            def error():
+                return sqlite3.OperationalError("database or disk is full")
 
         def full(conn, cursor, statement, parameters, context, executemany):
             if statement.lstrip().upper().startswith("INSERT INTO EVENT"):
-                raise sqlite3.OperationalError("database or disk is full")
+                raise error()
 
         event.listen(engine, "before_cursor_execute", full)
         self.active = True
@@ -606,25 +616,47 @@ def check_store(data_dir: Path, acknowledged: dict[str, str],
     return counts, lost, problems
 
 
+#: longest a crash-test child may take to say it is ready (a loaded two-core PC)
+READY_TIMEOUT_S = 120.0
+
+
 def crash_trials(n: int, data_dir: str | Path, *, seed: int = 0, max_delay_s: float = 6.0,
                  per_child: int = 20, log: Callable[[str], None] | None = None,
                  db_url: str | None = None) -> CrashReport:
     """``n`` times: start the child, SIGKILL it after a random delay, recover and check
-    (``db_url``: the database, default SQLite in ``data_dir``)."""
+    (``db_url``: the database, default SQLite in ``data_dir``).
+
+    One kill in four lands in the child's start-up (0.3-3 s after it was started: imports,
+    the store's migration and recovery, the twins); the others a random 0.3 s to
+    ``max_delay_s`` after the child said it was ready, among its homing, scans and
+    commits. Timed from "ready", the kills hit inspections however long a loaded
+    machine takes to start a Python process."""
     rng = random.Random(seed)
     data_dir = Path(data_dir)
     rep = CrashReport()
     acknowledged: dict[str, str] = {}
     env = dict(os.environ, PYTHONUNBUFFERED="1")
     for trial in range(n):
-        delay = rng.uniform(0.3, max_delay_s)
+        in_startup = rng.random() < 0.25
+        delay = rng.uniform(0.3, 3.0) if in_startup else rng.uniform(0.3, max_delay_s)
         args = [str(data_dir), str(per_child), f"K{trial:03d}"] + ([db_url] if db_url else [])
         proc = subprocess.Popen([sys.executable, "-c", CRASH_CHILD, *args],
                                 stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, env=env)
         lines: list[str] = []
-        reader = threading.Thread(target=lambda: lines.extend(iter(proc.stdout.readline, "")), daemon=True)
+        ready = threading.Event()
+
+        def read(proc=proc, lines=lines, ready=ready):
+            for line in iter(proc.stdout.readline, ""):
+                lines.append(line)
+                if line.startswith("ready"):
+                    ready.set()
+            ready.set()  # the child ended (or was killed): nobody waits for a ready that never comes
+
+        reader = threading.Thread(target=read, daemon=True)
         reader.start()
         try:
+            if not in_startup:
+                ready.wait(timeout=READY_TIMEOUT_S)
             try:
                 proc.wait(timeout=delay)
             except subprocess.TimeoutExpired:

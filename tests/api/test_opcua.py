@@ -9,7 +9,9 @@ import asyncio
 import socket
 import subprocess
 import time
+from collections import Counter
 
+import httpx
 import pytest
 from asyncua import Client, ua
 from asyncua.ua.uaerrors import BadUserAccessDenied, UaStatusCodeError
@@ -373,3 +375,67 @@ def test_with_a_certificate_a_token_session_runs_over_basic256sha256(tmp_path):
     finally:
         stop_server(server, thread)
     check_endpoint_free(url)
+
+
+def test_method_calls_count_against_the_tokens_write_limit(served):
+    """A method call is a write: a flood of them from one token is refused with
+    BadTooManyOperations once the token's bucket is empty, and the same token's REST
+    writes then get 429 (one bucket for both faces); another token is unaffected."""
+    srv, url = served
+    with Store(data_dir=srv.data_dir) as store:
+        _, flooder = TokenRepository(store).create("operator", name="opcua flood")
+    limiter = srv.runtime.write_limiter
+    burst = limiter.burst
+
+    async def main():
+        codes = Counter()
+        async with client(url, flooder) as c:
+            for _ in range(burst + 20):
+                with pytest.raises(UaStatusCodeError) as err:
+                    await call(c, "Stop")  # nothing runs: admitted calls answer BadInvalidState
+                codes[err.value.code] += 1
+        return codes
+
+    t0 = time.monotonic()
+    codes = run(main())
+    elapsed = time.monotonic() - t0
+    assert codes[ua.StatusCodes.BadTooManyOperations] >= 5
+    # admitted: the burst and what refilled meanwhile, no more
+    assert burst <= codes[ua.StatusCodes.BadInvalidState] <= burst + limiter.rate_per_s * elapsed + 1
+    headers = {"Authorization": f"Bearer {flooder}"}
+    with httpx.Client(base_url=srv.url, headers=headers, timeout=30.0) as rest:
+        r = rest.post("/api/v1/station/stop")
+        assert r.status_code == 429 and int(r.headers["Retry-After"]) >= 1
+    with srv.client("operator") as other:
+        assert other.post("/api/v1/station/stop").status_code != 429
+
+
+def test_the_last_result_is_there_from_the_start(tmp_path):
+    """A station restarted after its last inspection: LastResult shows that inspection
+    at once (read from the store, this station's own), not only after the next one."""
+    from station.parts import load_part
+    from station.store import Measurement
+
+    spec = load_part(PART)
+    data = tmp_path / "data"
+    with Store(data_dir=data, station_id="station") as store:  # the default config's station id
+        iid = store.begin_inspection(PART, serial="SN-BEFORE")
+        store.finish(iid, "complete", "pass", measurements=[
+            Measurement.of(c, c.nominal, passed=True, uncertainty_k2=0.001) for c in spec.characteristics()])
+    with Store(data_dir=data, station_id="another-station") as store:  # a later one of another station
+        other = store.begin_inspection(PART, serial="SN-ELSEWHERE")
+        store.finish(other, "aborted")
+    url = f"opc.tcp://127.0.0.1:{free_port()}"
+    srv, server, thread = start_server(data, opcua_endpoint=url)
+    try:
+        async def main():
+            async with client(url) as c:
+                last = (*V, "ResultManagement", "Results", "LastResult")
+                return (await value(c, *last, "ResultId"), await value(c, *last, "Serial"),
+                        await value(c, *last, "Characteristics", "hole_1.diameter", "Measured"))
+
+        rid, serial, d1 = run(main())
+        assert (rid, serial) == (iid, "SN-BEFORE")
+        assert d1 == pytest.approx(spec.characteristic("hole_1.diameter").nominal)
+    finally:
+        stop_server(server, thread)

@@ -2,7 +2,8 @@
 
 A child process inspects parts back to back on the twins and prints an inspection's id
 only after ``inspect`` returned (after the commit). It is killed with SIGKILL after a
-random delay (from start-up through homing, scanning, committing), then the store is
+random delay (one kill in four in its start-up, the others after it is ready: through
+homing, scanning, committing), then the store is
 opened as the station opens it (recovery) and checked:
 
 * ``PRAGMA integrity_check`` is ok (SQLite; under ``--db postgresql`` the same trials
@@ -27,7 +28,8 @@ KILLS = 8
 
 @pytest.mark.timeout(290)
 def test_sigkill_at_random_points_loses_nothing(tmp_path, db_url):
-    # up to 10 s: an inspection of the standard sample with its datum survey takes about 6 s here
+    # up to 10 s after the child is ready: an inspection of the standard sample with its
+    # datum survey takes about 5 s here
     rep = crash_trials(KILLS, tmp_path, seed=1234, max_delay_s=10.0, db_url=db_url(tmp_path))
     assert rep.kills == KILLS
     assert rep.problems == []
