@@ -38,7 +38,7 @@ from pathlib import Path
 from typing import Any, Iterable, Iterator, Mapping
 
 from sqlalchemy import event as sa_event
-from sqlalchemy import Connection, func, or_, select
+from sqlalchemy import Connection, false, func, or_, select
 from sqlalchemy.engine import make_url
 from alembic.util.exc import CommandError
 from sqlalchemy.exc import DBAPIError, IntegrityError, OperationalError, SQLAlchemyError
@@ -116,8 +116,28 @@ def _check_text(name: str, value: str | None, max_len: int, *, required: bool = 
         if required:
             raise ValueError(f"{name} is required")
         return
-    if not isinstance(value, str) or not value.strip() or len(value) > max_len:
-        raise ValueError(f"{name} must be a non-blank string of at most {max_len} characters, not {value!r}")
+    if not isinstance(value, str) or not value.strip() or len(value) > max_len or "\x00" in value:
+        raise ValueError(f"{name} must be a non-blank string of at most {max_len} characters "
+                         f"(no NUL), not {value!r}")
+
+
+def _has_nul(*values) -> bool:
+    """A lookup by a text with a NUL character finds nothing: no stored text has one
+    (the store refuses them, and PostgreSQL cannot hold them), so it is not sent."""
+    return any(isinstance(v, str) and "\x00" in v for v in values)
+
+
+def _finite_json(value: Any) -> Any:
+    """A JSON document with every non-finite number as null: JSON has no NaN or
+    infinity (PostgreSQL's JSONB refuses them; SQLite would keep a non-standard token),
+    so the store keeps what any reader can parse, the same on both backends."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, Mapping):
+        return {k: _finite_json(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_finite_json(v) for v in value]
+    return value
 
 
 def _aware(name: str, t: datetime | None) -> None:
@@ -452,7 +472,7 @@ class Store:
                 s.add(Finding(inspection_id=inspection_id, **asdict(f)))
             if machine_s is not None:
                 insp.machine_s = float(machine_s)
-                insp.cycle = None if cycle is None else dict(cycle)
+                insp.cycle = None if cycle is None else _finite_json(dict(cycle))
             s.flush()
             if result == "pass":
                 verdicts = s.scalars(select(CharacteristicResult.passed)
@@ -507,6 +527,8 @@ class Store:
 
     def get(self, inspection_id: str) -> InspectionRecord:
         """An inspection with its characteristics and images; :class:`InspectionNotFound`."""
+        if _has_nul(inspection_id):
+            raise InspectionNotFound(f"no inspection {inspection_id!r}")
         with self._transaction("read an inspection", write=False) as s:
             insp = s.scalar(select(Inspection).where(Inspection.id == inspection_id)
                             .options(selectinload(Inspection.characteristics), selectinload(Inspection.images),
@@ -524,6 +546,8 @@ class Store:
             )
 
     def find_by_idempotency_key(self, key: str) -> str | None:
+        if _has_nul(key):
+            return None
         with self._transaction("look up an idempotency key", write=False) as s:
             return s.scalar(select(Inspection.id).where(Inspection.idempotency_key == key))
 
@@ -540,6 +564,8 @@ class Store:
             conds.append(Inspection.started_at >= since)
         if until is not None:
             conds.append(Inspection.started_at < until)
+        if _has_nul(part_number, serial, station):
+            return [false()]
         for column, value in ((Inspection.part_number, part_number), (Inspection.serial, serial),
                               (Inspection.result, result), (Inspection.state, state),
                               (Inspection.station_id, station)):
@@ -585,6 +611,8 @@ class Store:
         if not 1 <= limit <= MAX_PAGE or offset < 0:
             raise ValueError(f"limit must be 1..{MAX_PAGE} and offset >= 0 (got {limit}, {offset})")
         q = select(Event)
+        if _has_nul(inspection_id, kind, station):
+            return []
         if station is not None:
             q = q.where(Event.station_id == station)
         if inspection_id is not None:

@@ -68,7 +68,8 @@ def test_the_served_station_gives_the_plans_lower_bound(api):
 
 
 def test_a_stored_cycle_that_json_cannot_carry_is_null_not_a_server_error(api):
-    """A ratio to a zero lower bound is NaN; the store keeps it (SQLite), the API says null.
+    """A ratio to a zero lower bound is NaN; the store keeps it as null (JSON has no NaN:
+    PostgreSQL's JSONB refuses one), the API says null.
     An inspection without findings shows an empty list."""
     from station.store import Traceability
 

@@ -495,3 +495,20 @@ def test_database_of_a_newer_station_and_odd_traceability_are_refused(tmp_path):
             conn.exec_driver_sql("UPDATE alembic_version SET version_num = '0999'")
     with pytest.raises(StoreError, match="schema up to date: Can't locate revision"):
         Store(data_dir=data)
+
+
+def test_texts_with_nul_find_nothing_and_json_keeps_no_nan(store):
+    """Both backends alike: a NUL character is refused in stored text and finds nothing
+    in a lookup (PostgreSQL cannot hold one; a path parameter may carry one), and a
+    non-finite number in a stored JSON document becomes null (JSON has no NaN)."""
+    iid = store.begin_inspection(PART, serial="SN-NUL")
+    with pytest.raises(ValueError, match="NUL"):
+        store.begin_inspection(PART, serial="SN\x00X")
+    with pytest.raises(InspectionNotFound):
+        store.get(iid + "\x00")
+    assert store.find_by_idempotency_key("k\x00") is None
+    assert store.list_inspections(serial="SN-NUL\x00") == [] and store.count_inspections(station="a\x00") == 0
+    assert store.events(iid + "\x00") == []
+    store.finish(iid, "aborted", machine_s=1.0,
+                 cycle={"ratio": float("nan"), "parts": [float("inf"), 1.0], "lower_bound_s": 0.0})
+    assert dict(store.get(iid).cycle) == {"ratio": None, "parts": [None, 1.0], "lower_bound_s": 0.0}
