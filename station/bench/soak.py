@@ -177,7 +177,9 @@ async def _one(url: str, token: str, serial: str, pollers: int, timeout_s: float
 
 
 def run(inspections: int = 60, pollers: int = 5, time_scale: float = 20.0, warmup: float = 0.25,
-        progress: Callable[[], None] | None = None) -> SoakResult:
+        progress: Callable[[], None] | None = None, db_url: Callable[[Path], str] | None = None) -> SoakResult:
+    """``db_url(data_dir)``: the database of the served station's data folder (default:
+    SQLite in it)."""
     from station.store import Store
     from station.store.tokens import TokenRepository
 
@@ -186,9 +188,10 @@ def run(inspections: int = 60, pollers: int = 5, time_scale: float = 20.0, warmu
     res = SoakResult(warmup=max(1, int(round(warmup * inspections))))
     with tempfile.TemporaryDirectory(prefix="soak-") as tmp:
         data = Path(tmp)
-        with Store(data_dir=data) as store:
+        url = db_url(data) if db_url is not None else None
+        with Store(url, data_dir=data) as store:
             token = TokenRepository(store).create("admin", name="soak")[1]
-        with served.served(data, time_scale=time_scale) as server:
+        with served.served(data, time_scale=time_scale, extra=["--db", url] if url else None) as server:
             pid = server.proc.pid
             for i in range(inspections):
                 rec = asyncio.run(_one(server.url, token, f"SOAK-{i:04d}", pollers, 300.0))

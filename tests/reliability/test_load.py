@@ -55,10 +55,11 @@ async def _inspect_under_load(url: str, token: str, serial: str, clients: int) -
             await c.aclose()
 
 
-def test_fifty_polling_clients_see_a_consistent_record_and_change_nothing(tmp_path):
-    with Store(data_dir=tmp_path) as store:
+def test_fifty_polling_clients_see_a_consistent_record_and_change_nothing(tmp_path, db_url):
+    url = db_url(tmp_path)  # the served station's database (a child process: given explicitly)
+    with Store(url, data_dir=tmp_path) as store:
         token = TokenRepository(store).create("mes", name="load")[1]
-    with served.served(tmp_path, time_scale=20.0) as server:
+    with served.served(tmp_path, time_scale=20.0, extra=["--db", url]) as server:
         quiet = asyncio.run(_inspect_under_load(server.url, token, "LOAD-Q", 0))[0]
         final, per_client = asyncio.run(_inspect_under_load(server.url, token, "LOAD-L", 50))
     assert quiet["state"] == final["state"] == "complete"
@@ -77,7 +78,7 @@ def test_fifty_polling_clients_see_a_consistent_record_and_change_nothing(tmp_pa
             assert a["state"] == "running" and a["result"] is None
     assert any(a["state"] == "running" for a in answers) and any(a["state"] == "complete" for a in answers)
     # the record the API served last is the one in the store
-    with Store(data_dir=tmp_path, migrate=False) as store:
+    with Store(url, data_dir=tmp_path, migrate=False) as store:
         rec = store.get(final["id"])
     assert rec.result == final["result"] and len(rec.characteristics) == len(final["characteristics"])
     assert [c.measured for c in rec.characteristics] == [c["measured"] for c in final["characteristics"]]

@@ -37,8 +37,8 @@ def test_the_verdict_lets_a_pool_step_up_once():
     assert v["ok"]
 
 
-def test_repeated_inspections_leave_no_growth():
-    res = run(inspections=16, pollers=3, time_scale=50.0)
+def test_repeated_inspections_leave_no_growth(db_url):
+    res = run(inspections=16, pollers=3, time_scale=50.0, db_url=db_url)
     v = res.verdict()
     assert not v["failed"], v["failed"]
     assert v["ok"], (v, [(s["fds"], s["threads"], s["rss_kb"]) for s in res.samples])

@@ -12,6 +12,7 @@ import sqlite3
 import subprocess
 import sys
 import textwrap
+import time
 from datetime import datetime, timedelta, timezone
 from pathlib import Path
 
@@ -512,3 +513,30 @@ def test_texts_with_nul_find_nothing_and_json_keeps_no_nan(store):
     store.finish(iid, "aborted", machine_s=1.0,
                  cycle={"ratio": float("nan"), "parts": [float("inf"), 1.0], "lower_bound_s": 0.0})
     assert dict(store.get(iid).cycle) == {"ratio": None, "parts": [None, 1.0], "lower_bound_s": 0.0}
+
+
+def test_stations_starting_together_migrate_an_empty_database_once(tmp_path, empty_db_url):
+    """Four processes open one empty database at the same moment (stations starting
+    together after a plant-wide update): every one opens it, the schema is made once
+    (one revision row, the newest), none fails on another's half-made tables."""
+    url = empty_db_url(tmp_path / "shared")
+    code = textwrap.dedent(f"""
+        import sys, time
+        from station.store import Store
+        t0 = float(sys.argv[1])
+        time.sleep(max(0.0, t0 - time.time()))  # all at once
+        with Store({url!r}, data_dir=sys.argv[2]) as store:
+            print(store.count_inspections(), flush=True)
+    """)
+    start = time.time() + 3.0
+    procs = [subprocess.Popen([sys.executable, "-c", code, str(start), str(tmp_path / f"st{i}")], cwd=REPO,
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) for i in range(4)]
+    outs = [p.communicate(timeout=120) for p in procs]
+    assert [p.returncode for p in procs] == [0] * 4, [err[-800:] for _out, err in outs]
+    assert [out.strip() for out, _err in outs] == ["0"] * 4
+    engine = make_engine(url)
+    try:
+        with engine.connect() as conn:
+            assert conn.exec_driver_sql("SELECT version_num FROM alembic_version").scalars().all() == [head_revision()]
+    finally:
+        engine.dispose()
