@@ -61,11 +61,13 @@ async def get_axes(request: Request, who: auth.Principal = Depends(auth.reader))
 @router.get("/alarms")
 async def get_alarms(request: Request, limit: Annotated[int, Query(ge=1, le=1000)] = 100,
                      who: auth.Principal = Depends(auth.reader)) -> dict:
-    """Faults and alarms from the event log, newest first."""
+    """This station's faults and alarms from the event log, newest first (other stations
+    writing the same database have their own)."""
     store = runtime(request).store
     items = []
     for kind in ALARM_KINDS:
-        items += await blocking(store.events, kind=kind, limit=limit, newest_first=True)
+        items += await blocking(store.events, kind=kind, limit=limit, newest_first=True, station=store.station_id,
+                                with_unassigned=True)
     items.sort(key=lambda e: e.id, reverse=True)
     return {"items": [e.to_json() for e in items[:limit]]}
 

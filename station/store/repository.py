@@ -605,16 +605,19 @@ class Store:
                                     .distinct()))
 
     def events(self, inspection_id: str | None = None, *, kind: str | None = None, limit: int = 100,
-               offset: int = 0, newest_first: bool = False, station: str | None = None) -> list[EventRecord]:
+               offset: int = 0, newest_first: bool = False, station: str | None = None,
+               with_unassigned: bool = False) -> list[EventRecord]:
         """Events in the order they were logged (or newest first), of one inspection or
-        all (``station``: of one station)."""
+        all (``station``: of one station; ``with_unassigned``: and those logged before
+        stations had ids, which a station upgraded in place counts as its own)."""
         if not 1 <= limit <= MAX_PAGE or offset < 0:
             raise ValueError(f"limit must be 1..{MAX_PAGE} and offset >= 0 (got {limit}, {offset})")
         q = select(Event)
         if _has_nul(inspection_id, kind, station):
             return []
         if station is not None:
-            q = q.where(Event.station_id == station)
+            q = q.where(or_(Event.station_id == station, Event.station_id.is_(None)) if with_unassigned
+                        else Event.station_id == station)
         if inspection_id is not None:
             q = q.where(Event.inspection_id == inspection_id)
         if kind is not None:

@@ -540,3 +540,46 @@ def test_stations_starting_together_migrate_an_empty_database_once(tmp_path, emp
             assert conn.exec_driver_sql("SELECT version_num FROM alembic_version").scalars().all() == [head_revision()]
     finally:
         engine.dispose()
+
+
+def test_each_station_recovers_and_reads_its_own(tmp_path):
+    """Two stations on one database: a station opening the store marks its own running
+    inspections interrupted, never the other's; lists and events filter by station;
+    events older than station ids count as any station's own where asked."""
+    data = tmp_path / "data"
+    with Store(data_dir=data) as legacy:  # written before stations had ids
+        legacy.log_event("alarm", "an old alarm")
+    with Store(data_dir=data, station_id="st-a") as a, Store(data_dir=data, station_id="st-b") as b:
+        ia, ib = a.begin_inspection(PART, serial="A1"), b.begin_inspection(PART, serial="B1")
+        a.log_event("alarm", "a's alarm")
+        assert a.recover_interrupted() == [ia]  # as st-a's restart does
+        assert b.get(ib).state == "running"  # st-b's inspection runs on
+        assert [s.id for s in a.list_inspections(station="st-b")] == [ib]
+        assert a.count_inspections(station="st-a") == 1 and a.stations() == ["st-a", "st-b"]
+        assert a.get(ia).station_id == "st-a" and b.get(ib).station_id == "st-b"
+        assert [e.message for e in a.events(kind="alarm", station="st-a")] == ["a's alarm"]
+        assert [e.message for e in a.events(kind="alarm", station="st-a", with_unassigned=True)] == \
+            ["an old alarm", "a's alarm"]
+        assert [e.message for e in b.events(kind="alarm", station="st-b", with_unassigned=True)] == ["an old alarm"]
+    with pytest.raises(ValueError, match="station id"):
+        Store(data_dir=data, station_id="no spaces")
+
+
+def test_one_live_process_per_station_id(tmp_path, db_url, db_backend):
+    """Two station processes with one id would cut off each other's inspections at
+    start: the second is refused. SQLite: the data folder's file lock (one database per
+    folder). PostgreSQL: a session advisory lock per id on the shared database, across
+    data folders; another id opens, and the id is free again once its holder closes."""
+    url = db_url(tmp_path / "a")
+    first = Store.open(url, data_dir=tmp_path / "a", station_id="st-1")
+    try:
+        if db_backend == "sqlite":
+            with pytest.raises(StoreLocked, match="another station process"):
+                Store.open(url, data_dir=tmp_path / "a", station_id="st-2")
+        else:
+            with pytest.raises(StoreLocked, match="station id 'st-1'"):
+                Store.open(url, data_dir=tmp_path / "b", station_id="st-1")
+            Store.open(url, data_dir=tmp_path / "c", station_id="st-2").close()
+    finally:
+        first.close()
+    Store.open(url, data_dir=tmp_path / "b", station_id="st-1").close()
