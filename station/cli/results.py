@@ -61,13 +61,15 @@ def list_command(
     serial: Optional[str] = typer.Option(None, "--serial", help="serial number"),
     result: Optional[str] = typer.Option(None, "--result", help="pass or fail"),
     state: Optional[str] = typer.Option(None, "--state", help="running, complete, aborted, faulted, interrupted"),
+    station: Optional[str] = typer.Option(None, "--station", help="one station's id (several stations may "
+                                          "share a database: docs/plant.md)"),
     since: Optional[str] = typer.Option(None, "--since", help="started at or after (ISO 8601; UTC if no offset)"),
     until: Optional[str] = typer.Option(None, "--until", help="started before (ISO 8601; UTC if no offset)"),
     limit: int = typer.Option(50, "--limit", min=1, max=1000, help="at most this many"),
     offset: int = typer.Option(0, "--offset", min=0, help="skip this many (paging)"),
     as_json: bool = typer.Option(False, "--json", help="print exactly one JSON array on stdout"),
     data: Path = typer.Option(DEFAULT_DATA_DIR, "--data", help=_DATA_HELP),
-    db: Optional[str] = typer.Option(None, "--db", help=_DB_HELP),
+    db: Optional[str] = typer.Option(None, "--db", envvar="STATION_DB_URL", help=_DB_HELP),
 ) -> None:
     """Inspections, newest first."""
     if result is not None and result not in ("pass", "fail"):
@@ -83,9 +85,10 @@ def list_command(
     with store:
         try:
             rows = store.list_inspections(since=t_since, until=t_until, part_number=part, serial=serial,
-                                          result=result, state=state, limit=limit, offset=offset)
+                                          result=result, state=state, station=station, limit=limit,
+                                          offset=offset)
             total = store.count_inspections(since=t_since, until=t_until, part_number=part, serial=serial,
-                                            result=result, state=state)
+                                            result=result, state=state, station=station)
         except (StoreError, ValueError) as exc:
             fail(escape(str(exc)))
     if as_json:
@@ -93,10 +96,11 @@ def list_command(
         return
     table = Table(title=f"Inspections {offset + 1 if rows else 0}–{offset + len(rows)} of {total}",
                   title_justify="left")
-    for name in ("id", "started (UTC)", "part", "serial", "state", "result"):
+    for name in ("id", "station", "started (UTC)", "part", "serial", "state", "result"):
         table.add_column(name)
     for r in rows:
-        table.add_row(r.id, _when(r.started_at), r.part_number, r.serial or "–", r.state, r.result or "–")
+        table.add_row(r.id, r.station_id or "–", _when(r.started_at), r.part_number, r.serial or "–", r.state,
+                      r.result or "–")
     out_console.print(table)
 
 
@@ -105,7 +109,7 @@ def show_command(
     inspection_id: str = typer.Argument(..., help="inspection id"),
     as_json: bool = typer.Option(False, "--json", help="print exactly one JSON object on stdout"),
     data: Path = typer.Option(DEFAULT_DATA_DIR, "--data", help=_DATA_HELP),
-    db: Optional[str] = typer.Option(None, "--db", help=_DB_HELP),
+    db: Optional[str] = typer.Option(None, "--db", envvar="STATION_DB_URL", help=_DB_HELP),
 ) -> None:
     """One inspection: header, characteristics with limits, image crops, events."""
     store = _open(data, db)

@@ -14,7 +14,8 @@ token_app = typer.Typer(help="API tokens of the REST API (stored hashed in the r
                         no_args_is_help=True)
 
 DataOpt = typer.Option(Path("var"), "--data", help="data folder of the station (its database)")
-DbOpt = typer.Option(None, "--db", help="database URL (default: SQLite in the data folder)")
+DbOpt = typer.Option(None, "--db", envvar="STATION_DB_URL",
+                     help="database URL (default: SQLite in the data folder; also $STATION_DB_URL)")
 ExpiresHelp = ("when the token stops working: a duration (90d, 12w, 24h, 30m; s m h d w), an ISO date or "
                "date and time (2027-01-31, 2027-01-31T18:00+01:00; UTC without an offset), or 'never'")
 

@@ -437,6 +437,8 @@ def test_cli_results_list_and_show(tmp_path, spec):
     assert [r["serial"] for r in json.loads(listed.stdout)] == ["SN-B", "SN-A"]
     failed = runner.invoke(app, ["results", "list", "--data", str(data), "--result", "fail", "--json"])
     assert [r["id"] for r in json.loads(failed.stdout)] == [b]
+    by_station = runner.invoke(app, ["results", "list", "--data", str(data), "--station", "nowhere", "--json"])
+    assert by_station.exit_code == 0 and json.loads(by_station.stdout) == []
     limited = runner.invoke(app, ["results", "list", "--data", str(data), "--limit", "1", "--serial", "SN-A"])
     assert limited.exit_code == 0 and "SN-A" in limited.stdout and "SN-B" not in limited.stdout
 
