@@ -47,7 +47,7 @@ import numpy as np
 from station.calibration.artefact import ArtefactCertificate
 from station.effects import ErrorCurve
 from station.kinematics.model import StationModel
-from station.kinematics.rigid import adjoint_apply
+from station.kinematics.rigid import RAD_PER_ARCSEC, adjoint_apply
 from station.kinematics.parameters import COMPONENT_UNITS, TO_SI, ErrorMotions, SixDof, motion_names
 
 #: the vision stage's standard uncertainty of a hole centre on the wall, um
@@ -250,40 +250,11 @@ def jacobian(par: Parameterisation, design: Sightings, n_targets: int, radius_mm
     Rows: grating (M), tangential (K), axial (K). Columns: the model parameters
     (``par.names``, per um or arcsec), then each target's axial deviation (um), then
     each target's tangential deviation (um)."""
-    base = par.base.without_errors()
     z, c = design.z_mm, design.c_deg
     M, K = z.size, design.pose.size
-    S = base.sensitivity(z, c)  # (M, 9, P_full), per mm or rad
-    # the detection point's displacement -> its axial and angular coordinates (part_coordinates)
-    D = np.asarray(base.endoscope_offset_mm) - np.asarray(base.table_offset_mm)
-    q = base.ideal_point_mm(z, c)[:, :2] + D[:2]
-    q2 = (q ** 2).sum(axis=1)
-    d_axial_mm = S[:, 8, :]
-    d_angle_rad = -(q[:, 0, None] * S[:, 7, :] - q[:, 1, None] * S[:, 6, :]) / q2[:, None]
-    # columns of the full model -> our parameters (static as is; motions through the node basis)
-    block_col = {}
-    col = 0
-    for body, is_motion, _ in base.parameter_blocks():
-        block_col[(body, is_motion)] = col
-        col += 6
-    bases = {b: par.basis(b, z if par.kind_of(b) == "linear" else c) for b in base.joint_bodies}
+    eff = pose_effects(par, z, c, radius_mm)
+    A_ax, A_an, G = eff["axial_um"], eff["tangential_um"], eff["grating_um"]
     P = par.size
-    A_ax = np.zeros((M, P))  # d axial_dp [um] / d parameter
-    A_an = np.zeros((M, P))  # d (r * angle_dp) [um] / d parameter
-    G = np.zeros((M, P))  # d grating [um] / d parameter
-    for j, s in enumerate(par.slots):
-        if s[0] == "static":
-            k = block_col[(s[1], False)] + s[2]
-            w = TO_SI[s[2]]
-            A_ax[:, j] = d_axial_mm[:, k] * w * 1e3
-            A_an[:, j] = radius_mm * d_angle_rad[:, k] * w * 1e3
-        else:
-            k = block_col[(s[1], True)] + s[2]
-            w = TO_SI[s[2]] * bases[s[1]][:, s[3]]
-            A_ax[:, j] = d_axial_mm[:, k] * w * 1e3
-            A_an[:, j] = radius_mm * d_angle_rad[:, k] * w * 1e3
-            if s[1] == par.z_body and s[2] == 2:  # EZZ: the grating reads the carriage
-                G[:, j] = bases[s[1]][:, s[3]]
     T = n_targets
     J = np.zeros((M + 2 * K, P + 2 * T))
     J[:M, :P] = G
@@ -294,6 +265,47 @@ def jacobian(par: Parameterisation, design: Sightings, n_targets: int, radius_mm
     J[rows_a, P + design.target] = 1.0
     J[rows_t, P + T + design.target] = 1.0
     return J
+
+
+def pose_effects(par: Parameterisation, z_mm, c_deg, radius_mm: float) -> dict[str, np.ndarray]:
+    """First-order effect of each parameter (per um or arcsec) at poses, (M, P) each:
+    the detection point's axial, tangential (arc at ``radius_mm``) and radial
+    displacement in the part (um), the grating's reading (um), and the rotation of the
+    endoscope relative to the part about x, y, z (arcsec). From the model's closed-form
+    ``sensitivity`` and the chain rule of ``part_coordinates``."""
+    base = par.base.without_errors()
+    z = np.atleast_1d(np.asarray(z_mm, dtype=float))
+    c = np.atleast_1d(np.asarray(c_deg, dtype=float))
+    S = base.sensitivity(z, c)  # (M, 9, P_full), per mm or rad
+    D = np.asarray(base.endoscope_offset_mm) - np.asarray(base.table_offset_mm)
+    q = base.ideal_point_mm(z, c)[:, :2] + D[:2]
+    rq = np.sqrt((q ** 2).sum(axis=1))[:, None]
+    d_axial_mm = S[:, 8, :]
+    d_angle_rad = -(q[:, 0, None] * S[:, 7, :] - q[:, 1, None] * S[:, 6, :]) / rq ** 2
+    d_radial_mm = (q[:, 0, None] * S[:, 6, :] + q[:, 1, None] * S[:, 7, :]) / rq
+    block_col = {}
+    col = 0
+    for body, is_motion, _ in base.parameter_blocks():
+        block_col[(body, is_motion)] = col
+        col += 6
+    bases = {b: par.basis(b, z if par.kind_of(b) == "linear" else c) for b in base.joint_bodies}
+    M, P = z.size, par.size
+    out = {k: np.zeros((M, P)) for k in ("axial_um", "tangential_um", "radial_um", "grating_um")}
+    out["rotation_arcsec"] = np.zeros((M, 3, P))
+    for j, s in enumerate(par.slots):
+        if s[0] == "static":
+            k = block_col[(s[1], False)] + s[2]
+            w = np.full(M, TO_SI[s[2]])
+        else:
+            k = block_col[(s[1], True)] + s[2]
+            w = TO_SI[s[2]] * bases[s[1]][:, s[3]]
+            if s[1] == par.z_body and s[2] == 2:  # EZZ: the grating reads the carriage
+                out["grating_um"][:, j] = bases[s[1]][:, s[3]]
+        out["axial_um"][:, j] = d_axial_mm[:, k] * w * 1e3
+        out["tangential_um"][:, j] = radius_mm * d_angle_rad[:, k] * w * 1e3
+        out["radial_um"][:, j] = d_radial_mm[:, k] * w * 1e3
+        out["rotation_arcsec"][:, :, j] = S[:, 3:6, k] * w[:, None] / RAD_PER_ARCSEC
+    return out
 
 
 # ====================================================================== least squares
