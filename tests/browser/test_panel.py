@@ -173,6 +173,36 @@ def test_an_unexpected_hole_is_a_warning_among_the_findings(browser, stray_stati
         assert not page.problems, page.problems
 
 
+def test_the_results_page_filters_by_station(page, station):
+    """Another station writes the same database (docs/plant.md): the results page lists
+    both stations' records with a Station column, its Station filter shows one station's,
+    and the operation page's recent parts are this station's own."""
+    from station.store import Store
+
+    with Store(data_dir=station.data_dir, station_id="line2-st1") as other:  # as that station's store writes
+        iid = other.begin_inspection(PART, serial="SN-OTHER-STATION")
+        other.finish(iid, "aborted", reason="aborted on line 2")
+    login(page, station.tokens["operator"])
+    expect(page.locator("#recent tbody tr", has_text="SN-OTHER-STATION")).to_have_count(0)
+    page.click("nav.tabs button[data-view=results]")
+    options = page.locator("#filter-station option")
+    expect(options).to_contain_text(["all", "line2-st1", "station (this station)"])
+    rows = page.locator("#results tbody tr")
+    expect(rows.filter(has_text="SN-OTHER-STATION")).to_have_count(1)
+    page.select_option("#filter-station", "line2-st1")
+    page.click("#filter-apply")
+    expect(rows).to_have_count(1)
+    expect(rows.first.locator("td").nth(1)).to_have_text("line2-st1")
+    rows.first.click()
+    expect(page.locator("#result-detail .part-info")).to_contain_text("station line2-st1")
+    page.select_option("#filter-station", "station")
+    page.click("#filter-apply")
+    expect(rows.filter(has_text="SN-OTHER-STATION")).to_have_count(0)
+    expect(rows.first.locator("td").nth(1)).to_have_text("station")
+    screenshot(page, "results-by-station")
+    assert not page.problems, page.problems
+
+
 def test_axis_error_plots_and_discovery_reports(page, station):
     from station.discovery.synth import Campaign, linear_model, make_recording
     from station.effects import Backlash
