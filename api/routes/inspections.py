@@ -20,14 +20,14 @@ from fastapi import APIRouter, Depends, Header, HTTPException, Query, Request, R
 from pydantic import BaseModel, ConfigDict, Field
 
 from api import auth
-from api.qif import qif_bytes
 from api.routes.common import blocking, runtime
 from api.routes.parts import load_by_number
 from api.runtime import Busy
 from station import __version__
+from station.exports.qif import finished_qif_bytes
 from station.parts import PartSpecError
 from station.parts.spec import PART_NUMBER_PATTERN
-from station.store import InspectionNotFound, StoreError
+from station.store import InspectionNotFound, InspectionStateError, StoreError
 
 router = APIRouter(prefix="/api/v1", tags=["job orders and inspections"])
 
@@ -136,9 +136,10 @@ async def get_inspection(inspection_id: str, request: Request, who: auth.Princip
 async def get_inspection_qif(inspection_id: str, request: Request,
                              who: auth.Principal = Depends(auth.reader)) -> Response:
     rec = await _get_record(request, inspection_id)
-    if rec.state == "running":
-        raise HTTPException(status.HTTP_409_CONFLICT, f"inspection {inspection_id} is still running: no results yet")
-    body = qif_bytes(rec, software_version=__version__)
+    try:
+        body = finished_qif_bytes(rec, software_version=__version__)  # station/exports/qif.py
+    except InspectionStateError as exc:  # still running: no results yet
+        raise HTTPException(status.HTTP_409_CONFLICT, str(exc)) from None
     return Response(body, media_type="application/xml",
                     headers={"Content-Disposition": f'inline; filename="{inspection_id}.qif"'})
 

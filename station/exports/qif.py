@@ -1,5 +1,9 @@
 """An inspection record as a QIF 3.0 results document (namespace ``http://qifstandards.org/xsd/qif3``).
 
+A domain export: it reads only the record (:class:`station.store.InspectionRecord`)
+and knows nothing of the REST API or the CLI, which both serve it
+(``GET /api/v1/inspections/{id}/qif``, ``station results qif ID``).
+
 Why QIF: the plant's quality systems read measurement results as QIF, the ANSI/ISO
 standard that carries a characteristic's definition (tolerance), nominal, item and
 measurement together, so a result keeps its meaning outside the station.
@@ -67,6 +71,8 @@ import uuid
 import xml.etree.ElementTree as ET
 from datetime import datetime
 from typing import Any
+
+from station.store.errors import InspectionStateError
 
 QIF_NS = "http://qifstandards.org/xsd/qif3"
 QIF_VERSION = "3.0.0"
@@ -296,3 +302,12 @@ def qif_bytes(record: Any, *, software_version: str = "") -> bytes:
     tree = ET.ElementTree(qif_document(record, software_version=software_version))
     ET.indent(tree)
     return ET.tostring(tree.getroot(), encoding="utf-8", xml_declaration=True)
+
+
+def finished_qif_bytes(record: Any, *, software_version: str = "") -> bytes:
+    """:func:`qif_bytes` of a finished inspection (complete, aborted, faulted or
+    interrupted); a running one has no results yet: :class:`InspectionStateError`
+    (the REST route answers it with 409, the CLI with an error)."""
+    if record.state == "running":
+        raise InspectionStateError(f"inspection {record.id} is still running: no results yet")
+    return qif_bytes(record, software_version=software_version)
