@@ -46,6 +46,17 @@ def paper_data(shared_dir) -> Path:
 
 
 @pytest.fixture(scope="session")
+def qif_schema(shared_dir):
+    """The official QIF 3.0 schemas (``shared/schemas/qif3``), loaded once per run: it
+    takes seconds, and the REST tests and the CLI's tests validate against them both."""
+    import xmlschema
+
+    d = shared_dir / "schemas" / "qif3"
+    return xmlschema.XMLSchema(str(d / "QIFDocument.xsd"),
+                               locations={"http://www.w3.org/2000/09/xmldsig#": str(d / "xmldsig-core-schema.xsd")})
+
+
+@pytest.fixture(scope="session")
 def pg_cluster(tmp_path_factory):
     """A PostgreSQL server of the test run's own (started on first use)."""
     from pgcluster import PgCluster

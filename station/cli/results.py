@@ -1,4 +1,4 @@
-"""``station results list / show``: what the results store holds.
+"""``station results list / show / qif``: what the results store holds.
 
 These commands only read: they open the store without taking the station's owner
 lock and without recovering interrupted inspections (that is the running station's
@@ -7,6 +7,7 @@ job), and a data folder without a database stays without one.
 
 from __future__ import annotations
 
+import sys
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Optional
@@ -15,11 +16,13 @@ import typer
 from rich.markup import escape
 from rich.table import Table
 
+from station import __version__
 from station.cli.common import err_console, fail, out_console, print_json
-from station.store import DEFAULT_DATA_DIR, InspectionNotFound, Store, StoreError
+from station.exports.qif import finished_qif_bytes
+from station.store import DEFAULT_DATA_DIR, InspectionNotFound, InspectionStateError, Store, StoreError
 from station.store.engine import default_url, sqlite_file
 
-results_app = typer.Typer(help="Inspection results: list and show.", no_args_is_help=True)
+results_app = typer.Typer(help="Inspection results: list, show, QIF.", no_args_is_help=True)
 
 _DATA_HELP = "data folder holding station.db and images/"
 _DB_HELP = "database URL (default: sqlite in the data folder; postgresql+psycopg://... for a server)"
@@ -145,6 +148,38 @@ def show_command(
         out_console.print(f"image {i.subject}: {i.path} (sha256 {i.sha256[:16]}…)", highlight=False, markup=False)
     for e in events:
         out_console.print(f"{_when(e.at)}  {e.kind}: {e.message}", highlight=False, markup=False)
+
+
+@results_app.command("qif")
+def qif_command(
+    inspection_id: str = typer.Argument(..., help="inspection id"),
+    out: Optional[Path] = typer.Option(None, "--out", help="write the document to this file (default: stdout)"),
+    data: Path = typer.Option(DEFAULT_DATA_DIR, "--data", help=_DATA_HELP),
+    db: Optional[str] = typer.Option(None, "--db", envvar="STATION_DB_URL", help=_DB_HELP),
+) -> None:
+    """A finished inspection as a QIF 3.0 results document (the same bytes as the REST
+    API's GET /api/v1/inspections/ID/qif); a running one has no results yet."""
+    store = _open(data, db)
+    if store is None:
+        fail(f"no inspection {inspection_id!r}: no results store in {data} yet")
+    with store:
+        try:
+            rec = store.get(inspection_id)
+        except StoreError as exc:  # InspectionNotFound among them
+            fail(escape(str(exc)))
+    try:
+        body = finished_qif_bytes(rec, software_version=__version__)
+    except InspectionStateError as exc:
+        fail(escape(str(exc)))
+    if out is None:
+        sys.stdout.buffer.write(body)
+        sys.stdout.flush()
+        return
+    try:
+        out.write_bytes(body)
+    except OSError as exc:
+        fail(escape(f"cannot write {out}: {exc}"))
+    err_console.print(f"QIF of inspection {rec.id} written to {out}", highlight=False, markup=False)
 
 
 def register(app: typer.Typer) -> None:

@@ -1,6 +1,6 @@
 """Part specs through the API, and QIF 3.0 results validated against the official
 schemas (shared/schemas/qif3) for a passing and a failing inspection, with the scan's
-findings as noted events."""
+findings as noted events. The schemas are the ``qif_schema`` fixture of tests/conftest.py."""
 
 from __future__ import annotations
 
@@ -8,7 +8,6 @@ import tomllib
 import xml.etree.ElementTree as ET
 
 import pytest
-import xmlschema
 
 from tests.api.conftest import PART, wait_done, wait_idle
 
@@ -27,13 +26,6 @@ TIGHT = {
          "position": {"nominal": 85.19, "tol": 0.1}},
     ],
 }
-
-
-@pytest.fixture(scope="session")
-def qif_schema(shared_dir):
-    d = shared_dir / "schemas" / "qif3"
-    return xmlschema.XMLSchema(str(d / "QIFDocument.xsd"),
-                               locations={"http://www.w3.org/2000/09/xmldsig#": str(d / "xmldsig-core-schema.xsd")})
 
 
 def test_put_part_stores_toml_that_load_part_finds(api):
