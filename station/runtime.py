@@ -134,6 +134,34 @@ class Station:
         finally:
             self.world.part = saved
 
+    @contextlib.contextmanager
+    def artefact_on_table(self, cert, *, seed: int = 0):
+        """The calibration artefact (an ``ArtefactCertificate``) on the table for a
+        self-calibration run (docs/calibration.md). On hardware the operator has put it
+        there; in simulation the twin's world holds the artefact (its targets made within
+        the certificate's U, ``sim.masters.artefact_part``) until the block ends, then the
+        production part again."""
+        if self.world is None:
+            yield
+            return
+        from sim.masters import artefact_part
+
+        saved = self.world.part
+        self.world.part = artefact_part(cert, seed=seed)
+        try:
+            yield
+        finally:
+            self.world.part = saved
+
+    def world_model_now(self):
+        """Simulation only: the world's true error model as its drift has left it now
+        (ground truth, for annotating results; never an input to a measurement); None
+        on hardware."""
+        if self.world is None or self.twins is None:
+            return None
+        z = self.twins.station.physics["Z"]
+        return self.world.effective_model(z.now())
+
     async def connect(self) -> None:
         for dev in (self.z, self.c, self.encoder, self.camera):
             if dev is None:
