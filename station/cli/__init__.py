@@ -21,7 +21,7 @@ app = typer.Typer(
 )
 
 #: modules under station.cli that add commands; each defines register(app)
-_COMMAND_MODULES = ("inspect", "gauge", "paper", "scanlog", "model", "iso230", "compensation", "bench", "vision", "sim", "discover", "demo", "parts", "results", "serve", "token", "campaign")
+_COMMAND_MODULES = ("inspect", "gauge", "paper", "scanlog", "model", "iso230", "compensation", "bench", "vision", "sim", "discover", "demo", "parts", "results", "serve", "token", "campaign", "calibrate")
 
 
 def _register_all() -> None:
