@@ -122,17 +122,13 @@ class Station:
         """The certified master on the table for a check. On hardware the operator has
         put it there; in simulation the twin's world holds the master (made within its
         certificate, ``sim.masters``) until the block ends, then the production part again."""
-        if self.world is None:
-            yield
-            return
-        from sim.masters import master_part
+        def make():
+            from sim.masters import master_part
 
-        saved = self.world.part
-        self.world.part = master_part(cert, bore_diameter_mm=bore_diameter_mm, seed=seed)
-        try:
+            return master_part(cert, bore_diameter_mm=bore_diameter_mm, seed=seed)
+
+        with self._part_on_table(make):
             yield
-        finally:
-            self.world.part = saved
 
     @contextlib.contextmanager
     def artefact_on_table(self, cert, *, seed: int = 0):
@@ -141,13 +137,23 @@ class Station:
         there; in simulation the twin's world holds the artefact (its targets made within
         the certificate's U, ``sim.masters.artefact_part``) until the block ends, then the
         production part again."""
+        def make():
+            from sim.masters import artefact_part
+
+            return artefact_part(cert, seed=seed)
+
+        with self._part_on_table(make):
+            yield
+
+    @contextlib.contextmanager
+    def _part_on_table(self, make):
+        """Simulation: the world holds ``make()``'s part until the block ends, then its
+        production part again; on hardware nothing to do (the operator placed it)."""
         if self.world is None:
             yield
             return
-        from sim.masters import artefact_part
-
         saved = self.world.part
-        self.world.part = artefact_part(cert, seed=seed)
+        self.world.part = make()
         try:
             yield
         finally:
