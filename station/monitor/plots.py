@@ -25,6 +25,11 @@ def write_proposal_plot(p, path: Path) -> Path | None:
     error_um, u_um); None when it has none to show. After a step, the checks before it
     were another state of the machine: the right-hand side shows the change on the
     checks since the step (the earlier ones in grey, as they were)."""
+    if (p.explanation or {}).get("kind") == "calibration":
+        # a self-calibration's proposal: its curves before and after (it takes the lock)
+        from station.calibration.proposal import write_calibration_plot
+
+        return write_calibration_plot(p, path)
     pts = (p.explanation or {}).get("points") or []
     if not pts:
         return None

@@ -49,6 +49,8 @@ class Change:
     term: str
     delta: float
     why: str = ""
+    #: the change's standard uncertainty, when it was measured with one (self-calibration)
+    u: float | None = None
 
     def apply(self, model: StationModel) -> StationModel:
         if self.term.startswith("motion."):
@@ -56,6 +58,11 @@ class Change:
             from station.checks.axis import apply_motion_change
 
             return apply_motion_change(model, self)
+        if self.term.startswith("node."):
+            # an error-motion curve at one node of a self-calibration (station.calibration.proposal)
+            from station.calibration.proposal import apply_node_change
+
+            return apply_node_change(model, self)
         if self.term == SCALE_TERM:
             return model  # the part's, not the machine's: ``part_scale_ppm`` (session settings)
         section, body, key = self.term.split(".")

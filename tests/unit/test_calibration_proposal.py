@@ -1,0 +1,88 @@
+"""A self-calibration's result as a model proposal (issue 21, stage 3): only the
+observable parameters change (each with its u), the unobservable ones keep the
+station's values, the picture is written, and the approval flow applies it."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from station.calibration.artefact import load_artefact
+from station.calibration.identify import Observations, identify, predict
+from station.calibration.observability import analyse
+from station.calibration.planner import candidate_poses
+from station.calibration.proposal import apply_node_change, calibration_proposal, node_term
+from station.calibration.run import artefact_parameterisation
+from station.kinematics.model import load_model
+from station.monitor.proposals import Change, ProposalBook, ProposalError, apply_changes
+
+
+@pytest.fixture(scope="module")
+def outcome():
+    """Synthetic sightings of a world 2 um / 2 arcsec away from the station's model in
+    every parameter, identified on the artefact's ring nodes (as a run does)."""
+    model = load_model()
+    cert = load_artefact("CA-22.2-5x8")
+    par = artefact_parameterisation(model, cert)
+    cand = candidate_poses(cert)
+    rng = np.random.default_rng(7)
+    truth = par.values_from_model(model) + rng.normal(0.0, 2.0, par.size)
+    ax, ang = cert.certified_axial_mm(), cert.certified_angle_deg()
+    y = predict(par, truth, cand, ax, ang, cert.radius_mm)
+    M, K = cand.z_mm.size, cand.pose.size
+    y = y + np.r_[rng.normal(0, 0.05, M), rng.normal(0, 1.0, 2 * K)]
+    res = identify(par, model, cert, Observations(cand, y[:M], y[M:M + K], y[M + K:]))
+    rep = analyse(par, cert, cand)
+    return SimpleNamespace(par=par, result=res, report=rep), model
+
+
+def test_only_observable_parameters_change(outcome, tmp_path):
+    out, model = outcome
+    par, res = out.par, out.result
+    p = calibration_proposal(out, "base@0", artefact_id="CA-22.2-5x8")
+    obs = res.observable[:par.size]
+    seat = np.array([s[0] == "static" and s[1] == "M" for s in par.slots])
+    assert len(p.changes) == int((obs & ~seat).sum()) >= 13
+    assert all(c.u is not None and c.u > 0 for c in p.changes)
+    assert all(c.term.startswith(("node.", "installation.")) for c in p.changes)
+    assert "keep the station's current values" in p.explanation["description"]
+
+    before = par.values_from_model(model)
+    after = par.values_from_model(apply_changes(model, p.changes))
+    keep = obs & ~seat
+    assert np.allclose(after[keep], res.value[:par.size][keep], atol=1e-6)
+    assert np.allclose(after[~keep], before[~keep], atol=1e-6)  # unobservable (and the seat) unchanged
+
+    # the approval flow: kept with its picture, approved, applied at the next start
+    book = ProposalBook(tmp_path)
+    book.add(p)
+    png = book.plot_path(p.id)
+    assert png.is_file() and png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert {c["name"] for c in p.explanation["curves"]} >= {"EZZ", "EBZ", "EAC"}
+    book.decide(p.id, True, "engineer")
+    again = par.values_from_model(apply_changes(model, book.approved_changes()))
+    assert np.allclose(again, after, atol=1e-9)
+
+
+def test_node_change_is_the_nodes_hat(outcome):
+    """A node change moves its node by delta, its neighbours' nodes not at all, and the
+    curve between them linearly; on a rotary axis across the turn's end too."""
+    out, model = outcome
+    par = out.par
+    z = model.motions_of(par.z_body).z
+    m1 = apply_node_change(model, Change(node_term(par.z_body, "EZZ", 42.5, 10.0, 75.0), 2.0))
+    z1 = m1.motions_of(par.z_body).z
+    x = np.array([10.0, 26.25, 42.5, 75.0, 140.0])
+    assert np.allclose(z1.evaluate(x) - z.evaluate(x), [0.0, 1.0, 2.0, 0.0, 0.0], atol=1e-9)
+    m2 = apply_node_change(model, Change(node_term(par.z_body, "EZZ", 140.0, 107.5, None), 1.0))
+    d = m2.motions_of(par.z_body).z.evaluate(np.array([107.5, 140.0, 150.0])) - z.evaluate(np.array([107.5, 140.0, 150.0]))
+    assert np.allclose(d, [0.0, 1.0, 1.0], atol=1e-9)
+    c = model.motions_of(par.c_body).a
+    m3 = apply_node_change(model, Change(node_term(par.c_body, "EAC", 315.0, 270.0, 360.0), 4.0))
+    xc = np.array([0.0, 270.0, 292.5, 315.0, 337.5, 359.0, 45.0])
+    dc = m3.motions_of(par.c_body).a.evaluate(xc) - c.evaluate(xc)
+    assert np.allclose(dc, [0.0, 0.0, 2.0, 4.0, 2.0, 4.0 / 45.0, 0.0], atol=1e-9)
+    with pytest.raises(ProposalError):
+        apply_node_change(model, Change("node.Z.EZZ(at=42.5)", 1.0))
