@@ -268,7 +268,7 @@ def _draw(p: Proposal, curves: list[dict], path: Path) -> Path:
     for ax in list(axes.flat)[n:]:
         ax.axis("off")
     axes.flat[0].legend(loc="best", fontsize=7)
-    fig.suptitle(f"proposal {p.id}: self-calibration, {len(p.changes)} observable parameter(s) changed",
+    fig.suptitle(f"proposal {p.id}: self-calibration\n{len(p.changes)} observable parameter(s) changed, the rest kept",
                  fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=80)

@@ -10,6 +10,7 @@ offsets. C's nodes are the targets' angles (every 45 deg for CA-22.2-5x8).
 
 from __future__ import annotations
 
+import asyncio
 import time
 from dataclasses import dataclass
 
@@ -39,16 +40,16 @@ class CalibrationOutcome:
     truth: np.ndarray | None
     wall_s: float
 
-    def to_json(self) -> dict:
-        """The issue's output contract; ``model_version`` is null until an identified
-        model goes through the approval flow (not built yet)."""
+    def to_json(self, model_version: str | None = None) -> dict:
+        """The issue's output contract; ``model_version``: the id of the model proposal
+        made from this result (``station.calibration.proposal``), null when none was made."""
         rep = self.report.to_dict()
         return {
             "parameters": self.result.parameters(self.truth),
             "observability": {"rank": rep["rank"], "n_parameters": rep["n_parameters"],
                               "condition": rep["condition"], "unobservable": rep["unobservable"]},
             "residual_rms_um": self.result.residual_rms_um,
-            "model_version": None,
+            "model_version": model_version,
             "chi2_per_dof": self.result.chi2_per_dof,
             "poses": int(self.run.observations.design.z_mm.size),
             "sightings": int(self.run.observations.design.pose.size),
@@ -77,8 +78,10 @@ async def calibrate(session, cert: ArtefactCertificate, *, n_poses: int = 40, se
     if run.missed:
         say(f"{len(run.missed)} sighting(s) not found: " + ", ".join(f"{x['target']}" for x in run.missed[:5]))
     say("identifying")
-    res = identify(par, st.model, cert, run.observations, sigma_grating_um=SIGMA_GRATING_RUN_UM)
-    rep = analyse(par, cert, run.observations.design, candidate_poses=cand if suggestions else None,
-                  sigma_grating_um=SIGMA_GRATING_RUN_UM)
+    # off the event loop: it carries the drives' heartbeats (seconds of linear algebra)
+    res = await asyncio.to_thread(identify, par, st.model, cert, run.observations,
+                                  sigma_grating_um=SIGMA_GRATING_RUN_UM)
+    rep = await asyncio.to_thread(analyse, par, cert, run.observations.design,
+                                  candidate_poses=cand if suggestions else None, sigma_grating_um=SIGMA_GRATING_RUN_UM)
     truth = None if truth_model is None else par.values_from_model(truth_model)
     return CalibrationOutcome(par, res, rep, run, cycle, truth, time.perf_counter() - t0)

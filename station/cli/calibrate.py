@@ -27,6 +27,8 @@ def register(app: typer.Typer) -> None:
         time_scale: float = typer.Option(20.0, "--time-scale", help="simulation: moves this much faster"),
         seed: int = typer.Option(0, "--seed", help="simulation: the artefact's making"),
         json: bool = typer.Option(False, "--json", help="one JSON object on stdout"),
+        propose: bool = typer.Option(False, "--propose", help="make a model proposal of the observable parameters "
+                                     "(approve it with station model approve)"),
     ) -> None:
         """Measure the artefact at planned (Z, C) poses with the camera and the grating,
         identify the error model's parameters with the certificate as prior, and report
@@ -56,15 +58,25 @@ def register(app: typer.Typer) -> None:
 
         async def go():
             async with open_session(config, scenario=scenario, time_scale=time_scale, data_dir=data) as s:
-                return await calibrate(s, cert, n_poses=poses, seed=seed, progress=say)
+                outcome = await calibrate(s, cert, n_poses=poses, seed=seed, progress=say)
+                proposal = None
+                if propose:
+                    from station.calibration.proposal import propose_from_calibration
+                    from station.monitor.proposals import ProposalError
+
+                    try:
+                        proposal = await propose_from_calibration(s, outcome, cert.artefact_id)
+                    except ProposalError as exc:
+                        say(f"no model proposal: {exc}")
+                return outcome, proposal
 
         try:
-            res = asyncio.run(go())
+            res, proposal = asyncio.run(go())
         except PlanEnded as exc:
             fail(f"the calibration run did not complete: {exc}", 2)
         except (ConfigError, StoreError, DriverError, OSError, ValueError) as exc:
             fail(str(exc), 2)
-        doc = res.to_json()
+        doc = res.to_json(model_version=None if proposal is None else proposal.id)
         try:
             out.mkdir(parents=True, exist_ok=True)
             full = {**doc, "artefact": {"id": cert.artefact_id, "certificate": cert.certificate},
@@ -82,6 +94,9 @@ def register(app: typer.Typer) -> None:
             f"{sum(p['observable'] for p in doc['parameters'])} model parameters observable, residual rms "
             f"{doc['residual_rms_um']:.2f} um, machine time "
             + ("unknown" if doc["machine_s"] is None else f"{doc['machine_s']:.0f} s") + f"; files in {out}/")
+        if proposal is not None:
+            say(f"model proposal {proposal.id}: {len(proposal.changes)} observable parameter(s) changed, the rest kept "
+                f"(station model proposals --data {data}; approve with station model approve)")
         if json:
             print_json(doc)
             return
