@@ -19,7 +19,7 @@ from fastapi.responses import JSONResponse, RedirectResponse
 from fastapi.staticfiles import StaticFiles
 
 from api import logsafe, openapi_links
-from api.routes import assets, inspections, live, monitor, ops, parts, reports, session, station, tokens
+from api.routes import assets, calibrate, inspections, live, monitor, ops, parts, reports, session, station, tokens
 from api.runtime import StationRuntime
 from api.settings import Settings
 from station import __version__
@@ -77,7 +77,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
 
     app.add_middleware(SecurityHeaders)
 
-    for module in (inspections, station, monitor, parts, assets, reports, live, ops, session, tokens):
+    for module in (inspections, station, monitor, calibrate, parts, assets, reports, live, ops, session, tokens):
         app.include_router(module.router)
 
     @app.get("/", include_in_schema=False)

@@ -76,6 +76,7 @@ POLICY: dict[tuple[str, str], frozenset[str] | str] = {
     ("GET", "/api/v1/events"): ANY,
     ("GET", "/api/v1/camera.mjpg"): ANY,
     ("GET", "/api/v1/checks/{check_id}"): ANY,
+    ("GET", "/api/v1/calibrations/master/{run_id}"): ANY,
     ("GET", "/api/v1/model-proposals"): ANY,
     ("GET", "/api/v1/model-proposals/{proposal_id}"): ANY,
     ("GET", "/api/v1/model-proposals/{proposal_id}/plot"): ANY,
@@ -91,6 +92,8 @@ POLICY: dict[tuple[str, str], frozenset[str] | str] = {
     ("POST", "/api/v1/models/{version}/activate"): roles("engineer"),
     ("POST", "/api/v1/calibrations"): roles("engineer"),
     ("POST", "/api/v1/calibrations/{version}/activate"): roles("engineer"),
+    # a self-calibration on the artefact: the station's model is an engineer's
+    ("POST", "/api/v1/calibrations/master"): roles("engineer"),
     ("POST", "/api/v1/reports/iso230"): roles("engineer"),
     ("POST", "/api/v1/reports/discovery"): roles("engineer"),
     # a client swaps its own token (a panel session has none of its own: 400)
@@ -120,6 +123,9 @@ PROBES: dict[tuple[str, str], list[Probe]] = {
     ("POST", "/api/v1/job-orders"): [Probe("/api/v1/job-orders",
                                            {"json": {"part_number": "NO-SUCH-PART", "serial": "S"}})],
     ("GET", "/api/v1/checks/{check_id}"): [Probe(f"/api/v1/checks/{uuid.uuid4()}")],
+    ("GET", "/api/v1/calibrations/master/{run_id}"): [Probe("/api/v1/calibrations/master/0123456789ab")],
+    # 422: poses below 1 (validated only after the caller is admitted)
+    ("POST", "/api/v1/calibrations/master"): [Probe("/api/v1/calibrations/master", {"json": {"poses": 0}})],
     ("GET", "/api/v1/model-proposals/{proposal_id}"): [Probe("/api/v1/model-proposals/0123456789ab")],
     ("GET", "/api/v1/model-proposals/{proposal_id}/plot"): [Probe("/api/v1/model-proposals/0123456789ab/plot")],
     # 422: no such kind of check; 404: no such proposal
