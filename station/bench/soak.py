@@ -165,7 +165,10 @@ async def _one(url: str, token: str, serial: str, pollers: int, timeout_s: float
         deadline = time.monotonic() + timeout_s
         try:
             while True:
-                rec = (await c.get(path)).json()
+                r = await c.get(path)
+                if r.status_code != 200:
+                    raise RuntimeError(f"inspection {serial}: GET {path} answered {r.status_code}: {r.text[:300]}")
+                rec = r.json()
                 if rec["state"] != "running":
                     return rec
                 if time.monotonic() > deadline:
