@@ -57,11 +57,15 @@ def qif_schema(shared_dir):
 
 
 @pytest.fixture(scope="session")
-def pg_cluster(tmp_path_factory):
-    """A PostgreSQL server of the test run's own (started on first use)."""
+def pg_cluster():
+    """A PostgreSQL server of the test run's own (started on first use). Its folder is
+    not under pytest's base temp: another pytest run starting meanwhile deletes the
+    oldest base temps, and a server whose data folder is deleted shuts down."""
+    import tempfile
+
     from pgcluster import PgCluster
 
-    cluster = PgCluster(tmp_path_factory.mktemp("pg")).start()
+    cluster = PgCluster(Path(tempfile.mkdtemp(prefix="station-tests-pg-"))).start()
     try:
         cluster.wait_ready()
         cluster.make_template()
