@@ -251,21 +251,29 @@ class TokenRepository:
         the first 6 of its hex digits, as `station token list` shows it); KeyError when
         none or more than one matches."""
         text = str(id_or_prefix).strip()
-        if text.isdigit():
-            record = self.get(int(text))
-            if record is None:
-                raise KeyError(f"no API token {text}")
-            return record
         prefix = text.removeprefix("st_").split("_", 1)[0].rstrip(".").lower()
-        if not re.fullmatch(r"[0-9a-f]{6,%d}" % TOKEN_PREFIX_LEN, prefix):
+        is_prefix = bool(re.fullmatch(r"[0-9a-f]{6,%d}" % TOKEN_PREFIX_LEN, prefix))
+        # a prefix is hex: "005875" reads as an id too; both are looked up, and a text
+        # that names two different tokens is refused rather than guessed
+        by_id = self.get(int(text)) if text.isdigit() else None
+        if not is_prefix:
+            if by_id is not None:
+                return by_id
+            if text.isdigit():
+                raise KeyError(f"no API token {text}")
             raise KeyError(f"{text!r} is neither a token id nor a token prefix (st_ and at least 6 hex digits)")
         with self.store._transaction("find an API token", write=False) as s:
             rows = list(s.scalars(select(ApiToken).where(ApiToken.prefix.startswith(prefix)).limit(2)))
-        if not rows:
-            raise KeyError(f"no API token with prefix {prefix}")
         if len(rows) > 1:
             raise KeyError(f"more than one API token has the prefix {prefix}: give more of it, or the id")
-        return _record(rows[0])
+        if rows and by_id is not None and rows[0].id != by_id.id:
+            raise KeyError(f"{text} is token {by_id.id}'s id and token {rows[0].id}'s prefix: "
+                           f"write the prefix as st_{prefix}")
+        if rows:
+            return _record(rows[0])
+        if by_id is not None:
+            return by_id
+        raise KeyError(f"no API token with prefix {prefix}" if not text.isdigit() else f"no API token {text}")
 
     def list(self) -> list[TokenRecord]:
         with self.store._transaction("list API tokens", write=False) as s:

@@ -27,8 +27,12 @@ def fuzz_server(tmp_path_factory):
 
 
 #: operations not fuzzed: endless streams (SSE, MJPEG); the token rotation, which would
-#: swap the fuzzer's own token away (tested in test_token_expiry.py)
-EXCLUDED = ("/api/v1/events", "/api/v1/camera.mjpg", "/api/v1/tokens/rotate")
+#: swap the fuzzer's own token away (tested in test_token_expiry.py); a calibration run,
+#: which holds the station for up to minutes (200 poses), so every later answer would
+#: depend on whether it is still running (hypothesis then sees "inconsistent data
+#: generation" when it replays a sequence); its bodies, 202, 409 and 422 are tested in
+#: test_calibrate_master_route.py
+EXCLUDED = ("/api/v1/events", "/api/v1/camera.mjpg", "/api/v1/tokens/rotate", "/api/v1/calibrations/master")
 
 
 def test_no_server_errors(fuzz_server):
@@ -73,7 +77,7 @@ def test_stateful_sequences_follow_the_links_without_server_errors(fuzz_server):
         assert r.status_code == 202, r.text
         while c.get(f"/api/v1/inspections/{r.json()['id']}").json()["state"] == "running":
             time.sleep(0.1)
-    base = schema.exclude(path="/api/v1/tokens/rotate").as_state_machine()
+    base = schema.exclude(path=["/api/v1/tokens/rotate", "/api/v1/calibrations/master"]).as_state_machine()
     followed: list[str] = []
 
     class Workflow(base):

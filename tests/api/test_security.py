@@ -288,6 +288,7 @@ BODY_ROUTES = {
     ("POST", "/api/v1/model-proposals/{proposal_id}/approve"): "json",
     ("POST", "/api/v1/model-proposals/{proposal_id}/reject"): "json",
     ("POST", "/api/v1/tokens/rotate"): "json",
+    ("POST", "/api/v1/calibrations/master"): "json",
 }
 #: every file field of every upload
 FILE_FIELDS = [("/api/v1/models", "file"), ("/api/v1/calibrations", "file"),
@@ -474,6 +475,7 @@ TRAVERSAL_ROUTES = [
     ("GET", "/api/v1/reports/discovery/{report_id}/plots/{name}"),
     ("POST", "/api/v1/station/{command}"),
     ("GET", "/api/v1/checks/{check_id}"),
+    ("GET", "/api/v1/calibrations/master/{run_id}"),
     ("GET", "/api/v1/model-proposals/{proposal_id}"),
     ("GET", "/api/v1/model-proposals/{proposal_id}/plot"),
     ("POST", "/api/v1/model-proposals/{proposal_id}/approve"),

@@ -213,3 +213,23 @@ def test_create_rotate_and_revoke_are_audited_without_the_secret(repo, clock):
     assert f"token {new.id} (plant MES, role mes, st_{new.prefix}_...) revoked by station token revoke" in text
     for token in (old_token, new_token):
         assert token not in text and token[len("st_") + 16 + 1:] not in text
+
+
+def test_a_prefix_of_decimal_digits_is_found_as_a_prefix(repo):
+    """Hex prefixes are made of decimal digits alone about 6 % of the time at 6 digits:
+    such a text is looked up as an id and as a prefix; one match is the token, two
+    different ones are refused (never a guess)."""
+    a, _ = repo.create("mes")
+    b, _ = repo.create("mes")
+    digits = "0123456789abcdef"
+    with repo.store._transaction("give a token a decimal prefix") as s:
+        from station.store.models import ApiToken
+
+        s.get(ApiToken, b.id).prefix = "9876543210" + digits[:6]
+    assert repo.find("987654").id == b.id  # six decimal digits, no such id: the prefix
+    assert repo.find(str(a.id)).id == a.id  # a short id is an id
+    with repo.store._transaction("give a token a prefix that is another's id") as s:
+        s.get(ApiToken, b.id).prefix = f"{a.id:06d}" + "abcdefabcd"
+    with pytest.raises(KeyError, match="id and token"):
+        repo.find(f"{a.id:06d}")
+    assert repo.find(f"st_{a.id:06d}abc").id == b.id
