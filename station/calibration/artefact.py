@@ -20,13 +20,12 @@ does not try to read them as master certificates); format in docs/calibration.md
 from __future__ import annotations
 
 import math
-from importlib import resources
 from pathlib import Path
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-from station.parts.loader import PartSpecError, Problem, parse_toml_as
+from station.parts.loader import builtin_names, load_certificate, parse_toml_as
 from station.parts.spec import HOLE_ID_PATTERN, PART_NUMBER_PATTERN
 
 _BUILTIN = ("data", "masters", "artefacts")
@@ -108,29 +107,12 @@ def parse_artefact(text: str, source: str = "<text>") -> ArtefactCertificate:
 
 
 def builtin_artefacts() -> list[str]:
-    d = resources.files("station").joinpath(*_BUILTIN)
-    return sorted(f.name.removesuffix(".toml") for f in d.iterdir() if f.name.endswith(".toml")) if d.is_dir() else []
+    return builtin_names(_BUILTIN)
 
 
 def load_artefact(id_or_path: str | Path) -> ArtefactCertificate:
     """A built-in artefact by id, or a certificate file by path (``.toml`` or a path separator)."""
-    arg = str(id_or_path)
-    if isinstance(id_or_path, Path) or arg.endswith(".toml") or "/" in arg or "\\" in arg:
-        p = Path(arg)
-        try:
-            text = p.read_text(encoding="utf-8-sig")
-        except OSError as exc:
-            raise PartSpecError([Problem(str(p), None, "", f"cannot read: {exc.strerror or exc}")]) from None
-        return parse_artefact(text, str(p))
-    known = builtin_artefacts()
-    if arg not in known:
-        raise PartSpecError([Problem(repr(arg), None, "", "no built-in artefact of that id, and not a .toml path "
-                                                          f"(built in: {', '.join(known) or 'none'})")])
-    src = "station/data/masters/artefacts/" + arg + ".toml"
-    cert = parse_artefact(resources.files("station").joinpath(*_BUILTIN, f"{arg}.toml").read_text(encoding="utf-8-sig"), src)
-    if cert.artefact_id != arg:
-        raise PartSpecError([Problem(src, None, "artefact_id", f"{cert.artefact_id!r} differs from the file name")])
-    return cert
+    return load_certificate(id_or_path, parse_artefact, _BUILTIN, "artefact", "artefact_id")
 
 
 def design_artefact(artefact_id: str = "CA-22.2-5x8", *, bore_diameter_mm: float = 22.2,

@@ -40,7 +40,7 @@ import numpy as np
 from station.effects import ErrorCurve
 from station.kinematics.model import StationModel
 from station.kinematics.parameters import COMPONENTS, SixDof, motion_names
-from station.monitor.proposals import Change, Proposal, ProposalError
+from station.monitor.proposals import Change, Proposal, ProposalError, motion_component
 
 NODE_PREFIX = "node."
 #: the artefact's installation on the table: the run's nuisance, not the station's
@@ -90,16 +90,7 @@ def apply_node_change(model: StationModel, change: Change) -> StationModel:
     delta = float(change.delta)
     if not math.isfinite(delta):
         raise ProposalError(f"cannot change {change.term}: the delta {change.delta!r} is not a number")
-    try:
-        joint = model.topology.by_name(body)
-    except KeyError:
-        raise ProposalError(f"cannot change {change.term}: no body {body!r} in the model's topology") from None
-    if joint.joint is None:
-        raise ProposalError(f"cannot change {change.term}: body {body} has no joint, hence no error motions")
-    names = motion_names(body)
-    if motion not in names:
-        raise ProposalError(f"cannot change {change.term}: {body}'s error motions are {', '.join(names)}")
-    comp = COMPONENTS[names.index(motion)]
+    comp = motion_component(model, change.term, body, motion)
     motions = model.motions_of(body)
     curve = getattr(motions, comp)
     hat = _hat(curve.kind, at, lo, hi)

@@ -69,8 +69,7 @@ from station.axis_model import AxisModel, read_axis_model
 from station.effects import VOCABULARY, EffectSpecError, effect_from_dict
 from station.kinematics.inverse import compensate
 from station.kinematics.model import StationModel
-from station.kinematics.parameters import COMPONENTS, motion_names
-from station.monitor.proposals import Change, Proposal, ProposalError
+from station.monitor.proposals import Change, Proposal, ProposalError, motion_component
 from station.motion import AxisLimits
 from station.recording import Recording, read_recording
 from station.inspection.scan import predicted_carriage_mm
@@ -354,15 +353,7 @@ def apply_motion_change(model: StationModel, change: Change) -> StationModel:
     applied to the error motion's curve: the delta added to the size of its effect of
     that name and shape, or that effect added with the delta as its size."""
     body, motion, effect, shape = parse_motion_term(change.term)
-    try:
-        joint = model.topology.by_name(body)
-    except KeyError:
-        raise ProposalError(f"cannot change {change.term}: no body {body!r} in the model's topology") from None
-    if joint.joint is None:
-        raise ProposalError(f"cannot change {change.term}: body {body} has no joint, hence no error motions")
-    names = motion_names(body)
-    if motion not in names:
-        raise ProposalError(f"cannot change {change.term}: {body}'s error motions are {', '.join(names)}")
+    comp = motion_component(model, change.term, body, motion)
     size = size_parameter(effect)
     if size is None:
         known = ", ".join(sorted(k for k in VOCABULARY if size_parameter(k)))
@@ -371,7 +362,6 @@ def apply_motion_change(model: StationModel, change: Change) -> StationModel:
     delta = float(change.delta)
     if not math.isfinite(delta):
         raise ProposalError(f"cannot change {change.term}: the delta {change.delta!r} is not a number")
-    comp = COMPONENTS[names.index(motion)]
     motions = model.motions_of(body)
     curve = getattr(motions, comp)
     effects = list(curve.effects)

@@ -9,13 +9,12 @@ its certified position and diameter with their expanded uncertainties (k = 2, um
 
 from __future__ import annotations
 
-from importlib import resources
 from pathlib import Path
 
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from station.monitor.watch import CharacteristicCheck
-from station.parts.loader import PartSpecError, Problem, parse_toml_as
+from station.parts.loader import builtin_names, load_certificate, parse_toml_as
 from station.parts.spec import HOLE_ID_PATTERN, PART_NUMBER_PATTERN, PartSpec
 
 _BUILTIN = ("data", "masters")
@@ -88,30 +87,12 @@ def parse_master(text: str, source: str = "<text>") -> MasterCertificate:
 
 
 def builtin_masters() -> list[str]:
-    d = resources.files("station").joinpath(*_BUILTIN)
-    return sorted(f.name.removesuffix(".toml") for f in d.iterdir() if f.name.endswith(".toml")) if d.is_dir() else []
+    return builtin_names(_BUILTIN)
 
 
 def load_master(id_or_path: str | Path) -> MasterCertificate:
     """A built-in master by id, or a certificate file by path (``.toml`` or a path separator)."""
-    arg = str(id_or_path)
-    if isinstance(id_or_path, Path) or arg.endswith(".toml") or "/" in arg or "\\" in arg:
-        p = Path(arg)
-        try:
-            text = p.read_text(encoding="utf-8-sig")
-        except OSError as exc:
-            raise PartSpecError([Problem(str(p), None, "", f"cannot read: {exc.strerror or exc}")]) from None
-        return parse_master(text, str(p))
-    known = builtin_masters()
-    if arg not in known:
-        raise PartSpecError([Problem(repr(arg), None, "", "no built-in master of that id, and not a .toml path "
-                                                          f"(built in: {', '.join(known) or 'none'})")])
-    f = resources.files("station").joinpath(*_BUILTIN, f"{arg}.toml")
-    cert = parse_master(f.read_text(encoding="utf-8-sig"), f"station/data/masters/{arg}.toml")
-    if cert.master_id != arg:
-        raise PartSpecError([Problem(f"station/data/masters/{arg}.toml", None, "master_id",
-                                     f"{cert.master_id!r} differs from the file name")])
-    return cert
+    return load_certificate(id_or_path, parse_master, _BUILTIN, "master", "master_id")
 
 
 def compare(cert: MasterCertificate, characteristics) -> list[CharacteristicCheck]:

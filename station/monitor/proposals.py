@@ -29,7 +29,7 @@ from typing import Iterable
 import numpy as np
 
 from station.kinematics.model import StationModel
-from station.kinematics.parameters import SixDof
+from station.kinematics.parameters import COMPONENTS, SixDof, motion_names
 
 #: the parameter a master check names when the datum moved
 DATUM_BODY = "J"
@@ -258,3 +258,19 @@ def apply_changes(model: StationModel, changes: Iterable[Change], name_suffix: s
     for c in changes:
         model = c.apply(model)
     return replace(model, name=model.name + name_suffix) if name_suffix else model
+
+
+def motion_component(model: StationModel, term: str, body: str, motion: str) -> str:
+    """The component name (``dx`` ... ``ez``) of ``body``'s error motion ``motion`` in
+    ``model``, for a change ``term`` of it: ProposalError when the body is not in the
+    topology, has no joint, or has no such error motion."""
+    try:
+        joint = model.topology.by_name(body)
+    except KeyError:
+        raise ProposalError(f"cannot change {term}: no body {body!r} in the model's topology") from None
+    if joint.joint is None:
+        raise ProposalError(f"cannot change {term}: body {body} has no joint, hence no error motions")
+    names = motion_names(body)
+    if motion not in names:
+        raise ProposalError(f"cannot change {term}: {body}'s error motions are {', '.join(names)}")
+    return COMPONENTS[names.index(motion)]

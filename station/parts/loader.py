@@ -148,6 +148,36 @@ def parse_toml_as(model_cls, text: str, source: str = "<text>"):
         raise PartSpecError(validation_problems(exc, text, source)) from None
 
 
+def builtin_names(folder: Sequence[str]) -> list[str]:
+    """The ids of the ``.toml`` files in a folder of the ``station`` package, sorted."""
+    d = resources.files("station").joinpath(*folder)
+    return sorted(f.name.removesuffix(".toml") for f in d.iterdir() if f.name.endswith(".toml")) if d.is_dir() else []
+
+
+def load_certificate(id_or_path: str | Path, parse, folder: Sequence[str], kind: str, id_field: str):
+    """A certificate (a master's, an artefact's) by built-in id, or from a file by path
+    (``.toml`` or a path separator), read with ``parse(text, source)``. A built-in
+    file's id field must equal its name. Every failure is a :class:`PartSpecError`
+    naming the file and key."""
+    arg = str(id_or_path)
+    if isinstance(id_or_path, Path) or arg.endswith(".toml") or "/" in arg or "\\" in arg:
+        p = Path(arg)
+        try:
+            text = p.read_text(encoding="utf-8-sig")
+        except OSError as exc:
+            raise PartSpecError([Problem(str(p), None, "", f"cannot read: {exc.strerror or exc}")]) from None
+        return parse(text, str(p))
+    known = builtin_names(folder)
+    if arg not in known:
+        raise PartSpecError([Problem(repr(arg), None, "", f"no built-in {kind} of that id, and not a .toml path "
+                                                          f"(built in: {', '.join(known) or 'none'})")])
+    src = "station/" + "/".join(folder) + f"/{arg}.toml"
+    cert = parse(resources.files("station").joinpath(*folder, f"{arg}.toml").read_text(encoding="utf-8-sig"), src)
+    if getattr(cert, id_field) != arg:
+        raise PartSpecError([Problem(src, None, id_field, f"{getattr(cert, id_field)!r} differs from the file name")])
+    return cert
+
+
 def parse_part(text: str, source: str = "<text>") -> PartSpec:
     """Validate TOML text as a part spec; :class:`PartSpecError` lists every problem."""
     return parse_toml_as(PartSpec, text, source)
