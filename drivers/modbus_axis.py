@@ -2,7 +2,9 @@
 
 One class serves both axes; they differ only in unit, scaling (``unit_per_count``:
 e.g. 1e-4 mm = 0.1 um per count for Z, 1e-4 deg per count for C) and device id.
-The register map is ``drivers.interfaces.register_map`` (docs/register-map.md).
+The register map is ``drivers.interfaces.register_map`` (docs/register-map.md): a
+declaration of fields (address, width, signedness, scale) that decodes the status
+snapshot and encodes a move, so no register is split or joined by hand here.
 
 Uses pymodbus 3.x's current async client API (checked against 3.16):
 ``AsyncModbusTcpClient(host, port=, timeout=, retries=, reconnect_delay=)``,
@@ -40,7 +42,7 @@ from drivers.interfaces import (
     MoveInterrupted,
     ProtocolError,
     RotaryAxis,
-    _ServoAxis,
+    ServoAxis,
 )
 from drivers.interfaces import register_map as rm
 
@@ -62,7 +64,7 @@ class _CorruptReply(Exception):
     """Bytes arrived for the request in flight, but pymodbus made no reply of them."""
 
 
-class ModbusServoAxis(_ServoAxis):
+class ModbusServoAxis(ServoAxis):
     """Drives one servo axis over Modbus.  Build it with :meth:`tcp` or :meth:`rtu`."""
 
     def __init__(
@@ -116,7 +118,7 @@ class ModbusServoAxis(_ServoAxis):
         self._control = 0  # shadow of the level bits of the control word (ENABLE)
         self._heartbeat_task: asyncio.Task | None = None
         self._heartbeat_counter = 0
-        self._last_target: float | None = None
+        self._setpoint: float | None = None  # the public ``setpoint`` (ServoAxis)
         self.firmware_id: int | None = None
         #: the last error the background heartbeat met (None while it succeeds)
         self.heartbeat_error: DriverError | None = None
@@ -285,7 +287,8 @@ class ModbusServoAxis(_ServoAxis):
         (self.firmware_id,) = await self.read_registers(rm.FIRMWARE_ID, 1)
         if self.following_error_limit is not None:
             limit_counts = max(1, self.to_counts(self.following_error_limit))
-            await self.write_registers(rm.FOLLOWING_ERROR_LIMIT, rm.uint32_to_regs(limit_counts))
+            limit = rm.REGISTERS.FOLLOWING_ERROR_LIMIT
+            await self.write_registers(limit.address, limit.encode_raw(limit_counts))
         # heartbeat first, then arm the watchdog, so the drive never sees a stale counter
         await self._beat()
         await self.write_registers(rm.WATCHDOG_TIMEOUT_MS, [self.watchdog_timeout_ms])
@@ -336,24 +339,25 @@ class ModbusServoAxis(_ServoAxis):
         a = self.default_acceleration if acceleration is None else float(acceleration)
         if not (v > 0 and a > 0):
             raise ValueError("velocity and acceleration must be positive")
-        v_counts = max(1, self.to_counts(v))
-        a_counts = max(1, self.to_counts(a))
-        # target, velocity and acceleration are contiguous (2..9): one FC16 request
-        await self.write_registers(
-            rm.TARGET_POSITION,
-            rm.int32_to_regs(self.to_counts(position)) + rm.uint32_to_regs(v_counts) + rm.uint32_to_regs(a_counts),
-        )
-        self._last_target = float(position)
+        # target, velocity and acceleration are contiguous (8..13): one FC16 request; a
+        # profile of 0 counts would mean "the drive's default", so at least 1 count
+        move = rm.MOVE_BLOCK
+        await self.write_registers(move.start, move.encode_raw({
+            "TARGET_POSITION": self.to_counts(position),
+            "PROFILE_VELOCITY": max(1, self.to_counts(v)),
+            "PROFILE_ACCELERATION": max(1, self.to_counts(a)),
+        }))
+        self._setpoint = float(position)
         await self._command(rm.ControlBit.START_MOVE)
 
     async def stop(self) -> None:
-        self._last_target = None  # the axis stops short of the target by design
+        self._setpoint = None  # the axis stops short of the target by design
         await self._command(rm.ControlBit.STOP)
 
     async def home(self) -> None:
         st = await self.status()
         self._raise_if_fault(st)
-        self._last_target = 0.0
+        self._setpoint = 0.0
         await self._command(rm.ControlBit.HOME)
 
     async def reset_fault(self) -> None:
@@ -364,12 +368,9 @@ class ModbusServoAxis(_ServoAxis):
     # ------------------------------------------------------------------ reading
 
     async def status(self) -> AxisStatus:
-        regs = await self.read_registers(rm.STATUS_BLOCK_START, rm.STATUS_BLOCK_COUNT)
-
-        def reg(addr: int) -> int:
-            return regs[addr - rm.STATUS_BLOCK_START]
-
-        word = reg(rm.STATUS_WORD)
+        block = rm.STATUS_BLOCK
+        v = block.decode(await self.read_registers(block.start, block.count), self.unit_per_count)
+        word = v["STATUS_WORD"]
         sb = rm.StatusBit
         return AxisStatus(
             ready=bool(word & sb.READY),
@@ -380,15 +381,15 @@ class ModbusServoAxis(_ServoAxis):
             fault=bool(word & sb.FAULT),
             following_error=bool(word & sb.FOLLOWING_ERROR),
             estop=bool(word & sb.ESTOP),
-            fault_code=reg(rm.FAULT_CODE),
-            position=self.from_counts(rm.regs_to_int32(reg(rm.ACTUAL_POSITION), reg(rm.ACTUAL_POSITION + 1))),
-            velocity=self.from_counts(rm.regs_to_int32(reg(rm.ACTUAL_VELOCITY), reg(rm.ACTUAL_VELOCITY + 1))),
+            fault_code=v["FAULT_CODE"],
+            position=v["ACTUAL_POSITION"],
+            velocity=v["ACTUAL_VELOCITY"],
             status_word=word,
         )
 
     async def read_position(self) -> float:
-        hi, lo = await self.read_registers(rm.ACTUAL_POSITION, 2)
-        return self.from_counts(rm.regs_to_int32(hi, lo))
+        pos = rm.REGISTERS.ACTUAL_POSITION
+        return pos.decode(await self.read_registers(pos.address, pos.count), self.unit_per_count)
 
     def _raise_if_fault(self, st: AxisStatus) -> None:
         if st.following_error or st.fault_code == rm.FaultCode.FOLLOWING_ERROR:
@@ -404,7 +405,8 @@ class ModbusServoAxis(_ServoAxis):
         while True:
             st = await self.status()
             self._raise_if_fault(st)
-            at_target = self._last_target is None or abs(st.position - self._last_target) <= self.in_position_window
+            target = self._setpoint
+            at_target = target is None or abs(st.position - target) <= self.in_position_window
             if st.in_position and not st.moving and at_target:
                 return st
             # at rest, no fault, not at our target, on several polls in a row (not the
@@ -413,11 +415,11 @@ class ModbusServoAxis(_ServoAxis):
             resting_short = resting_short + 1 if (not st.moving and not at_target) else 0
             if resting_short >= RESTING_SHORT_POLLS:
                 raise MoveInterrupted(
-                    f"at rest at {st.position:.6f} {getattr(self, 'unit', '')}, short of the target "
-                    f"{self._last_target:.6f}, without a fault", self.name)
+                    f"at rest at {st.position:.6f} {self.units}, short of the target "
+                    f"{target:.6f}, without a fault", self.name)
             if loop.time() >= deadline:
                 raise DeviceTimeout(
-                    f"not in position after {timeout} s (at {st.position:.6f} {getattr(self, 'unit', '')}, moving={st.moving})",
+                    f"not in position after {timeout} s (at {st.position:.6f} {self.units}, moving={st.moving})",
                     self.name,
                 )
             await asyncio.sleep(poll_s)

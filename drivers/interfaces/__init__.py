@@ -12,6 +12,13 @@ Errors are typed so that a caller can decide what to do without parsing messages
 * :class:`ProtocolError` -- an answer arrived but was malformed or failed its checksum;
 * :class:`DriveFault` -- the drive answered and reports a fault code;
 * :class:`FollowingError` -- a drive fault of the special kind "the axis did not follow".
+
+The axes' abstract base is :class:`ServoAxis` (:class:`LinearAxis` in mm,
+:class:`RotaryAxis` in deg); a caller that needs only one verb of a device may ask
+for the small protocols instead (:mod:`drivers.interfaces.protocols`:
+:class:`Movable`, :class:`Locatable`, :class:`Stoppable`, :class:`Readable`). The
+logic of one move (its check, its timeout) is :class:`MoveLogic`
+(:mod:`drivers.interfaces.move_logic`).
 """
 
 from __future__ import annotations
@@ -22,6 +29,21 @@ import enum
 from dataclasses import dataclass, field
 
 import numpy as np
+
+from drivers.interfaces.move_logic import MoveLogic
+from drivers.interfaces.protocols import UNITS, Locatable, Location, Movable, Readable, Stoppable, Units
+
+__all__ = [
+    # errors
+    "DriverError", "DeviceTimeout", "CommunicationLost", "ProtocolError", "BadFrame", "DriveFault",
+    "FollowingError", "MoveInterrupted",
+    # the small protocols and the move logic (re-exported from their modules)
+    "Movable", "Locatable", "Stoppable", "Readable", "Location", "Units", "UNITS", "MoveLogic",
+    # axes
+    "AxisState", "AxisStatus", "ServoAxis", "LinearAxis", "RotaryAxis",
+    # encoder, camera
+    "EncoderStatus", "EncoderReading", "PositionEncoder", "Frame", "CameraTiming", "Camera",
+]
 
 # --------------------------------------------------------------------------- errors
 
@@ -115,11 +137,52 @@ class AxisStatus:
         return AxisState.IDLE
 
 
-class _ServoAxis(abc.ABC):
-    """Common face of a positioning axis; subclasses fix the unit (mm or deg)."""
+class ServoAxis(abc.ABC):
+    """Common face of a positioning axis; subclasses fix the unit (``units``: mm or deg).
+
+    It satisfies the small protocols of :mod:`drivers.interfaces.protocols`:
+    :class:`Movable` (``move_to``, ``units``), :class:`Locatable` (``setpoint``,
+    ``locate``), :class:`Stoppable` (``stop``) and :class:`Readable` (``read``). A
+    concrete axis implements the abstract methods and keeps ``_setpoint`` (the last
+    target it commanded, None after a stop); the movable core -- :meth:`set`, move
+    and wait with a timeout from the move's distance and profile -- is written here
+    once, over :attr:`move_logic`, in the manner of ophyd-async's ``StandardMovable``.
+    """
 
     #: a human name used in error messages ("Z", "C")
     name: str = "axis"
+    #: the axis unit: "mm" (linear) or "deg" (rotary); velocities are units/s
+    units: str = ""
+
+    #: the velocity and acceleration the station may command (unit/s, unit/s^2): the
+    #: integrator's limits for scanning, within the drive's own; None: not stated
+    velocity_limit: float | None = None
+    acceleration_limit: float | None = None
+    #: the profile of a move that names none (unit/s, unit/s^2); None: the drive's own
+    default_velocity: float | None = None
+    default_acceleration: float | None = None
+    #: how often ``wait_in_position`` asks the drive (s): on average the station sees
+    #: the end of a move half a period late
+    poll_s: float = 0.0
+    #: the last target commanded (a concrete axis sets it; read it as ``setpoint``)
+    _setpoint: float | None = None
+
+    @property
+    def unit(self) -> str:
+        """The former name of :attr:`units` (kept for callers that still use it)."""
+        return self.units
+
+    @property
+    def setpoint(self) -> float | None:
+        """The last target commanded, in the axis unit: a move's target, 0 for homing;
+        None before the first move and after a stop (the axis rests short of it by design)."""
+        return self._setpoint
+
+    @property
+    def move_logic(self) -> MoveLogic:
+        """This axis' move logic, from its present defaults and limits."""
+        return MoveLogic(self.default_velocity, self.default_acceleration,
+                         self.velocity_limit, self.acceleration_limit)
 
     @abc.abstractmethod
     async def connect(self) -> None:
@@ -132,14 +195,6 @@ class _ServoAxis(abc.ABC):
     @abc.abstractmethod
     async def enable(self, on: bool = True) -> None:
         """Power the motor (or remove power)."""
-
-    #: the velocity and acceleration the station may command (unit/s, unit/s^2): the
-    #: integrator's limits for scanning, within the drive's own; None: not stated
-    velocity_limit: float | None = None
-    acceleration_limit: float | None = None
-    #: how often ``wait_in_position`` asks the drive (s): on average the station sees
-    #: the end of a move half a period late
-    poll_s: float = 0.0
 
     @abc.abstractmethod
     async def move_to(self, position: float, velocity: float | None = None,
@@ -171,6 +226,33 @@ class _ServoAxis(abc.ABC):
     async def reset_fault(self) -> None:
         """Acknowledge a drive fault (the cause must be gone for it to clear)."""
 
+    # ------------------------------------------------------------------ the protocols' verbs
+
+    async def read(self) -> AxisStatus:
+        """:class:`Readable`: one status snapshot."""
+        return await self.status()
+
+    async def locate(self) -> Location:
+        """:class:`Locatable`: the setpoint and the drive's reported position."""
+        return Location(setpoint=self.setpoint, readback=await self.read_position())
+
+    async def set(self, target: float, velocity: float | None = None, acceleration: float | None = None,
+                  *, timeout: float | None = None) -> AxisStatus:
+        """Move to ``target`` and wait until in position: the movable core.
+
+        The move is checked first (:meth:`MoveLogic.check_move`); ``timeout`` (s) is by
+        default the move logic's, from the distance (from the setpoint, or the reported
+        position before the first move) and the profile."""
+        logic = self.move_logic
+        logic.check_move(target, velocity, acceleration)
+        if timeout is None:
+            start = self.setpoint
+            if start is None:
+                start = await self.read_position()
+            timeout = logic.timeout_s(abs(float(target) - float(start)), velocity, acceleration)
+        await self.move_to(target, velocity, acceleration)
+        return await self.wait_in_position(timeout)
+
     async def __aenter__(self):
         await self.connect()
         return self
@@ -179,16 +261,16 @@ class _ServoAxis(abc.ABC):
         await self.close()
 
 
-class LinearAxis(_ServoAxis):
+class LinearAxis(ServoAxis):
     """A linear axis; positions in mm, velocities in mm/s."""
 
-    unit = "mm"
+    units = "mm"
 
 
-class RotaryAxis(_ServoAxis):
+class RotaryAxis(ServoAxis):
     """A rotary axis; positions in deg, velocities in deg/s."""
 
-    unit = "deg"
+    units = "deg"
 
 
 # --------------------------------------------------------------------------- encoder

@@ -48,6 +48,22 @@ async def test_enable_home_move_and_read_back(z_axis, twins):
     assert z_axis.firmware_id == 0x0102
 
 
+async def test_setpoint_follows_the_commands_and_set_moves_and_waits(z_axis, twins):
+    assert z_axis.setpoint is None and z_axis.units == "mm"
+    await z_axis.enable()
+    await z_axis.home()
+    await z_axis.wait_in_position(5.0)
+    assert z_axis.setpoint == 0.0  # homing goes to the reference
+    st = await z_axis.set(12.5)  # move and wait, the timeout from the axis' move logic
+    assert st.position == pytest.approx(12.5, abs=1e-9) and z_axis.setpoint == 12.5
+    loc = await z_axis.locate()
+    assert loc.setpoint == 12.5 and loc.readback == pytest.approx(12.5, abs=1e-9)
+    await z_axis.move_to(150.0, velocity=5.0)
+    await z_axis.stop()
+    assert z_axis.setpoint is None  # stopped short of the target by design
+    await z_axis.wait_in_position(2.0)
+
+
 async def test_rotary_axis_scaling_and_device_id(twins):
     c = make_axis(twins, "C")
     try:
