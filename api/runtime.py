@@ -45,9 +45,11 @@ from api.sessions import SessionStore
 from api.singleflight import SingleFlight
 from api.settings import Settings
 from api.station_thread import StationThread, to_loop
-from station.inspection.session import Session, open_session
+from station.inspection.documents import InspectionStart
+from station.inspection.session import Session
+from station.runtime import open_session
 from station.parts.spec import PartSpec
-from station.sequencer.engine import EngineEvent, EngineStateError, PlanEnded, State
+from station.sequencer.engine import EngineEvent, EngineStateError, PlanEnded
 from station.store import DuplicateIdempotencyKey, StoreError
 from station.store.tokens import TokenRepository
 
@@ -129,33 +131,24 @@ class Job:
     started: float = 0.0
 
 
-class _BeginNotifier:
-    """The store, as the inspection service sees it, telling us the new inspection's id.
+class _StartWatcher:
+    """Tells the API the new inspection's id the moment its record exists.
 
-    The service creates the inspection record itself (``begin_inspection``) and only
-    returns at the end; the API must answer the job order with the id at once. This
-    thin proxy resolves a future of the API loop with the id the moment the row is
-    committed (it runs in a worker thread of the station loop: it hops).
+    Subscribed to the session's documents for one job: the store writer (a required
+    subscriber, before this one) begins the record on the start document, then this
+    resolves a future of the API loop with the id (it runs on the station loop: it
+    hops). A refused start never reaches it; the job's failure settles the future.
     """
 
-    def __init__(self, store, future: asyncio.Future, loop: asyncio.AbstractEventLoop):
-        self._store, self._future, self._loop = store, future, loop
+    def __init__(self, future: asyncio.Future, loop: asyncio.AbstractEventLoop):
+        self._future, self._loop = future, loop
         self.iid: str | None = None
 
-    def begin_inspection(self, *args, **kwargs) -> str:
-        try:
-            iid = self._store.begin_inspection(*args, **kwargs)
-        except BaseException as exc:  # noqa: BLE001 - the waiting request must hear of it
+    def __call__(self, doc) -> None:
+        if self.iid is None and isinstance(doc, InspectionStart):
+            self.iid = doc.inspection_id
             with contextlib.suppress(RuntimeError):
-                self._loop.call_soon_threadsafe(_settle, self._future, None, exc)
-            raise
-        self.iid = iid
-        with contextlib.suppress(RuntimeError):
-            self._loop.call_soon_threadsafe(_settle, self._future, iid, None)
-        return iid
-
-    def __getattr__(self, name: str) -> Any:
-        return getattr(self._store, name)
+                self._loop.call_soon_threadsafe(_settle, self._future, self.iid, None)
 
 
 def _settle(future: asyncio.Future, value, exc) -> None:
@@ -371,10 +364,10 @@ class StationRuntime:
     async def _run_inspection(self, part, serial, order_id, key, started: asyncio.Future) -> _Ended:
         """On the station loop. Store writes go to this loop's own worker threads."""
         t0 = time.monotonic()
-        notifier = None
+        watcher = _StartWatcher(started, self.api_loop)
+        unsubscribe = self.session.documents.subscribe(watcher)
         try:
             service = self.session.service_for(part)
-            notifier = service.store = _BeginNotifier(self.store, started, self.api_loop)
             outcome = await service.inspect(part, serial, order_id=order_id, idempotency_key=key)
             await self._observe(outcome)
             return _Ended(outcome=outcome, seconds=time.monotonic() - t0, iid=outcome.id,
@@ -384,13 +377,15 @@ class StationRuntime:
         except Exception as exc:  # noqa: BLE001 - a job must end recorded, whatever broke
             log.exception("inspection failed")
             reason = f"{type(exc).__name__}: {exc}"
-            iid = notifier.iid if notifier is not None else None
+            iid = watcher.iid
             if iid is not None:
                 await self._finish_if_running(iid, reason)
             self._to_api(_settle, started, None, exc)
             with contextlib.suppress(StoreError):
                 await asyncio.to_thread(self.store.log_event, "alarm", f"inspection failed: {reason}", iid)
             return _Ended(iid=iid, reason=reason)
+        finally:
+            unsubscribe()
 
     async def _observe(self, outcome) -> None:
         """On the station loop: a production inspection's evidence on the station's charts
@@ -474,12 +469,12 @@ class StationRuntime:
     async def _run_check(self, cert, family: PartSpec, started: asyncio.Future) -> _Ended:
         """On the station loop: the session's check on the master, then (out of control)
         a model proposal from the checks since the last in control, as the campaign
-        makes it. The session's store is wrapped for the check's duration so the master
-        inspection's id reaches the waiting request as soon as its record exists."""
+        makes it. The master inspection's id reaches the waiting request from its start
+        document, as soon as its record exists."""
         t0 = time.monotonic()
         session = self.session
-        notifier = _BeginNotifier(session.store, started, self.api_loop)
-        session.store = notifier
+        notifier = _StartWatcher(started, self.api_loop)
+        unsubscribe = session.documents.subscribe(notifier)
         try:
             chk = await session.check_master(cert, family)
         except asyncio.CancelledError:
@@ -495,7 +490,7 @@ class StationRuntime:
                 await asyncio.to_thread(self.store.log_event, "alarm", f"master check failed: {reason}", iid)
             return _Ended(iid=iid, reason=reason, monitor=session.watch.state())
         finally:
-            session.store = notifier._store
+            unsubscribe()
         proposal = None
         if chk.alarms:
             try:
@@ -593,21 +588,17 @@ class StationRuntime:
         return self.station_status()
 
     def _engine_command(self, name: str, who: str) -> None:
-        """On the station loop: the state check and the command, in one step."""
+        """On the station loop: the state check (the engine's own table) and the
+        command, in one step."""
         engine = self.engine
-        if name in ("pause", "stop", "abort") and engine.state not in (State.RUNNING, State.PAUSED, State.STOPPING):
-            raise EngineStateError(f"cannot {name} while {engine.state.value}: nothing is running")
-        if name == "resume" and engine.state not in (State.PAUSED, State.RUNNING):
-            raise EngineStateError(f"cannot resume while {engine.state.value}: nothing is paused")
+        engine.check(name)
         if name == "abort":
             engine.abort(f"aborted by {who}")
         else:
             getattr(engine, name)()
 
     def _check_can_home(self) -> None:
-        engine = self.engine
-        if engine.state not in (State.IDLE, State.READY):
-            raise EngineStateError(f"cannot home while {engine.state.value} (reset first)")
+        self.engine.check("home")
 
     async def _home(self) -> None:
         """On the station loop."""

@@ -168,6 +168,22 @@ class Station:
         z = self.twins.station.physics["Z"]
         return self.world.effective_model(z.now())
 
+    def traceability(self) -> dict[str, Any]:
+        """What an inspection's record says of the station that made it: the config's
+        hash, the mode and, in simulation, the scenario the world came from."""
+        trace: dict[str, Any] = {"config_hash": self.config_hash, "mode": self.mode}
+        if self.twins is not None:
+            trace["scenario"] = str(self.twins.station.scenario.source)
+        return trace
+
+    def truth_annotator(self):
+        """Simulation only: a subscriber to the inspections' documents that writes the
+        twin's true value beside each measured characteristic (an annotation for tests
+        and benches, never an input to a measurement); None on hardware."""
+        if self.world is None:
+            return None
+        return TruthAnnotator(self.world)
+
     async def connect(self) -> None:
         for dev in (self.z, self.c, self.encoder, self.camera):
             if dev is None:
@@ -193,6 +209,65 @@ class Station:
         if self.twins is not None:
             self.twins.stop()
             self.twins = None
+
+
+class TruthAnnotator:
+    """The twin's ground truth beside each characteristic, from the check documents of
+    an inspection (station.inspection.documents): the world's hole of the same name
+    at the time of the check (the part on the table then: a master's during a check)."""
+
+    def __init__(self, world):
+        self.world = world
+
+    def __call__(self, doc) -> None:
+        from station.inspection.documents import CheckDocument
+
+        if not isinstance(doc, CheckDocument) or doc.characteristic is None:
+            return
+        c = doc.characteristic
+        hole_id, _, kind = c.id.rpartition(".")
+        for h in self.world.part.holes:
+            if h.name == hole_id:
+                c.true_value = h.axial_mm if kind == "position" else h.diameter_mm
+                return
+
+
+@contextlib.asynccontextmanager
+async def open_session(config: str | Path | None = None, *, scenario: str | Path | None = None,
+                       time_scale: float | None = None, data_dir: str | Path = "var", db_url: str | None = None,
+                       settings=None, world=None, model: str | Path | None = None,
+                       station_id: str | None = None):
+    """Build the station, connect it, open the store (recovering interrupted
+    inspections) and yield an inspection session (``station.inspection.session.Session``);
+    close everything on the way out, whatever happened. ``model``: the station's model
+    file (its belief), instead of the config's; ``world``: a caller's world whose part
+    replaces the scenario's; ``station_id``: the station's id on the database, instead
+    of the config's."""
+    from station.inspection.scan import ScanSettings
+    from station.inspection.session import Session, vision_measure
+    from station.sequencer.engine import Devices, Engine
+    from station.store import Store
+
+    station = build_station(config, scenario=scenario, time_scale=time_scale, model=model)
+    store = None
+    try:
+        if world is not None and station.world is not None:
+            # a caller's world (a test's or a study's part) replaces the scenario's
+            station.world.part = world.part
+        if station_id is not None:
+            station.station_id = station_id
+        store = Store.open(db_url, data_dir=data_dir, station_id=station.station_id)
+        await station.connect()
+        devices = Devices(station.z, station.c, station.encoder, station.camera, measure=vision_measure(station.mm_per_px))
+        session = Session(station, store, Engine(devices), settings or ScanSettings())
+        annotator = station.truth_annotator()
+        if annotator is not None:
+            session.documents.subscribe(annotator)
+        yield session
+    finally:
+        await station.close()
+        if store is not None:
+            store.close()
 
 
 def load_config(path: str | Path | None) -> tuple[dict[str, Any], str]:

@@ -39,7 +39,7 @@ def largest_u_um(outcome) -> float | None:
 async def _campaign(scenario: Path | None, parts: int, master_every: int, data: Path, time_scale: float,
                     seed: int, auto_approve: bool = False, progress=None) -> dict:
     from station.checks.master import load_master
-    from station.inspection.session import open_session
+    from station.runtime import open_session
     from station.parts import load_part
 
     cert = load_master(MASTER)

@@ -192,10 +192,10 @@ async def run_calibration(session, cert: ArtefactCertificate, design: Sightings,
     settings = settings or MeasureSettings()
     st = session.station
     geo = CameraGeometry(st.mm_per_px, st.frame_size_px[0], st.frame_size_px[1], cert.radius_mm)
-    from station.inspection.service import InspectionService
+    from station.inspection.service import ensure_ready
 
-    # the inspection service only for its readiness rules (reset after a fault, home when idle)
-    await InspectionService(session.engine, session.store, st.model, geo).ensure_ready()
+    # the readiness rules every job keeps (reset after a fault, home when idle)
+    await ensure_ready(session.engine)
     engine = session.engine
     run = await engine.run(calibration_plan(cert, design, geo, z_reference_mm, settings, motion_limits(engine.devices)))
     try:

@@ -565,7 +565,7 @@ async def run_axis_check(session, family=None, *, settings: AxisCheckSettings | 
     the plan on its engine, discovery on the files in ``out_dir`` (default
     ``<data>/checks/axis/<UTC time>``), and with ``propose`` a proposal in the
     station's book when the report claims a change; every step logged."""
-    from station.inspection.service import motion_limits
+    from station.inspection.service import ensure_ready, motion_limits
     from station.sequencer.engine import PlanEnded
 
     settings = settings or AxisCheckSettings()
@@ -583,7 +583,7 @@ async def run_axis_check(session, family=None, *, settings: AxisCheckSettings | 
     out = Path(out_dir) if out_dir is not None else Path(session.store.data_dir) / "checks" / "axis" / stamp
     time_scale = getattr(st, "time_scale", None)
     try:
-        await session.service_for(family).ensure_ready()
+        await ensure_ready(session.engine)
         plan = axis_check_plan(model, targets, settings, motion_limits(session.engine.devices), time_scale)
         data: AxisCheckData = await session.engine.run(plan)
     except PlanEnded as ended:

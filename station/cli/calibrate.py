@@ -39,7 +39,7 @@ def register(app: typer.Typer) -> None:
         from drivers.interfaces import DriverError
         from station.calibration.artefact import load_artefact
         from station.calibration.run import calibrate
-        from station.inspection.session import open_session
+        from station.runtime import open_session
         from station.runtime import ConfigError
         from station.sequencer.engine import PlanEnded
         from station.store.errors import StoreError

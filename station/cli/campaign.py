@@ -76,7 +76,7 @@ def register(app: typer.Typer) -> None:
 
         from drivers.interfaces import DriverError
         from station.checks.master import load_master
-        from station.inspection.session import open_session
+        from station.runtime import open_session
         from station.parts import load_part
         from station.runtime import ConfigError
         from station.store.errors import StoreError
@@ -134,7 +134,7 @@ def register(app: typer.Typer) -> None:
 
         from drivers.interfaces import DriverError
         from station.checks.axis import AxisCheckSettings
-        from station.inspection.session import open_session
+        from station.runtime import open_session
         from station.parts import load_part
         from station.runtime import ConfigError
         from station.store.errors import StoreError

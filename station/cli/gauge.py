@@ -20,7 +20,7 @@ async def run_study(part, repeats: int, *, config=None, scenario=None, time_scal
     """Inspect the part ``repeats`` times (a full re-approach each time) and return
     the type-1 results per characteristic."""
     from station.inspection.gauge import type1
-    from station.inspection.session import open_session
+    from station.runtime import open_session
 
     values: dict[str, list[float]] = {c.id: [] for c in part.characteristics()}
     truths: dict[str, float | None] = {}

@@ -57,7 +57,7 @@ def register(app: typer.Typer) -> None:
     ) -> None:
         """Run one inspection and print the result table."""
         from drivers.interfaces import DriverError
-        from station.inspection.session import open_session
+        from station.runtime import open_session
         from station.parts import load_part
         from station.runtime import ConfigError
         from station.store.errors import StoreError

@@ -32,7 +32,7 @@ SAME_DIAMETER_MM = 1e-4 * 10
 
 async def _measure(scenario: Path, data: Path, compensated: bool, time_scale: float):
     from station.inspection.scan import ScanSettings
-    from station.inspection.session import open_session
+    from station.runtime import open_session
     from station.parts import load_part
 
     from sim.twins import DEFAULT_SCENARIO

@@ -654,11 +654,12 @@ class _BoreScan:
             axial = target[0] + drift + (cy - h.y_px) * s
             # unwrapped about the target (frames of a hole at 0 deg must not average to 180)
             angle = target[1] + math.degrees((h.x_px - cx) * s / self.radius_mm)
-            result.frames.append(FrameObservation(axial, angle, h.diameter_px * s, h.x_px, h.y_px,
-                                                  h.diameter_px, float(getattr(h, "confidence", 1.0)), grating,
-                                                  z_cmd, c_cmd, None if reading is None else float(reading.timestamp),
-                                                  getattr(h, "diameter_u_px", None), getattr(h, "y_u_px", None),
-                                                  carriage_pred))
+            obs = FrameObservation(axial, angle, h.diameter_px * s, h.x_px, h.y_px, h.diameter_px,
+                                   float(getattr(h, "confidence", 1.0)), grating, z_cmd, c_cmd,
+                                   None if reading is None else float(reading.timestamp),
+                                   getattr(h, "diameter_u_px", None), getattr(h, "y_u_px", None), carriage_pred)
+            result.frames.append(obs)
+            yield m.Emit("frame", (t.name, len(result.frames) - 1, obs))
             if result.crop is None:
                 result.crop = _crop(frame.image, h.x_px, h.y_px, h.diameter_px)
         if not result.frames:

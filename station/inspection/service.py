@@ -1,11 +1,13 @@
-"""One inspection, from the part spec to the committed result.
+"""One inspection, from the part spec to the judged result, as a stream of documents.
 
-The service owns the engine and the store: it begins the inspection record, runs
-the bore scan, judges every characteristic, saves the hole crops and commits the
-result (all characteristics and the final state in one transaction) before it
-reports anything. A plan that ends early (stopped, aborted, faulted) is recorded
-with its reason; a crash leaves the record ``running``, which the next start of
-the store marks ``interrupted``.
+The service plans the bore scan, runs it on the engine and judges every
+characteristic; it publishes what happened as documents (``station.inspection.
+documents``: start, frames, holes, checks, stop) and leaves every side effect to their
+subscribers. The store writer is a required one: the result (all characteristics and
+the final state in one transaction) is committed before the service returns it; when
+it is not, the outcome says so and the stop published is the faulted one. A plan that
+ends early (stopped, aborted, faulted) is published with its reason; a crash leaves
+the record ``running``, which the next start of the store marks ``interrupted``.
 
 Decision rule: simple acceptance (ISO 14253-1's "shared risk"): a value inside the
 limits, inclusive, conforms; the expanded uncertainty is recorded beside it.
@@ -13,25 +15,26 @@ limits, inclusive, conforms; the expanded uncertainty is recorded beside it.
 
 from __future__ import annotations
 
-import asyncio
 import hashlib
 import math
 import platform
+import uuid
 from dataclasses import dataclass, field
-from typing import Callable, Mapping
+from typing import Mapping
 
 from station import __version__
+from station.inspection.documents import (CheckDocument, DocumentStream, FrameDocument, HoleDocument,
+                                          InspectionStart, InspectionStop)
 from station.inspection.scan import (CameraGeometry, HoleResult, HoleTarget, ScanFinding, ScanResult, ScanSettings,
                                      bore_scan)
-from station.inspection.scanlog import write_scan_log
+from station.inspection.writers import ResultNotStored
 from station.kinematics.model import StationModel
 from station.motion import AxisLimits
 from station.parts.spec import PartSpec
 from drivers.interfaces import DriverError
 from station.sequencer.cycle import cycle_summary, lower_bound, machine_time
-from station.sequencer.engine import Engine, EngineEvent, PlanEnded, State
-from station.store.errors import StoreError
-from station.store.records import FindingRecord, Measurement
+from station.sequencer import messages as m
+from station.sequencer.engine import Engine, PlanEnded, State
 
 
 @dataclass
@@ -79,11 +82,6 @@ class InspectionOutcome:
                 "result": self.result, "reason": self.reason, "characteristics": chars,
                 "findings": [dict(f.__dict__) for f in self.findings], "cycle": self.cycle,
                 "alarms": [a.to_json() for a in self.alarms]}
-
-
-#: per store (by id): inspections whose record could not be finished (store failure),
-#: with the reason to finish them with once the store takes writes again
-_UNFINISHED: dict[int, dict[str, str]] = {}
 
 
 def model_fingerprint(model: StationModel) -> str:
@@ -138,39 +136,47 @@ def run_cycle(ledger_steps, devices, settings: ScanSettings, time_scale: float |
     return cycle_summary(machine, bound)
 
 
+async def ensure_ready(engine: Engine) -> None:
+    """Home when needed; after a fault or a released e-stop, reset first. A ready
+    engine's axes are asked first: a drive that faulted (or lost its reference) while
+    nothing ran is reset and homed again, instead of failing the next move. Every job
+    that moves the axes starts here (inspections, checks, calibrations)."""
+    if engine.state == State.READY:
+        try:
+            problem = await engine.axes_problem()
+        except DriverError as exc:
+            await engine.report_fault(exc)
+            raise PlanEnded("faulted", engine.reason) from exc
+        if problem:
+            engine.note(f"{problem}: reset and home before the inspection")
+            await engine.reset()
+    if engine.state in (State.FAULTED, State.ESTOPPED):
+        await engine.reset()
+    if engine.state == State.IDLE:
+        await engine.home()
+
+
 class InspectionService:
-    def __init__(self, engine: Engine, store, model: StationModel, geometry: CameraGeometry,
+    """Runs and judges inspections; what it finds goes out as documents to
+    ``documents``' subscribers (the store writer among them, required)."""
+
+    def __init__(self, engine: Engine, documents: DocumentStream, model: StationModel, geometry: CameraGeometry,
                  settings: ScanSettings | None = None, *, traceability: dict | None = None,
-                 truth: Callable[[str, str], float | None] | None = None, time_scale: float | None = None):
+                 time_scale: float | None = None, purpose: str = "production"):
         self.engine = engine
-        self.store = store
+        self.documents = documents
         self.model = model
         self.geometry = geometry
         self.settings = settings or ScanSettings()
         self.traceability = traceability or {}
-        #: simulation only: (hole id, kind) -> the twin's true value
-        self.truth = truth
         #: simulation only: how much faster than real time the twin's motion runs (the
         #: machine time is then replayed, station.sequencer.cycle); None: measured
         self.time_scale = time_scale
+        #: "production" or "master" (the start document's purpose)
+        self.purpose = purpose
 
     async def ensure_ready(self) -> None:
-        """Home when needed; after a fault or a released e-stop, reset first. A ready
-        engine's axes are asked first: a drive that faulted (or lost its reference)
-        while nothing ran is reset and homed again, instead of failing the next move."""
-        if self.engine.state == State.READY:
-            try:
-                problem = await self.engine.axes_problem()
-            except DriverError as exc:
-                await self.engine._fault(exc)
-                raise PlanEnded("faulted", self.engine.reason) from exc
-            if problem:
-                self.engine._emit("note", f"{problem}: reset and home before the inspection")
-                await self.engine.reset()
-        if self.engine.state in (State.FAULTED, State.ESTOPPED):
-            await self.engine.reset()
-        if self.engine.state == State.IDLE:
-            await self.engine.home()
+        await ensure_ready(self.engine)
 
     async def inspect(self, part: PartSpec, serial: str, *, order_id: str | None = None,
                       idempotency_key: str | None = None) -> InspectionOutcome:
@@ -184,47 +190,64 @@ class InspectionService:
             "part_spec": part.part_number,
             **self.traceability,
         }
-        await self._close_unfinished()
-        iid = await asyncio.to_thread(self.store.begin_inspection, part.part_number, serial=serial, order_id=order_id,
-                                      traceability=trace, idempotency_key=idempotency_key)
-        log = lambda ev: self._log(iid, ev)  # noqa: E731
-        self.engine.subscribe(log)
+        iid = str(uuid.uuid4())
+        # the record begins here (the store writer is a required subscriber): a refused
+        # start (a repeated idempotency key, a store that takes nothing) ends it all
+        await self.documents.publish(InspectionStart(iid, part.part_number, serial, order_id, idempotency_key, trace,
+                                                     self.purpose))
         try:
+            await self.ensure_ready()
+            plan = scan_plan(self.model, part, self.geometry, self.settings, motion_limits(self.engine.devices))
+            restore = self.engine.register_command(m.Emit, self._frame_command(iid))
             try:
-                await self.ensure_ready()
-                plan = scan_plan(self.model, part, self.geometry, self.settings, motion_limits(self.engine.devices))
                 scan: ScanResult = await self.engine.run(plan)
-            except PlanEnded as ended:
-                state = "faulted" if ended.outcome == "faulted" else "aborted"
-                cycle = self._cycle()
-                await asyncio.to_thread(self.store.finish, iid, state, None, ended.reason,
-                                        **self._cycle_fields(cycle))
-                return InspectionOutcome(iid, part.part_number, serial, state, None, ended.reason, cycle=cycle)
-            results = scan.holes
-            outcome = self._judge(iid, part, serial, results)
-            outcome.findings = scan.findings
-            outcome.cycle = self._cycle()
-            measurements = [Measurement(c.id, c.nominal, c.lower_limit, c.upper_limit, c.measured, c.passed,
-                                        uncertainty_k2=c.uncertainty_k2, true_value=c.true_value)
-                            for c in outcome.characteristics]
-            try:
-                for r in results:
-                    if r.crop is not None and r.crop.size:
-                        await asyncio.to_thread(self.store.add_image, iid, r.name, f"{r.name}", r.crop)
-                await asyncio.to_thread(self.store.finish, iid, "complete", outcome.result, outcome.reason or None,
-                                        measurements=measurements,
-                                        findings=[FindingRecord.of(f) for f in scan.findings],
-                                        **self._cycle_fields(outcome.cycle))
-            except StoreError as exc:
-                return await self._not_stored(iid, part, serial, exc)
-            # after the commit: the log is for discovery, the result must not wait on it
-            try:
-                await asyncio.to_thread(write_scan_log, self.store.data_dir, iid, results)
-            except OSError as exc:
-                self.store.log_event("alarm", f"scan log not written: {exc}", iid)
+            finally:
+                restore()
+        except PlanEnded as ended:
+            state = "faulted" if ended.outcome == "faulted" else "aborted"
+            outcome = InspectionOutcome(iid, part.part_number, serial, state, None, ended.reason, cycle=self._cycle())
+            await self._stop(outcome, [])
             return outcome
-        finally:
-            self.engine.unsubscribe(log)
+        except BaseException as exc:
+            # a bug or a cancellation before the plan ended: the subscribers must still
+            # see the inspection end (the record is finished; the event log let go)
+            reason = f"{type(exc).__name__}: {exc}"
+            outcome = InspectionOutcome(iid, part.part_number, serial, "faulted", None, reason)
+            try:
+                await self._stop(outcome, [])
+            except Exception:  # noqa: BLE001 - the first error is the one to raise
+                pass
+            raise
+        outcome = self._judge(iid, part, serial, scan.holes)
+        outcome.findings = scan.findings
+        outcome.cycle = self._cycle()
+        for r in scan.holes:
+            await self.documents.publish(HoleDocument(iid, r))
+        for c in outcome.characteristics:
+            await self.documents.publish(CheckDocument(iid, c))
+        return await self._stop(outcome, scan.holes)
+
+    async def _stop(self, outcome: InspectionOutcome, holes: list[HoleResult]) -> InspectionOutcome:
+        """Publish the stop; a result the store did not take is reported as the faulted
+        inspection it is (and its faulted stop published), never as a result."""
+        try:
+            await self.documents.publish(InspectionStop(outcome.id, outcome, holes))
+        except ResultNotStored as exc:
+            faulted = InspectionOutcome(outcome.id, outcome.part_number, outcome.serial, "faulted", None, exc.reason,
+                                        cycle=outcome.cycle)
+            await self.documents.publish(InspectionStop(outcome.id, faulted, []))
+            return faulted
+        return outcome
+
+    def _frame_command(self, iid: str):
+        """The engine's command for the plan's ``Emit`` messages during this
+        inspection: a frame's observation becomes a frame document."""
+        async def emit(engine, msg: m.Emit) -> None:
+            if msg.name == "frame":
+                hole, index, frame = msg.body
+                await self.documents.publish(FrameDocument(iid, hole, index, frame))
+
+        return emit
 
     def _cycle(self) -> dict | None:
         """The last run's machine time (and lower bound); None when it cannot be told
@@ -232,44 +255,8 @@ class InspectionService:
         try:
             return run_cycle(self.engine.ledger.steps, self.engine.devices, self.settings, self.time_scale)
         except Exception as exc:  # noqa: BLE001
-            self.engine._emit("note", f"cycle time not computed: {type(exc).__name__}: {exc}")
+            self.engine.note(f"cycle time not computed: {type(exc).__name__}: {exc}")
             return None
-
-    @staticmethod
-    def _cycle_fields(cycle: dict | None) -> dict:
-        if cycle is None or not math.isfinite(cycle.get("machine_s", math.nan)):
-            return {}
-        return {"machine_s": cycle["machine_s"], "cycle": cycle}
-
-    async def _not_stored(self, iid: str, part: PartSpec, serial: str, exc: StoreError) -> InspectionOutcome:
-        """The result could not be committed: nothing of it is reported as a result. The
-        record is finished ``faulted`` with the reason and an alarm when the store takes
-        that much; when it takes nothing, it stays ``running`` and the next inspection
-        (or the next start: recovery) closes it."""
-        reason = f"result not stored: {type(exc).__name__}: {exc}"
-        self._alarm(iid, reason)
-        try:
-            await asyncio.to_thread(self.store.finish, iid, "faulted", None, reason)
-        except StoreError:
-            _UNFINISHED.setdefault(id(self.store), {})[iid] = reason
-        return InspectionOutcome(iid, part.part_number, serial, "faulted", None, reason)
-
-    def _alarm(self, iid: str | None, text: str) -> None:
-        try:
-            self.store.log_event("alarm", text, iid)
-        except Exception:  # noqa: BLE001 - the store is what failed; the outcome carries the reason
-            pass
-
-    async def _close_unfinished(self) -> None:
-        """Records an earlier inspection could not finish because the store failed."""
-        pending = _UNFINISHED.get(id(self.store)) or {}
-        for iid, reason in sorted(pending.items()):
-            try:
-                await asyncio.to_thread(self.store.finish, iid, "faulted", None, reason)
-                self._alarm(iid, "closed as faulted once the results store was back")
-            except StoreError:
-                continue
-            pending.pop(iid, None)
 
     def _judge(self, iid: str, part: PartSpec, serial: str, results: list[HoleResult]) -> InspectionOutcome:
         by_hole = {r.name: r for r in results}
@@ -285,17 +272,9 @@ class InspectionService:
             else:
                 value, u = r.diameter_mm, r.diameter_u_mm
             ok = value is not None and math.isfinite(value) and c.conforms(value)
-            truth = self.truth(c.hole_id, c.kind) if self.truth is not None else None
-            chars.append(CharacteristicOutcome(c.id, c.nominal, c.lower_limit, c.upper_limit, value, u, ok, truth))
+            chars.append(CharacteristicOutcome(c.id, c.nominal, c.lower_limit, c.upper_limit, value, u, ok))
         result = "pass" if all(c.passed for c in chars) else "fail"
         reason = "; ".join(dict.fromkeys(reasons))
         if result == "fail" and not reason:
             reason = "out of tolerance: " + ", ".join(c.id for c in chars if not c.passed)
         return InspectionOutcome(iid, part.part_number, serial, "complete", result, reason, chars, results)
-
-    def _log(self, iid: str, ev: EngineEvent) -> None:
-        if ev.kind in ("state", "fault", "retry", "note"):
-            try:
-                self.store.log_event(ev.kind, f"{ev.state.value}: {ev.text}" if ev.kind == "state" else ev.text, iid)
-            except Exception:  # noqa: BLE001 - the event log must not stop the inspection
-                pass

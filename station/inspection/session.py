@@ -1,26 +1,30 @@
-"""An inspection session: the station, the store and the service, built and torn down together.
+"""An inspection session: the station, the store, the engine and the inspections'
+document stream, kept together for as long as the station runs.
 
-The CLI (``station inspect``, ``station gauge``, ``station paper``), the benches and
-the end-to-end tests all run inspections through this one object, so they exercise
-the same code the plant runs.
+The CLI (``station inspect``, ``station gauge``, ``station paper``), the benches, the API
+and the end-to-end tests all run inspections through this one object, so they exercise
+the same code the plant runs. The composition root builds it
+(``station.runtime.open_session``); this module knows the station only by what it
+offers (its model, its camera geometry, its traceability, the part on its table).
 """
 
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import math
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
+from station.inspection.documents import DocumentStream
 from station.inspection.scan import CameraGeometry, ScanSettings
 from station.inspection.service import InspectionOutcome, InspectionService
+from station.inspection.writers import EngineEventLog, ScanLogWriter, StoreWriter
 from station.monitor.evidence import WINDOW, Explanation, MasterRecord, explain
 from station.monitor.watch import Alarm, CharacteristicCheck, StationWatch
 from station.parts.spec import PartSpec
-from station.sequencer.engine import Devices, Engine
+from station.sequencer.engine import Engine
 
 
 def vision_measure(mm_per_px: float):
@@ -34,18 +38,6 @@ def vision_measure(mm_per_px: float):
         return measure_holes(image, mm_per_px=mm_per_px)
 
     return measure
-
-
-def truth_of(world) -> Any:
-    """Simulation only: the twin's true value of a characteristic (hole id, kind)."""
-
-    def truth(hole_id: str, kind: str):
-        for h in world.part.holes:
-            if h.name == hole_id:
-                return h.axial_mm if kind == "position" else h.diameter_mm
-        return None
-
-    return truth
 
 
 @dataclass
@@ -84,6 +76,13 @@ class Session:
     def __post_init__(self):
         from station.monitor.proposals import ProposalBook, apply_changes, part_scale_ppm
 
+        #: every inspection's documents (station.inspection.documents); the record is
+        #: a required subscriber, the engine's event log and the scan log follow it
+        self.documents = DocumentStream()
+        self.writer = StoreWriter(self.store)
+        self.documents.subscribe(self.writer, required=True)
+        self.documents.subscribe(EngineEventLog(self.store, self.engine))
+        self.documents.subscribe(ScanLogWriter(self.store))
         if self.watch is None:
             self.watch = StationWatch(gate_um=self.settings.model_u_um)
         #: model proposals and the approved changes (docs/monitor.md, The loop)
@@ -209,12 +208,9 @@ class Session:
         extra = self.evidence_bound_um([h.position.nominal for h in part.holes]) if evidence else 0.0
         settings = replace(self.settings, evidence_bound_um=extra)
         geo = CameraGeometry(st.mm_per_px, st.frame_size_px[0], st.frame_size_px[1], part.bore.diameter_mm / 2.0)
-        trace = {"config_hash": st.config_hash, "mode": st.mode}
-        if st.twins is not None:
-            trace["scenario"] = str(st.twins.station.scenario.source)
-        return InspectionService(self.engine, self.store, st.model, geo, settings, traceability=trace,
-                                 truth=truth_of(st.world) if st.world is not None else None,
-                                 time_scale=st.time_scale)
+        return InspectionService(self.engine, self.documents, st.model, geo, settings,
+                                 traceability=st.traceability(), time_scale=st.time_scale,
+                                 purpose="production" if evidence else "master")
 
     async def inspect(self, part: PartSpec, serial: str, **kw) -> InspectionOutcome:
         """One production inspection; its evidence goes on the station's charts."""
@@ -286,34 +282,3 @@ class Session:
 
         return await run_axis_check(self, family, settings=settings, out_dir=out_dir, propose=propose, plots=plots,
                                     holes_mm=holes_mm)
-
-
-@contextlib.asynccontextmanager
-async def open_session(config: str | Path | None = None, *, scenario: str | Path | None = None,
-                       time_scale: float | None = None, data_dir: str | Path = "var", db_url: str | None = None,
-                       settings: ScanSettings | None = None, world=None, model: str | Path | None = None,
-                       station_id: str | None = None):
-    """Build the station, connect it, open the store (recovering interrupted
-    inspections); close everything on the way out, whatever happened. ``model``: the
-    station's model file (its belief), instead of the config's; ``world``: a caller's
-    world whose part replaces the scenario's; ``station_id``: the station's id on the
-    database, instead of the config's."""
-    from station.runtime import build_station
-    from station.store import Store
-
-    station = build_station(config, scenario=scenario, time_scale=time_scale, model=model)
-    store = None
-    try:
-        if world is not None and station.world is not None:
-            # a caller's world (a test's or a study's part) replaces the scenario's
-            station.world.part = world.part
-        if station_id is not None:
-            station.station_id = station_id
-        store = Store.open(db_url, data_dir=data_dir, station_id=station.station_id)
-        await station.connect()
-        devices = Devices(station.z, station.c, station.encoder, station.camera, measure=vision_measure(station.mm_per_px))
-        yield Session(station, store, Engine(devices), settings or ScanSettings())
-    finally:
-        await station.close()
-        if store is not None:
-            store.close()

@@ -95,3 +95,29 @@ class Note(Msg):
     """Something worth recording in the event log."""
 
     text: str
+
+
+@dataclass(frozen=True)
+class Enable(Msg):
+    """Enable (or disable) an axis' drive."""
+
+    axis: str
+    on: bool = True
+
+
+@dataclass(frozen=True)
+class Home(Msg):
+    """Start an axis' homing (its reference run); a :class:`Wait` collects it."""
+
+    axis: str
+
+
+@dataclass(frozen=True)
+class Emit(Msg):
+    """Hand something the plan observed (``name``, ``body``: a frame's observation) to
+    the plan's owner, which registers a command for it (the inspection service turns
+    frames into documents); without one the engine only notes the event."""
+
+    name: str
+    body: Any = None
+    retryable = False

@@ -195,6 +195,8 @@ def summarize_plan(plan: Generator[m.Msg, Any, Any], world: SimWorld | None = No
             out.progress.append((msg.done, msg.total, msg.text))
         elif isinstance(msg, m.Note):
             out.notes.append(msg.text)
+        elif isinstance(msg, (m.Emit, m.Enable, m.Home)):
+            pass  # a document for the plan's owner, or homing: nothing the world answers
         else:
             plan.close()
             raise TypeError(f"unknown message {msg!r}")

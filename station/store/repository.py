@@ -334,8 +334,11 @@ class Store:
 
     def begin_inspection(self, part_number: str, *, serial: str | None = None, order_id: str | None = None,
                          traceability: Traceability | Mapping[str, Any] | None = None,
-                         idempotency_key: str | None = None, started_at: datetime | None = None) -> str:
-        """Create a ``running`` inspection and return its id (a UUID string).
+                         idempotency_key: str | None = None, started_at: datetime | None = None,
+                         inspection_id: str | None = None) -> str:
+        """Create a ``running`` inspection and return its id (a UUID string; the
+        caller's ``inspection_id`` when given: the inspection's documents carry it from
+        their start, before the record exists).
 
         A repeated ``idempotency_key`` raises :class:`DuplicateIdempotencyKey` naming the
         inspection that has it, so the REST API can answer a retried POST with it.
@@ -352,7 +355,13 @@ class Store:
             json.dumps(trace, allow_nan=False)
         except (TypeError, ValueError) as exc:
             raise ValueError(f"traceability must be plain JSON (str, numbers, lists, dicts): {exc}") from None
-        inspection_id = str(uuid.uuid4())
+        if inspection_id is None:
+            inspection_id = str(uuid.uuid4())
+        else:
+            try:
+                inspection_id = str(uuid.UUID(inspection_id))
+            except (ValueError, AttributeError, TypeError):
+                raise ValueError(f"inspection_id must be a UUID, not {inspection_id!r}") from None
         try:
             with self._transaction("begin an inspection") as s:
                 s.add(Inspection(

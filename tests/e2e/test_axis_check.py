@@ -21,7 +21,7 @@ import sys
 from pathlib import Path
 
 from station.inspection.scan import predicted_carriage_mm
-from station.inspection.session import open_session
+from station.runtime import open_session
 from station.parts import load_part
 from station.recording import read_recording
 from station.store import Store

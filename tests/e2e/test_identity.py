@@ -23,7 +23,7 @@ import pytest
 from sim.world import HoleTruth as H
 from sim.world import PartTruth, Temperature
 from station.effects import ThermalDrift, ThermalExpansion
-from station.inspection.session import open_session
+from station.runtime import open_session
 from station.parts import load_part
 
 PART = "ZDZG-22.2-12.3851"

@@ -20,7 +20,7 @@ import pytest
 
 from sim.faults import FaultKind
 from sim.world import HoleTruth, PartTruth, World
-from station.inspection.session import open_session
+from station.runtime import open_session
 from station.parts import load_part
 from station.sequencer.engine import State
 from station.store import Store
@@ -157,7 +157,7 @@ def test_drive_fault_mid_scan_is_recorded_and_cleared(spec, tmp_path):
 CRASH_SCRIPT = textwrap.dedent(
     """
     import asyncio, sys
-    from station.inspection.session import open_session
+    from station.runtime import open_session
     from station.parts import load_part
 
     async def main():

@@ -8,7 +8,7 @@ from pathlib import Path
 from station.axis_model import AxisModel
 from station.discovery.engine import discover
 from station.inspection.scanlog import SCANLOG_DIR, merge_scan_logs
-from station.inspection.session import open_session
+from station.runtime import open_session
 from station.kinematics.model import load_model
 from station.parts import load_part
 

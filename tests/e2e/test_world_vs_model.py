@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from station.inspection.session import open_session
+from station.runtime import open_session
 from station.parts import load_part
 
 REPO = Path(__file__).resolve().parents[2]

@@ -20,7 +20,7 @@ from station.sequencer import messages as m
 from station.sequencer.cycle import Step, frame_poses, lower_bound, machine_time
 from station.sequencer.engine import Devices, Engine, Timeouts
 
-from test_engine import FakeAxis, FakeRotary
+from drivers.testing import InstantMockLinearAxis, InstantMockRotaryAxis
 
 Z = AxisLimits(velocity=50.0, acceleration=500.0)
 C = AxisLimits(velocity=90.0, acceleration=720.0)
@@ -172,43 +172,19 @@ def test_approach_sends_the_second_legs_in_the_order_the_first_legs_end():
     assert waits == [("C",), ("Z",), ("C", "Z")]
 
 
-class SlowAxis(FakeAxis):
-    """Moves take ``seconds``; records in ``events`` (shared) when each move started
-    and when its wait ended."""
-
-    def __init__(self, name, seconds, events):
-        super().__init__(name)
-        self.seconds = seconds
-        self.events = events
-        self.done: asyncio.Event | None = None
-        self.log = []
-        self.timeouts = []
-        self.ends = 0.0
-
-    async def move_to(self, position, velocity=None, acceleration=None):
-        self.log.append(("start", asyncio.get_running_loop().time(), velocity, acceleration))
-        self.events.append(f"{self.name} start")
-        self.position = position
-        loop = asyncio.get_running_loop()
-        self.ends = loop.time() + self.seconds
-
-    async def wait_in_position(self, timeout):
-        self.timeouts.append(timeout)
-        loop = asyncio.get_running_loop()
-        await asyncio.sleep(max(0.0, self.ends - loop.time()))
-        self.events.append(f"{self.name} done")
-        return await super().wait_in_position(timeout)
-
-
-class SlowRotary(SlowAxis, FakeRotary):
-    pass
+def started_and_done(journal):
+    """"Z start" when each move was sent, "Z done" when its wait ended, in time order."""
+    events = [(c.started, f"{c.axis} start") for c in journal if c.method == "move_to"]
+    events += [(math.inf if c.ended is None else c.ended, f"{c.axis} done")
+               for c in journal if c.method == "wait_in_position"]
+    return [name for _, name in sorted(events)]
 
 
 def test_engine_runs_two_moves_at_once_and_keeps_a_ledger():
     async def main():
-        events = []
-        z, c = SlowAxis("Z", 0.2, events), SlowRotary("C", 0.2, events)
-        z.default_velocity, z.default_acceleration = 50.0, 500.0
+        journal = []  # both axes' calls, interleaved; moves take 0.2 s
+        z = InstantMockLinearAxis("Z", delay_s=0.2, journal=journal, default_velocity=50.0, default_acceleration=500.0)
+        c = InstantMockRotaryAxis("C", delay_s=0.2, journal=journal)
         eng = Engine(Devices(z, c), retry_backoff_s=0.0)
         await eng.home()
         def plan():
@@ -218,9 +194,9 @@ def test_engine_runs_two_moves_at_once_and_keeps_a_ledger():
             yield m.Settle(0.0)
             return "ok"
 
-        events.clear()
+        journal.clear()
         assert await eng.run(plan()) == "ok"
-        return events, eng, z, c
+        return started_and_done(journal), eng, z, c
 
     events, eng, z, c = asyncio.run(main())
     # together: both started before either is waited for
@@ -229,10 +205,11 @@ def test_engine_runs_two_moves_at_once_and_keeps_a_ledger():
     assert [(s.axis, s.start, s.target, s.velocity, s.acceleration) for s in moves] == [
         ("Z", 0.0, 40.0, 50.0, 500.0), ("C", 0.0, 30.0, 90.0, 720.0)]
     assert [s.axis for s in eng.ledger.steps if s.kind == "wait"] == ["Z", "C"]
-    assert c.log[0][2:] == (90.0, 720.0)
+    assert c.calls_to("move_to")[0].args[1:] == (90.0, 720.0)
     # Z's timeout from its profile: twice 40 mm at 50 mm/s, 500 mm/s^2, plus the margin
-    assert z.timeouts[-1] == pytest.approx(2 * move_time_s(40.0, Z) + Timeouts().move_margin_s)
-    assert c.timeouts[-1] == pytest.approx(2 * move_time_s(30.0, C) + Timeouts().move_margin_s)
+    z_timeout, c_timeout = (ax.calls_to("wait_in_position")[-1].args[0] for ax in (z, c))
+    assert z_timeout == pytest.approx(2 * move_time_s(40.0, Z) + Timeouts().move_margin_s)
+    assert c_timeout == pytest.approx(2 * move_time_s(30.0, C) + Timeouts().move_margin_s)
 
 
 def test_move_timeout_from_the_profile_capped_and_the_fallback_when_the_speed_is_unknown():

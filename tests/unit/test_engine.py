@@ -1,4 +1,5 @@
-"""The run engine's state machine, on in-memory axes (the end-to-end tests use the twins)."""
+"""The run engine's state machine, on in-memory axes (``drivers.testing``'s instant
+mock axes; the end-to-end tests use the twins)."""
 
 from __future__ import annotations
 
@@ -6,62 +7,14 @@ import asyncio
 
 import pytest
 
-from drivers.interfaces import AxisStatus, DeviceTimeout, DriveFault, LinearAxis, RotaryAxis
+from drivers.interfaces import DeviceTimeout, DriveFault
+from drivers.testing import InstantMockLinearAxis, InstantMockRotaryAxis
 from station.sequencer import messages as m
 from station.sequencer.engine import Devices, Engine, EngineStateError, PlanEnded, State
 
 
-class FakeAxis(LinearAxis):
-    """An axis that moves instantly, counts its calls and can be told to fail."""
-
-    def __init__(self, name):
-        self.name = name
-        self.position = 0.0
-        self.stops = 0
-        self.fail_next: list[Exception] = []
-        self.move_gate: asyncio.Event | None = None
-
-    async def connect(self):
-        pass
-
-    async def close(self):
-        pass
-
-    async def enable(self, on=True):
-        pass
-
-    async def move_to(self, position, velocity=None):
-        if self.fail_next:
-            raise self.fail_next.pop(0)
-        self.position = position
-
-    async def stop(self):
-        self.stops += 1
-
-    async def home(self):
-        self.position = 0.0
-
-    async def wait_in_position(self, timeout):
-        if self.move_gate is not None:
-            await self.move_gate.wait()
-        return AxisStatus(True, True, False, True, True, False, False, False, 0, self.position, 0.0)
-
-    async def read_position(self):
-        return self.position
-
-    async def status(self):
-        return await self.wait_in_position(1.0)
-
-    async def reset_fault(self):
-        pass
-
-
-class FakeRotary(FakeAxis, RotaryAxis):
-    pass
-
-
 def make_engine():
-    z, c = FakeAxis("Z"), FakeRotary("C")
+    z, c = InstantMockLinearAxis("Z"), InstantMockRotaryAxis("C")
     eng = Engine(Devices(z, c), retry_backoff_s=0.0, sleep=lambda s: asyncio.sleep(0))
     states = []
     eng.subscribe(lambda ev: states.append(ev.state) if ev.kind == "state" else None)
@@ -100,12 +53,12 @@ def test_pause_takes_effect_at_a_checkpoint_and_resume_continues():
         eng, z, c, states = make_engine()
         await eng.home()
         log = []
-        z.move_gate = asyncio.Event()
+        z.hold()
         task = asyncio.create_task(eng.run(scan_plan(3, log)))
         await asyncio.sleep(0.01)
         eng.pause()  # requested while the first move is under way
         assert eng.state == State.RUNNING
-        z.move_gate.set()
+        z.release()
         for _ in range(100):
             await asyncio.sleep(0.001)
             if eng.state == State.PAUSED:
@@ -125,7 +78,7 @@ def test_abort_stops_axes_and_ends_aborted():
     async def go():
         eng, z, c, states = make_engine()
         await eng.home()
-        z.move_gate = asyncio.Event()  # the move never finishes by itself
+        z.hold()  # the move never finishes by itself
         task = asyncio.create_task(eng.run(scan_plan()))
         await asyncio.sleep(0.01)
         eng.abort("operator pressed abort")
@@ -135,7 +88,7 @@ def test_abort_stops_axes_and_ends_aborted():
 
     eng, z, c, ended = asyncio.run(go())
     assert ended.outcome == "aborted" and "operator" in ended.reason
-    assert z.stops == 1 and c.stops == 1
+    assert z.count("stop") == 1 and c.count("stop") == 1
     assert eng.state == State.READY
 
 
@@ -144,11 +97,11 @@ def test_controlled_stop_ends_at_next_checkpoint():
         eng, z, c, _ = make_engine()
         await eng.home()
         log = []
-        z.move_gate = asyncio.Event()
+        z.hold()
         task = asyncio.create_task(eng.run(scan_plan(5, log)))
         await asyncio.sleep(0.01)
         eng.stop()
-        z.move_gate.set()
+        z.release()
         with pytest.raises(PlanEnded) as exc:
             await task
         return eng, exc.value, log
@@ -162,7 +115,7 @@ def test_transient_errors_are_retried_within_budget():
     async def go():
         eng, z, c, _ = make_engine()
         await eng.home()
-        z.fail_next = [DeviceTimeout("no reply", "Z"), DeviceTimeout("no reply", "Z")]
+        z.fail("move_to", DeviceTimeout("no reply", "Z"), times=2)
         out = await eng.run(scan_plan(2))
         return eng, out
 
@@ -174,15 +127,15 @@ def test_budget_exhausted_or_drive_fault_faults_the_engine_and_reset_recovers():
     async def go():
         eng, z, c, _ = make_engine()
         await eng.home()
-        z.fail_next = [DeviceTimeout("no reply", "Z")] * 4
+        z.fail("move_to", DeviceTimeout("no reply", "Z"), times=4)
         with pytest.raises(PlanEnded) as e1:
             await eng.run(scan_plan(2))
-        s1, stops1 = eng.state, z.stops
+        s1, stops1 = eng.state, z.count("stop")
         with pytest.raises(EngineStateError):
             await eng.run(scan_plan(2))
         await eng.reset()
         await eng.home()
-        z.fail_next = [DriveFault(0x20, "overcurrent", "Z")]
+        z.fail("move_to", DriveFault(0x20, "overcurrent", "Z"))
         with pytest.raises(PlanEnded) as e2:
             await eng.run(scan_plan(2))
         s2, retries = eng.state, eng.retries_used
@@ -202,7 +155,7 @@ def test_estop_code_puts_engine_in_estopped():
     async def go():
         eng, z, c, _ = make_engine()
         await eng.home()
-        z.fail_next = [DriveFault(0x12, "emergency stop", "Z")]
+        z.fail("move_to", DriveFault(0x12, "emergency stop", "Z"))
         with pytest.raises(PlanEnded):
             await eng.run(scan_plan(1))
         return eng.state
@@ -220,7 +173,7 @@ def test_a_plan_that_raises_between_messages_faults_the_engine_instead_of_leavin
         await eng.home()
         with pytest.raises(PlanEnded) as e:
             await eng.run(broken())
-        state, stops = eng.state, z.stops
+        state, stops = eng.state, z.count("stop")
         await eng.reset()
         await eng.home()
         return e.value, state, stops, await eng.run(scan_plan(2))
@@ -243,3 +196,18 @@ def test_a_table_wound_up_by_many_parts_is_a_problem_to_re_reference_before_the_
 
     ok, wound = asyncio.run(go())
     assert ok is None and wound == "C has wound 101 turns"
+
+
+def test_a_fault_latched_while_ready_is_an_axes_problem_and_reset_leaves_the_axis_disabled():
+    async def go():
+        eng, z, c, _ = make_engine()
+        await eng.home()
+        ok = await eng.axes_problem()
+        z.trip(0x20, "motor overcurrent")  # the drive faults while nothing runs
+        tripped = await eng.axes_problem()
+        await z.reset_fault()  # acknowledged, but a drive comes back disabled
+        reset = await eng.axes_problem()
+        return ok, tripped, reset
+
+    ok, tripped, reset = asyncio.run(go())
+    assert ok is None and tripped == "Z reports fault 0x0020" and reset == "Z is not enabled"
