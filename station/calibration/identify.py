@@ -131,7 +131,7 @@ class Parameterisation:
     def values_from_model(self, model: StationModel) -> np.ndarray:
         """The parameter vector of any model: static errors as they are, each curve
         sampled at the nodes (direction-free: a direction effect contributes its mean)."""
-        static = {b: model._static(b).values().copy() for b, is_motion, _ in self.base.parameter_blocks()
+        static = {b: model.static_of(b).values().copy() for b, is_motion, _ in self.base.parameter_blocks()
                   if not is_motion}
         curves: dict[str, np.ndarray] = {}
         for body in self.base.joint_bodies:
@@ -156,7 +156,7 @@ class Parameterisation:
         if b.joint == "revolute_z":
             return body, xi_si
         nxt = next(x for x in self.base.topology.bodies if x.parent == b.index)
-        S = self.base._ideal_static(nxt.name)
+        S = self.base.ideal_static(nxt.name)
         return nxt.name, adjoint_apply(S.inverse(), xi_si)
 
     def to_model(self, x) -> StationModel:

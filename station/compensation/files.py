@@ -339,7 +339,7 @@ def table_to_linuxcnc(table: CompensationTable, comp_file_type: int) -> str:
     if len(table) > LINUXCNC_MAX_ENTRIES:
         raise ValueError(f"LinuxCNC takes at most {LINUXCNC_MAX_ENTRIES} entries per joint; "
                          f"this table has {len(table)}")
-    table._require_valid()
+    table.require_valid()
     scale = k_for_kind(table.kind)  # deviation units per machine unit
     up, down = table.column_for(+1), table.column_for(-1)
     lines = []

@@ -116,7 +116,7 @@ def table_to_segments(table: CompensationTable, direction: int = 0) -> SegmentMo
     ± backlash/2); 0 the mean of both.  A segment list has a single value per position,
     so a bidirectional table needs one model per direction.
     """
-    table._require_valid()
+    table.require_valid()
     x = table.position
     y = table.column_for(direction)
     slope = np.diff(y) / np.diff(x)

@@ -136,7 +136,7 @@ class CompensationTable:
 
     # ------------------------------------------------------------ evaluation
 
-    def _require_valid(self) -> None:
+    def require_valid(self) -> None:
         from station.compensation.check import check_table  # local: check imports this module
 
         errors = [p for p in check_table(self) if p.severity == "error"]
@@ -161,7 +161,7 @@ class CompensationTable:
         ``direction`` (scalar or array like ``x``): +1 approaching upwards, −1
         downwards, 0 unknown (the mean of both directions).
         """
-        self._require_valid()
+        self.require_valid()
         x = np.asarray(x, dtype=float)
         direction = np.broadcast_to(np.sign(np.asarray(direction, dtype=float)), x.shape)
         if self.mode == "averaged":

@@ -151,7 +151,7 @@ class StationModel:
     def parameter_names(self) -> tuple[str, ...]:
         return tuple(n for _, _, names in self.parameter_blocks() for n in names)
 
-    def _ideal_static(self, body: str) -> Rigid:
+    def ideal_static(self, body: str) -> Rigid:
         """Table 2's static matrices: N at the endoscope offset D from the slide; the
         table's pivot P2 at T from R; M at D - T from J (so O_M = O_N at the start)."""
         D = np.asarray(self.endoscope_offset_mm, dtype=float)
@@ -170,7 +170,7 @@ class StationModel:
         slots: list[Slot] = []
         for j in chain:
             body = self.topology.bodies[j]
-            slots.append(Slot("const", body.name, self._ideal_static(body.name)))
+            slots.append(Slot("const", body.name, self.ideal_static(body.name)))
             # static error: installation (bodies without a joint, paper Eqs. 2, 4, 5,
             # 7, 8) or a rotary axis's alignment (T45p'). The slide has none of its
             # own: its mounting error is bracket P1's installation error.
@@ -192,7 +192,7 @@ class StationModel:
         acc: Rigid | None = None
         for s in slots:
             if s.kind == "const" or (s.kind == "error" and not s.motion):
-                t = s.const if s.kind == "const" else small_transform(self._static(s.body).as_si())
+                t = s.const if s.kind == "const" else small_transform(self.static_of(s.body).as_si())
                 acc = t if acc is None else acc @ t
             else:
                 if acc is not None:
@@ -203,7 +203,8 @@ class StationModel:
             folded.append(Slot("const", "", acc))
         return folded
 
-    def _static(self, body: str) -> SixDof:
+    def static_of(self, body: str) -> SixDof:
+        """The installation (static) error of ``body``; zero when the model has none."""
         return self.static_errors.get(body, SixDof())
 
     def motions_of(self, body: str) -> ErrorMotions:
@@ -249,7 +250,7 @@ class StationModel:
                 if s.motion:
                     t = small_transform(motions_si[s.body])
                 else:
-                    t = small_transform(self._static(s.body).as_si())
+                    t = small_transform(self.static_of(s.body).as_si())
             else:  # pragma: no cover
                 raise AssertionError(s.kind)
             acc = t if acc is None else acc @ t
@@ -392,7 +393,7 @@ class StationModel:
             if is_motion:
                 cols.append(motions[body])
             else:
-                cols.append(np.broadcast_to(self._static(body).as_si(), z.shape + (6,)))
+                cols.append(np.broadcast_to(self.static_of(body).as_si(), z.shape + (6,)))
         return np.concatenate(cols, axis=-1)
 
     def first_order_errors(self, z_mm, c_deg, **context) -> np.ndarray:

@@ -50,7 +50,7 @@ def body_matrix(model: StationModel, body_name: str, z_mm: float, c_deg: float, 
     static = {"N": _h_trans(*D), "P2": _h_trans(*T), "M": _h_trans(*(D - T))}.get(body_name, np.eye(4))
     actual = motions_si is not None
     if actual and b.joint != "prismatic_z":
-        static = static @ _h_small(model._static(body_name).as_si())
+        static = static @ _h_small(model.static_of(body_name).as_si())
     if b.joint == "prismatic_z":
         motion = _h_trans(0, 0, z_mm)
         if actual:

@@ -304,7 +304,7 @@ class Store:
             self.record_generation += 1
 
     @contextmanager
-    def _transaction(self, what: str, *, write: bool = True) -> Iterator[Session]:
+    def transaction(self, what: str, *, write: bool = True) -> Iterator[Session]:
         """One session, one transaction: committed at the end of the block, rolled back
         (nothing written) on any error; database errors become :class:`StoreError`."""
         factory = self._write_sessions if write else self._read_sessions
@@ -363,7 +363,7 @@ class Store:
             except (ValueError, AttributeError, TypeError):
                 raise ValueError(f"inspection_id must be a UUID, not {inspection_id!r}") from None
         try:
-            with self._transaction("begin an inspection") as s:
+            with self.transaction("begin an inspection") as s:
                 s.add(Inspection(
                     id=inspection_id, station_id=self.station_id, part_number=part_number, serial=serial, order_id=order_id,
                     state="running", result=None, reason=None, started_at=started_at or utcnow(),
@@ -388,7 +388,7 @@ class Store:
     def record_characteristics(self, inspection_id: str, measurements: Iterable[Measurement]) -> None:
         """Commit several characteristic results of a running inspection, all or none."""
         items = list(measurements)
-        with self._transaction("record characteristic results") as s:
+        with self.transaction("record characteristic results") as s:
             self._running(s, inspection_id, "record characteristic results")
             self._add_measurements(s, inspection_id, items)
         self._bump_records()
@@ -431,7 +431,7 @@ class Store:
         except OSError as exc:
             raise StoreUnavailable(f"results store: cannot write image {final}: {exc.strerror or exc}") from exc
         try:
-            with self._transaction("record an image crop") as s:
+            with self.transaction("record an image crop") as s:
                 self._running(s, inspection_id, "add an image")
                 if s.scalar(select(ImageCrop.id).where(ImageCrop.path == str(rel))) is not None:
                     raise StoreIntegrityError(f"inspection {inspection_id} already has an image {rel.name}")
@@ -474,7 +474,7 @@ class Store:
         if machine_s is not None and (isinstance(machine_s, bool) or not isinstance(machine_s, (int, float))
                                       or not math.isfinite(machine_s) or machine_s < 0):
             raise ValueError(f"machine_s must be a finite number >= 0 or None, not {machine_s!r}")
-        with self._transaction("finish the inspection") as s:
+        with self.transaction("finish the inspection") as s:
             insp = self._running(s, inspection_id, "finish")
             self._add_measurements(s, inspection_id, items)
             for f in found:
@@ -504,7 +504,7 @@ class Store:
         than station ids) are this process's to recover; without one, all are."""
         reason = reason or (f"the station process stopped before the inspection finished "
                             f"(found running when process {os.getpid()} opened the store)")
-        with self._transaction("recover interrupted inspections") as s:
+        with self.transaction("recover interrupted inspections") as s:
             q = select(Inspection).where(Inspection.state == "running")
             if self.station_id is not None:
                 q = q.where(or_(Inspection.station_id == self.station_id, Inspection.station_id.is_(None)))
@@ -523,7 +523,7 @@ class Store:
         _check_text("kind", kind, EVENT_KIND_LEN, required=True)
         if not isinstance(message, str):
             raise ValueError(f"message must be a string, not {type(message).__name__}")
-        with self._transaction("log an event") as s:
+        with self.transaction("log an event") as s:
             if inspection_id is not None and s.get(Inspection, inspection_id) is None:
                 raise InspectionNotFound(f"no inspection {inspection_id!r}")
             ev = Event(inspection_id=inspection_id, station_id=self.station_id, at=utcnow(), kind=kind,
@@ -538,7 +538,7 @@ class Store:
         """An inspection with its characteristics and images; :class:`InspectionNotFound`."""
         if _has_nul(inspection_id):
             raise InspectionNotFound(f"no inspection {inspection_id!r}")
-        with self._transaction("read an inspection", write=False) as s:
+        with self.transaction("read an inspection", write=False) as s:
             insp = s.scalar(select(Inspection).where(Inspection.id == inspection_id)
                             .options(selectinload(Inspection.characteristics), selectinload(Inspection.images),
                                      selectinload(Inspection.findings)))
@@ -557,7 +557,7 @@ class Store:
     def find_by_idempotency_key(self, key: str) -> str | None:
         if _has_nul(key):
             return None
-        with self._transaction("look up an idempotency key", write=False) as s:
+        with self.transaction("look up an idempotency key", write=False) as s:
             return s.scalar(select(Inspection.id).where(Inspection.idempotency_key == key))
 
     @staticmethod
@@ -592,7 +592,7 @@ class Store:
         if not 1 <= limit <= MAX_PAGE or offset < 0:
             raise ValueError(f"limit must be 1..{MAX_PAGE} and offset >= 0 (got {limit}, {offset})")
         conds = self._filters(since, until, part_number, serial, result, state, station)
-        with self._transaction("list inspections", write=False) as s:
+        with self.transaction("list inspections", write=False) as s:
             rows = s.scalars(select(Inspection).where(*conds)
                              # id breaks ties of equal start times, so pages never overlap
                              .order_by(Inspection.started_at.desc(), Inspection.id.desc())
@@ -604,12 +604,12 @@ class Store:
                           state: str | None = None, station: str | None = None) -> int:
         """How many inspections :meth:`list_inspections` would page through."""
         conds = self._filters(since, until, part_number, serial, result, state, station)
-        with self._transaction("count inspections", write=False) as s:
+        with self.transaction("count inspections", write=False) as s:
             return s.scalar(select(func.count()).select_from(Inspection).where(*conds))
 
     def stations(self) -> list[str]:
         """The ids of the stations that have written inspections here, sorted."""
-        with self._transaction("list stations", write=False) as s:
+        with self.transaction("list stations", write=False) as s:
             return sorted(s.scalars(select(Inspection.station_id).where(Inspection.station_id.is_not(None))
                                     .distinct()))
 
@@ -632,7 +632,7 @@ class Store:
         if kind is not None:
             q = q.where(Event.kind == kind)
         q = q.order_by(Event.id.desc() if newest_first else Event.id.asc()).limit(limit).offset(offset)
-        with self._transaction("read events", write=False) as s:
+        with self.transaction("read events", write=False) as s:
             return [_event_record(e) for e in s.scalars(q)]
 
     def image_path(self, record: ImageRecord) -> Path:

@@ -214,7 +214,7 @@ class TokenRepository:
                 raise ValueError("expires_at must be an aware datetime")
             if expires_at <= now:
                 raise ValueError(f"expiry {_iso(expires_at)} is not in the future")
-        with self.store._transaction("create an API token") as s:
+        with self.store.transaction("create an API token") as s:
             row, token = self._new_row(role, name, expires_at, now)
             s.add(row)
             s.flush()
@@ -228,7 +228,7 @@ class TokenRepository:
         m = _TOKEN.match(token or "")
         if m is None:
             return None
-        with self.store._transaction("check an API token", write=False) as s:
+        with self.store.transaction("check an API token", write=False) as s:
             row = s.scalar(select(ApiToken).where(ApiToken.prefix == m.group(1)))
             if row is None:
                 return None
@@ -242,7 +242,7 @@ class TokenRepository:
         return record if record is not None and record.active() else None
 
     def get(self, token_id: int) -> TokenRecord | None:
-        with self.store._transaction("read an API token", write=False) as s:
+        with self.store.transaction("read an API token", write=False) as s:
             row = s.get(ApiToken, token_id)
             return None if row is None else _record(row)
 
@@ -262,7 +262,7 @@ class TokenRepository:
             if text.isdigit():
                 raise KeyError(f"no API token {text}")
             raise KeyError(f"{text!r} is neither a token id nor a token prefix (st_ and at least 6 hex digits)")
-        with self.store._transaction("find an API token", write=False) as s:
+        with self.store.transaction("find an API token", write=False) as s:
             rows = list(s.scalars(select(ApiToken).where(ApiToken.prefix.startswith(prefix)).limit(2)))
         if len(rows) > 1:
             raise KeyError(f"more than one API token has the prefix {prefix}: give more of it, or the id")
@@ -276,7 +276,7 @@ class TokenRepository:
         raise KeyError(f"no API token with prefix {prefix}" if not text.isdigit() else f"no API token {text}")
 
     def list(self) -> list[TokenRecord]:
-        with self.store._transaction("list API tokens", write=False) as s:
+        with self.store.transaction("list API tokens", write=False) as s:
             return [_record(t) for t in s.scalars(select(ApiToken).order_by(ApiToken.id))]
 
     def rotate(self, token_id: int, *, grace_s: float = DEFAULT_GRACE_S, expires_in_s: float | None = None,
@@ -302,7 +302,7 @@ class TokenRepository:
             raise ValueError(f"grace must be 0 to 100 years in seconds, not {grace_s!r}")
         now = utcnow()
         new_expires = _later(expires_in_s, now, "the new token's lifetime")
-        with self.store._transaction("rotate an API token") as s:
+        with self.store.transaction("rotate an API token") as s:
             old = s.get(ApiToken, token_id, with_for_update=True)
             if old is None:
                 raise KeyError(f"no API token {token_id}")
@@ -334,7 +334,7 @@ class TokenRepository:
 
     def revoke(self, token_id: int, *, by: str | None = None) -> TokenRecord:
         """Refuse the token from now on (KeyError when there is no such token)."""
-        with self.store._transaction("revoke an API token") as s:
+        with self.store.transaction("revoke an API token") as s:
             row = s.get(ApiToken, token_id, with_for_update=True)
             if row is None:
                 raise KeyError(f"no API token {token_id}")

@@ -222,13 +222,13 @@ def test_a_prefix_of_decimal_digits_is_found_as_a_prefix(repo):
     a, _ = repo.create("mes")
     b, _ = repo.create("mes")
     digits = "0123456789abcdef"
-    with repo.store._transaction("give a token a decimal prefix") as s:
+    with repo.store.transaction("give a token a decimal prefix") as s:
         from station.store.models import ApiToken
 
         s.get(ApiToken, b.id).prefix = "9876543210" + digits[:6]
     assert repo.find("987654").id == b.id  # six decimal digits, no such id: the prefix
     assert repo.find(str(a.id)).id == a.id  # a short id is an id
-    with repo.store._transaction("give a token a prefix that is another's id") as s:
+    with repo.store.transaction("give a token a prefix that is another's id") as s:
         s.get(ApiToken, b.id).prefix = f"{a.id:06d}" + "abcdefabcd"
     with pytest.raises(KeyError, match="id and token"):
         repo.find(f"{a.id:06d}")
