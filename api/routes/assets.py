@@ -11,11 +11,12 @@ from __future__ import annotations
 import json
 import tomllib
 
-from fastapi import APIRouter, Depends, File, Form, HTTPException, Request, UploadFile, status
+from fastapi import APIRouter, File, Form, HTTPException, UploadFile, status
 
-from api import auth
-from api.routes.common import blocking, read_upload, runtime
+from api.deps import EngineerDep, ReaderDep, RuntimeDep
+from api.routes.common import blocking, read_upload
 from api.runtime import StationRuntime
+from api.schemas.assets import ModelCurves, UploadedVersion, VersionList
 from api.versions import VersionStore
 
 router = APIRouter(prefix="/api/v1", tags=["models and calibrations"])
@@ -113,16 +114,15 @@ def _listing(store: VersionStore) -> dict:
 def _register(kind: str) -> None:
     store_of, parse, apply, what = KINDS[kind]
 
-    @router.get(f"/{kind}", name=f"list_{kind}")
-    async def list_versions(request: Request, who: auth.Principal = Depends(auth.reader)) -> dict:
-        return await blocking(_listing, store_of(runtime(request)))
+    @router.get(f"/{kind}", name=f"list_{kind}", response_model=VersionList)
+    async def list_versions(rt: RuntimeDep, who: ReaderDep) -> dict:
+        return await blocking(_listing, store_of(rt))
 
     @router.post(f"/{kind}", name=f"upload_{kind}", status_code=status.HTTP_201_CREATED,
+                 response_model=UploadedVersion,
                  responses={413: {"description": "file too large"}, 422: {"description": "not a valid file"}})
-    async def upload(request: Request, file: UploadFile = File(..., description=f"the {what} file"),
-                     name: str = Form("", max_length=64, description="a short name for the version"),
-                     who: auth.Principal = Depends(auth.engineer)) -> dict:
-        rt = runtime(request)
+    async def upload(rt: RuntimeDep, who: EngineerDep, file: UploadFile = File(..., description=f"the {what} file"),
+                     name: str = Form("", max_length=64, description="a short name for the version")) -> dict:
         text = await read_upload(file, rt.settings.max_upload_bytes, what)
         source = file.filename or what
         try:
@@ -134,10 +134,9 @@ def _register(kind: str) -> None:
                                           f"sha256 {entry['sha256'][:12]})")
         return entry
 
-    @router.post(f"/{kind}/{{version}}/activate", name=f"activate_{kind}",
+    @router.post(f"/{kind}/{{version}}/activate", name=f"activate_{kind}", response_model=UploadedVersion,
                  responses={404: {"description": "no such version"}, 409: {"description": "a job is running"}})
-    async def activate(version: int, request: Request, who: auth.Principal = Depends(auth.engineer)) -> dict:
-        rt = runtime(request)
+    async def activate(version: int, rt: RuntimeDep, who: EngineerDep) -> dict:
         store = store_of(rt)
         entry = await blocking(store.entry, version)
         if entry is None:
@@ -206,12 +205,12 @@ def curves_of(model, points: int = CURVE_POINTS) -> dict:
     return {"model": model.name, "axes": axes, "compensation_tables": tables}
 
 
-@router.get("/models/active/curves", tags=["models and calibrations"])
-async def active_model_curves(request: Request, who: auth.Principal = Depends(auth.reader)) -> dict:
+@router.get("/models/active/curves", tags=["models and calibrations"], response_model=ModelCurves,
+            response_model_exclude_unset=True)
+async def active_model_curves(rt: RuntimeDep, who: ReaderDep) -> dict:
     """The error motions of the model the station compensates with now (ISO 230-1
     names: EXZ..ECZ of Z over its travel, EXC..ECC of C over a turn; um and arcsec),
     for the panel's plots, and the baseline tables with their corrections."""
-    rt = runtime(request)
     out = await blocking(curves_of, rt.station.model)
     out["version"] = (await blocking(model_store(rt).index))["active"]
     return out

@@ -20,15 +20,15 @@ import logging
 import uuid
 from collections import OrderedDict
 from datetime import datetime, timezone
-from typing import Any, Literal
 
-from fastapi import APIRouter, Depends, HTTPException, Request, Response, status
+from fastapi import APIRouter, HTTPException, Response, status
 from pydantic import BaseModel, ConfigDict, Field
 
-from api import auth
-from api.routes.common import blocking, runtime
+from api.deps import EngineerDep, ReaderDep, RuntimeDep
+from api.routes.common import blocking
 from api.routes.inspections import _json_safe
 from api.runtime import Busy
+from api.schemas.calibration import CalibrationRun
 from station.store import StoreError
 
 log = logging.getLogger(__name__)
@@ -50,47 +50,6 @@ class CalibrationOrder(BaseModel):
     poses: int = Field(default=40, ge=1, le=200, description="poses to measure (chosen for observability)")
     propose: bool = Field(default=False, description="make a model proposal of the observable parameters")
     seed: int = Field(default=0, ge=0, description="simulation only: the artefact's making in the twin's world")
-
-
-class Parameter(BaseModel):
-    model_config = ConfigDict(extra="allow")
-    name: str
-    unit: str
-    value: float
-    u: float | None = Field(description="standard uncertainty; null when not observable")
-    observable: bool
-
-
-class Observability(BaseModel):
-    model_config = ConfigDict(extra="allow")
-    rank: int
-    n_parameters: int
-    condition: float | None
-    unobservable: list[dict[str, Any]]
-
-
-class CalibrationResult(BaseModel):
-    """What ``station calibrate master --json`` prints (docs/calibration.md)."""
-
-    model_config = ConfigDict(extra="allow")
-    parameters: list[Parameter]
-    observability: Observability
-    residual_rms_um: float | None
-    model_version: str | None = Field(description="the model proposal made from the result (propose), else null")
-
-
-class CalibrationRun(BaseModel):
-    id: str
-    kind: Literal["master"] = "master"
-    artefact: str
-    poses: int
-    propose: bool
-    state: Literal["running", "complete", "faulted"]
-    reason: str | None = None
-    started_at: str
-    finished_at: str | None = None
-    result: CalibrationResult | None = None
-    links: dict[str, str]
 
 
 def _now() -> str:
@@ -170,27 +129,26 @@ def _ended(rt, run: _Run, fut) -> None:
 
 
 @router.post("/calibrations/master", status_code=status.HTTP_202_ACCEPTED, response_model=CalibrationRun,
+             response_model_exclude_unset=True,
              responses={409: {"description": "the station is busy with another job"},
                         422: {"description": "unknown artefact, or a bad order"}})
-async def start_calibration(order: CalibrationOrder, request: Request, response: Response,
-                            who: auth.Principal = Depends(auth.engineer)) -> dict:
+async def start_calibration(order: CalibrationOrder, response: Response, rt: RuntimeDep, who: EngineerDep) -> dict:
     """Start a self-calibration on the artefact (the engineer has put it on the table; in
     simulation the twin's world holds it for the run). 202 with the run (``running``)
     and ``Location``; poll ``GET /calibrations/master/{id}``."""
-    rt = runtime(request)
     try:
         cert = await blocking(_load_artefact, order.artefact)
     except ValueError as exc:
         raise HTTPException(status.HTTP_422_UNPROCESSABLE_CONTENT, f"artefact: {exc}") from None
     if rt.busy:
-        raise HTTPException(status.HTTP_409_CONFLICT, rt._busy_text())
+        raise HTTPException(status.HTTP_409_CONFLICT, rt.busy_text())
     run = _Run(uuid.uuid4().hex[:12], order)
     runs = _runs(rt)
     runs[run.id] = run
     while len(runs) > RUNS_KEPT:
         runs.popitem(last=False)
     try:
-        rt._start_job("calibration", _calibrate(rt, run, cert), lambda fut: _ended(rt, run, fut))
+        rt.start_job("calibration", _calibrate(rt, run, cert), lambda fut: _ended(rt, run, fut))
     except Busy as exc:  # pragma: no cover - the check above holds on the one API loop
         raise HTTPException(status.HTTP_409_CONFLICT, str(exc)) from None
     rt.hub.publish("job", event="started", job="calibration", id=run.id, artefact=cert.artefact_id)
@@ -201,10 +159,10 @@ async def start_calibration(order: CalibrationOrder, request: Request, response:
     return run.to_json()
 
 
-@router.get("/calibrations/master/{run_id}", response_model=CalibrationRun,
+@router.get("/calibrations/master/{run_id}", response_model=CalibrationRun, response_model_exclude_unset=True,
             responses={404: {"description": "no calibration of that id in this server process"}})
-async def get_calibration(run_id: str, request: Request, who: auth.Principal = Depends(auth.reader)) -> dict:
-    run = _runs(runtime(request)).get(run_id)
+async def get_calibration(run_id: str, rt: RuntimeDep, who: ReaderDep) -> dict:
+    run = _runs(rt).get(run_id)
     if run is None:
         raise HTTPException(status.HTTP_404_NOT_FOUND, f"no calibration {run_id!r} (this server keeps the last "
                                                        f"{RUNS_KEPT} it ran)")

@@ -1,5 +1,6 @@
-"""Helpers shared by the routers: the runtime of the request, blocking calls off the
-event loop with a deadline, size-limited uploads."""
+"""Helpers shared by the routers: blocking calls off the event loop with a deadline,
+size-limited uploads. (The runtime and the caller come as typed dependencies:
+:mod:`api.deps`.)"""
 
 from __future__ import annotations
 
@@ -9,16 +10,10 @@ import functools
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any, Callable
 
-from fastapi import HTTPException, Request, UploadFile, status
-
-from api.runtime import StationRuntime
+from fastapi import HTTPException, UploadFile, status
 
 #: a store call (SQLite with its 5 s busy timeout) or a short computation: give up after this
 STORE_TIMEOUT_S = 15.0
-
-
-def runtime(request: Request) -> StationRuntime:
-    return request.app.state.runtime
 
 
 #: the API's own worker threads: requests queue here, never in the default executor

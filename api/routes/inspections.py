@@ -16,13 +16,14 @@ import math
 from datetime import datetime
 from typing import Annotated, Literal
 
-from fastapi import APIRouter, Depends, Header, HTTPException, Query, Request, Response, status
+from fastapi import APIRouter, Header, HTTPException, Query, Response, status
 from pydantic import BaseModel, ConfigDict, Field
 
-from api import auth
-from api.routes.common import blocking, runtime
+from api.deps import JobOrdersDep, ReaderDep, RuntimeDep
+from api.routes.common import blocking
 from api.routes.parts import load_by_number
-from api.runtime import Busy
+from api.runtime import Busy, StationRuntime
+from api.schemas.inspections import Inspection, InspectionList, Stations
 from station import __version__
 from station.exports.qif import finished_qif_bytes
 from station.parts import PartSpecError
@@ -88,8 +89,7 @@ def job_response(rec) -> dict:
     return out
 
 
-async def _get_record(request: Request, inspection_id: str):
-    rt = runtime(request)
+async def _get_record(rt: StationRuntime, inspection_id: str):
     try:
         # read once per committed change; clients polling meanwhile share it (api/records.py)
         return await rt.records.get(inspection_id)
@@ -97,14 +97,16 @@ async def _get_record(request: Request, inspection_id: str):
         raise HTTPException(status.HTTP_404_NOT_FOUND, f"no inspection {inspection_id!r}") from None
 
 
-@router.post("/job-orders", status_code=status.HTTP_202_ACCEPTED,
-             responses={200: {"description": "a retried order (same Idempotency-Key): the existing job"},
+@router.post("/job-orders", status_code=status.HTTP_202_ACCEPTED, response_model=Inspection,
+             response_model_exclude_unset=True,
+             responses={200: {"model": Inspection,
+                              "description": "a retried order (same Idempotency-Key): the existing job"},
                         409: {"description": "the station is busy with another job"},
                         422: {"description": "invalid order or unknown part number"}})
-async def create_job_order(order: JobOrder, request: Request, response: Response,
-                           idempotency_key: Annotated[str | None, Header(min_length=1, max_length=KEY_MAX)] = None,
-                           who: auth.Principal = Depends(auth.job_orders)) -> dict:
-    rt = runtime(request)
+async def create_job_order(
+    order: JobOrder, response: Response, rt: RuntimeDep, who: JobOrdersDep,
+    idempotency_key: Annotated[str | None, Header(min_length=1, max_length=KEY_MAX)] = None,
+) -> dict:
     try:
         spec = await blocking(load_by_number, order.part_number, rt.settings.parts_dir)
     except PartSpecError as exc:
@@ -118,24 +120,24 @@ async def create_job_order(order: JobOrder, request: Request, response: Response
             f", order {order.order_id!r}" if order.order_id else "")
         with contextlib.suppress(StoreError):
             await blocking(rt.audit, who.who, what)
-    rec = await _get_record(request, iid)
+    rec = await _get_record(rt, iid)
     if not created:
         response.status_code = status.HTTP_200_OK
     response.headers["Location"] = f"/api/v1/inspections/{iid}"
     return job_response(rec)
 
 
-@router.get("/inspections/{inspection_id}")
-async def get_inspection(inspection_id: str, request: Request, who: auth.Principal = Depends(auth.reader)) -> dict:
-    return job_response(await _get_record(request, inspection_id))
+@router.get("/inspections/{inspection_id}", response_model=Inspection, response_model_exclude_unset=True,
+            responses={404: {"description": "no such inspection"}})
+async def get_inspection(inspection_id: str, rt: RuntimeDep, who: ReaderDep) -> dict:
+    return job_response(await _get_record(rt, inspection_id))
 
 
 @router.get("/inspections/{inspection_id}/qif", response_class=Response,
             responses={200: {"content": {"application/xml": {}}, "description": "QIF 3.0 results document"},
                        409: {"description": "the inspection is still running"}})
-async def get_inspection_qif(inspection_id: str, request: Request,
-                             who: auth.Principal = Depends(auth.reader)) -> Response:
-    rec = await _get_record(request, inspection_id)
+async def get_inspection_qif(inspection_id: str, rt: RuntimeDep, who: ReaderDep) -> Response:
+    rec = await _get_record(rt, inspection_id)
     try:
         body = finished_qif_bytes(rec, software_version=__version__)  # station/exports/qif.py
     except InspectionStateError as exc:  # still running: no results yet
@@ -144,9 +146,10 @@ async def get_inspection_qif(inspection_id: str, request: Request,
                     headers={"Content-Disposition": f'inline; filename="{inspection_id}.qif"'})
 
 
-@router.get("/inspections")
+@router.get("/inspections", response_model=InspectionList, response_model_exclude_unset=True)
 async def list_inspections(
-    request: Request,
+    rt: RuntimeDep,
+    who: ReaderDep,
     since: Annotated[datetime | None, Query(description="started at or after (ISO 8601 with offset)")] = None,
     until: Annotated[datetime | None, Query(description="started before (ISO 8601 with offset)")] = None,
     part_number: Annotated[str | None, Query(max_length=64)] = None,
@@ -158,13 +161,12 @@ async def list_inspections(
                                                      "default: every station writing this database")] = None,
     limit: Annotated[int, Query(ge=1, le=1000)] = 50,
     offset: Annotated[int, Query(ge=0, le=10**9)] = 0,
-    who: auth.Principal = Depends(auth.reader),
 ) -> dict:
     for name, t in (("since", since), ("until", until)):
         if t is not None and t.utcoffset() is None:
             raise HTTPException(status.HTTP_422_UNPROCESSABLE_CONTENT,
                                 f"{name} needs a time zone (e.g. 2024-05-01T08:00:00Z)")
-    store = runtime(request).store
+    store = rt.store
     filters = dict(since=since, until=until, part_number=part_number, serial=serial, result=result, state=state,
                    station=station)
     total = await blocking(store.count_inspections, **filters)
@@ -172,8 +174,8 @@ async def list_inspections(
     return {"total": total, "limit": limit, "offset": offset, "items": [job_response(r) for r in items]}
 
 
-@router.get("/stations")
-async def list_stations(request: Request, who: auth.Principal = Depends(auth.reader)) -> dict:
+@router.get("/stations", response_model=Stations)
+async def list_stations(rt: RuntimeDep, who: ReaderDep) -> dict:
     """The stations whose inspections this database holds, and this one's id."""
-    store = runtime(request).store
+    store = rt.store
     return {"this": store.station_id, "stations": await blocking(store.stations)}

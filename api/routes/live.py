@@ -20,11 +20,10 @@ import json
 import time
 
 import cv2
-from fastapi import APIRouter, Depends, HTTPException, Request, status
+from fastapi import APIRouter, HTTPException, Request, status
 from fastapi.responses import StreamingResponse
 
-from api import auth
-from api.routes.common import runtime
+from api.deps import ReaderDep, RuntimeDep
 
 router = APIRouter(prefix="/api/v1", tags=["live"])
 
@@ -37,8 +36,7 @@ GRAB_TIMEOUT_S = 5.0
 
 @router.get("/events", response_class=StreamingResponse,
             responses={200: {"content": {"text/event-stream": {}}, "description": "Server-Sent Events"}})
-async def events(request: Request, who: auth.Principal = Depends(auth.reader)) -> StreamingResponse:
-    rt = runtime(request)
+async def events(request: Request, rt: RuntimeDep, who: ReaderDep) -> StreamingResponse:
     queue = rt.hub.subscribe()
     keepalive = rt.settings.sse_keepalive_s
 
@@ -72,10 +70,10 @@ def _jpeg(image) -> bytes:
 
 
 @router.get("/camera.mjpg", response_class=StreamingResponse,
-            responses={200: {"content": {f"multipart/x-mixed-replace; boundary={BOUNDARY}": {}}},
+            responses={200: {"content": {f"multipart/x-mixed-replace; boundary={BOUNDARY}": {}},
+                             "description": "the camera's frames as JPEG parts (MJPEG)"},
                        404: {"description": "the station has no camera"}})
-async def camera(request: Request, who: auth.Principal = Depends(auth.reader)) -> StreamingResponse:
-    rt = runtime(request)
+async def camera(request: Request, rt: RuntimeDep, who: ReaderDep) -> StreamingResponse:
     cam = rt.camera
     if cam is None:
         raise HTTPException(status.HTTP_404_NOT_FOUND, "the station has no camera")

@@ -20,17 +20,18 @@ inspection. Each decision is an event of the store's log (``approval`` /
 from __future__ import annotations
 
 import contextlib
+from typing import Annotated, Literal
 
-from typing import Literal
-
-from fastapi import APIRouter, Body, Depends, HTTPException, Request, Response, status
+from fastapi import APIRouter, Body, Depends, HTTPException, Response, status
 from pydantic import BaseModel, ConfigDict, Field
 
 from api import auth
-from api.routes.common import blocking, runtime
+from api.deps import EngineerDep, ReaderDep, RuntimeDep
+from api.routes.common import blocking
 from api.routes.inspections import _json_safe
 from api.routes.parts import load_by_number
-from api.runtime import Busy
+from api.runtime import Busy, StationRuntime
+from api.schemas.monitor import Check, DecidedProposal, Proposal, ProposalList
 from station.parts import PartSpecError
 from station.parts.spec import PART_NUMBER_PATTERN
 from station.store import StoreError
@@ -41,6 +42,7 @@ router = APIRouter(prefix="/api/v1", tags=["station checks and model proposals"]
 DEFAULT_MASTER = "MC-22.2-A"
 #: who may start a check: whoever works at the machine (the MES orders parts, not checks)
 checks_role = auth.require("operator", "engineer")
+CheckStarterDep = Annotated[auth.Principal, Depends(checks_role)]
 
 
 class CheckOrder(BaseModel):
@@ -86,15 +88,14 @@ def _family_of(cert, parts_dir):
     return family
 
 
-@router.post("/checks", status_code=status.HTTP_202_ACCEPTED,
+@router.post("/checks", status_code=status.HTTP_202_ACCEPTED, response_model=Check,
+             response_model_exclude_unset=True,
              responses={409: {"description": "the station is busy with another job"},
                         422: {"description": "unknown kind or master"}})
-async def start_check(order: CheckOrder, request: Request, response: Response,
-                      who: auth.Principal = Depends(checks_role)) -> dict:
+async def start_check(order: CheckOrder, response: Response, rt: RuntimeDep, who: CheckStarterDep) -> dict:
     """Start a check on the certified master (the operator has put it on the table; in
     simulation the twin's world holds it for the check). 202 with the check (state
     ``running``) and ``Location``; poll ``GET /checks/{id}``."""
-    rt = runtime(request)
     try:
         cert = await blocking(_load_master, order.master)
         family = await blocking(_family_of, cert, rt.settings.parts_dir)
@@ -110,9 +111,10 @@ async def start_check(order: CheckOrder, request: Request, response: Response,
     return _json_safe(rec.to_json())
 
 
-@router.get("/checks/{check_id}", responses={404: {"description": "no check of that id in this server process"}})
-async def get_check(check_id: str, request: Request, who: auth.Principal = Depends(auth.reader)) -> dict:
-    rec = runtime(request).checks.get(check_id)
+@router.get("/checks/{check_id}", response_model=Check, response_model_exclude_unset=True,
+            responses={404: {"description": "no check of that id in this server process"}})
+async def get_check(check_id: str, rt: RuntimeDep, who: ReaderDep) -> dict:
+    rec = rt.checks.get(check_id)
     if rec is None:
         raise HTTPException(status.HTTP_404_NOT_FOUND, f"no check {check_id!r} (this server keeps the last "
                                                        f"checks it ran; the inspection is at /inspections/{{id}})")
@@ -146,19 +148,18 @@ def _proposal_plot(rt, proposal_id: str) -> bytes:
                                                        f"master checks over time to show)") from None
 
 
-@router.get("/model-proposals")
-async def list_proposals(request: Request, who: auth.Principal = Depends(auth.reader)) -> dict:
+@router.get("/model-proposals", response_model=ProposalList)
+async def list_proposals(rt: RuntimeDep, who: ReaderDep) -> dict:
     """The station's model proposals, oldest first (newest last), and the version of
     the model it uses now."""
-    rt = runtime(request)
     items = await blocking(lambda: [_proposal_json(rt, p) for p in rt.session.proposals.list()])
     version = await blocking(lambda: rt.session.model_version)
     return {"model_version": version, "items": items}
 
 
-@router.get("/model-proposals/{proposal_id}", responses={404: {"description": "no such proposal"}})
-async def get_proposal(proposal_id: str, request: Request, who: auth.Principal = Depends(auth.reader)) -> dict:
-    rt = runtime(request)
+@router.get("/model-proposals/{proposal_id}", response_model=Proposal,
+            responses={404: {"description": "no such proposal"}})
+async def get_proposal(proposal_id: str, rt: RuntimeDep, who: ReaderDep) -> dict:
     return await blocking(lambda: _proposal_json(rt, _proposal(rt, proposal_id)))
 
 
@@ -167,20 +168,18 @@ async def get_proposal(proposal_id: str, request: Request, who: auth.Principal =
                              "description": "the proposal's picture: the master checks' position errors before "
                                             "and after the change (PNG)"},
                        404: {"description": "no such proposal, or it has no picture"}})
-async def get_proposal_plot(proposal_id: str, request: Request,
-                            who: auth.Principal = Depends(auth.reader)) -> Response:
+async def get_proposal_plot(proposal_id: str, rt: RuntimeDep, who: ReaderDep) -> Response:
     """The proposal's before/after picture (``image/png``): each master check's
     position error per hole against the machine clock, as measured and as the proposed
     model would have read it. 404 (JSON) when the proposal does not exist or has none."""
-    data = await blocking(_proposal_plot, runtime(request), proposal_id)
+    data = await blocking(_proposal_plot, rt, proposal_id)
     return Response(data, media_type="image/png", headers={"Cache-Control": "private, no-cache"})
 
 
-async def _decide(request: Request, proposal_id: str, approve: bool, body: Decision | None,
+async def _decide(rt: StationRuntime, proposal_id: str, approve: bool, body: Decision | None,
                   who: auth.Principal) -> dict:
     from station.monitor.proposals import ProposalError
 
-    rt = runtime(request)
     await blocking(_proposal, rt, proposal_id)  # 404 before anything else
     note = body.note.strip() if body is not None else ""
     try:
@@ -199,15 +198,16 @@ DECISION_RESPONSES = {404: {"description": "no such proposal"},
                       409: {"description": "decided already, or a job is running"}}
 
 
-@router.post("/model-proposals/{proposal_id}/approve", responses=DECISION_RESPONSES)
-async def approve_proposal(proposal_id: str, request: Request, body: Decision | None = Body(default=None),
-                           who: auth.Principal = Depends(auth.engineer)) -> dict:
+@router.post("/model-proposals/{proposal_id}/approve", response_model=DecidedProposal, responses=DECISION_RESPONSES)
+async def approve_proposal(proposal_id: str, rt: RuntimeDep, who: EngineerDep,
+                           body: Decision | None = Body(default=None)) -> dict:
     """Approve: the station uses the changed model from its next inspection (its charts
     start again); kept under ``<data>/models`` and applied at every start."""
-    return await _decide(request, proposal_id, True, body, who)
+    return await _decide(rt, proposal_id, True, body, who)
 
 
-@router.post("/model-proposals/{proposal_id}/reject", responses=DECISION_RESPONSES)
-async def reject_proposal(proposal_id: str, request: Request, body: Decision | None = Body(default=None),
-                          who: auth.Principal = Depends(auth.engineer)) -> dict:
-    return await _decide(request, proposal_id, False, body, who)
+@router.post("/model-proposals/{proposal_id}/reject", response_model=DecidedProposal, responses=DECISION_RESPONSES)
+async def reject_proposal(proposal_id: str, rt: RuntimeDep, who: EngineerDep,
+                          body: Decision | None = Body(default=None)) -> dict:
+    """Reject: the station's model stays as it is."""
+    return await _decide(rt, proposal_id, False, body, who)

@@ -3,27 +3,25 @@ reachable), /metrics (Prometheus text format)."""
 
 from __future__ import annotations
 
-
-from fastapi import APIRouter, Request, Response
+from fastapi import APIRouter, Response
 from fastapi.responses import JSONResponse
 from prometheus_client import CONTENT_TYPE_LATEST, generate_latest
 
-from api import auth
-from api.routes.common import blocking, runtime
-
-from fastapi import Depends
+from api.deps import ReaderDep, RuntimeDep
+from api.routes.common import blocking
+from api.schemas.ops import Health, Readiness
 
 router = APIRouter(tags=["operations"])
 
 
-@router.get("/healthz")
+@router.get("/healthz", response_model=Health)
 async def healthz() -> dict:
     return {"status": "ok"}
 
 
-@router.get("/readyz", responses={503: {"description": "the store or the station is not reachable"}})
-async def readyz(request: Request) -> JSONResponse:
-    rt = runtime(request)
+@router.get("/readyz", response_model=Readiness,
+            responses={503: {"model": Readiness, "description": "the store or the station is not reachable"}})
+async def readyz(rt: RuntimeDep) -> JSONResponse:
     checks: dict[str, str] = {}
     try:
         await blocking(rt.store.count_inspections, timeout=5.0)
@@ -38,12 +36,13 @@ async def readyz(request: Request) -> JSONResponse:
     except Exception as exc:  # noqa: BLE001
         checks["station"] = f"{type(exc).__name__}: {exc}"
     ready = all(v == "ok" for v in checks.values())
+    # a response of its own (its status says ready or not): FastAPI passes it on as it is
     return JSONResponse({"ready": ready, "checks": checks}, status_code=200 if ready else 503)
 
 
-@router.get("/metrics", response_class=Response, responses={200: {"content": {"text/plain": {}}}})
-async def metrics(request: Request, who: auth.Principal = Depends(auth.reader)) -> Response:
-    rt = runtime(request)
+@router.get("/metrics", response_class=Response,
+            responses={200: {"content": {"text/plain": {}}, "description": "Prometheus text exposition format"}})
+async def metrics(rt: RuntimeDep, who: ReaderDep) -> Response:
     # this station's pass rate, not the plant's: several stations may share the database
     mine = rt.store.station_id
     passed = await blocking(rt.store.count_inspections, state="complete", result="pass", station=mine)

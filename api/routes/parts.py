@@ -10,11 +10,12 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from fastapi import APIRouter, Body, Depends, HTTPException, Request, status
+from fastapi import APIRouter, Body, HTTPException, status
 from pydantic import ValidationError
 
-from api import auth
-from api.routes.common import blocking, runtime
+from api.deps import EngineerDep, ReaderDep, RuntimeDep
+from api.routes.common import blocking
+from api.schemas.parts import PartList, PartSpecDoc
 from api.toml_write import dumps
 from station.parts import PartSpecError, list_parts, load_part
 from station.parts.loader import Problem, validation_problems
@@ -44,9 +45,8 @@ def _check_number(part_number: str) -> None:
         raise HTTPException(status.HTTP_404_NOT_FOUND, f"{part_number!r} is not a part number")
 
 
-@router.get("/parts")
-async def get_parts(request: Request, who: auth.Principal = Depends(auth.reader)) -> dict:
-    rt = runtime(request)
+@router.get("/parts", response_model=PartList, response_model_exclude_unset=True)
+async def get_parts(rt: RuntimeDep, who: ReaderDep) -> dict:
     try:
         specs = await blocking(list_parts, [rt.settings.parts_dir])
     except PartSpecError as exc:
@@ -54,11 +54,12 @@ async def get_parts(request: Request, who: auth.Principal = Depends(auth.reader)
     return {"items": [s.to_json() for s in specs]}
 
 
-@router.get("/parts/{part_number}")
-async def get_part(part_number: str, request: Request, who: auth.Principal = Depends(auth.reader)) -> dict:
+@router.get("/parts/{part_number}", response_model=PartSpecDoc, response_model_exclude_unset=True,
+            responses={404: {"description": "no such part spec, or not a part number"}})
+async def get_part(part_number: str, rt: RuntimeDep, who: ReaderDep) -> dict:
     _check_number(part_number)
     try:
-        spec = await blocking(load_by_number, part_number, runtime(request).settings.parts_dir)
+        spec = await blocking(load_by_number, part_number, rt.settings.parts_dir)
     except PartSpecError as exc:
         raise HTTPException(status.HTTP_404_NOT_FOUND, str(exc)) from None
     return spec.to_json()
@@ -74,10 +75,11 @@ def _write_atomically(path: Path, text: str) -> None:
     os.replace(tmp, path)
 
 
-@router.put("/parts/{part_number}", responses={422: {"description": "the spec is not valid (every problem listed)"}})
-async def put_part(part_number: str, request: Request, body: dict = Body(..., description="the part spec as JSON "
-                   "(the TOML file's structure, docs/part-specs.md)"),
-                   who: auth.Principal = Depends(auth.engineer)) -> dict:
+@router.put("/parts/{part_number}", response_model=PartSpecDoc, response_model_exclude_unset=True,
+            responses={422: {"description": "the spec is not valid (every problem listed)"}})
+async def put_part(part_number: str, rt: RuntimeDep, who: EngineerDep,
+                   body: dict = Body(..., description="the part spec as JSON "
+                   "(the TOML file's structure, docs/part-specs.md)")) -> dict:
     _check_number(part_number)
     body = {k: v for k, v in body.items() if k != "characteristics"}  # derived, as GET shows them
     try:
@@ -89,7 +91,6 @@ async def put_part(part_number: str, request: Request, body: dict = Body(..., de
     if spec.part_number != part_number:
         raise HTTPException(status.HTTP_422_UNPROCESSABLE_CONTENT,
                             f"the body's part_number {spec.part_number!r} differs from the URL's {part_number!r}")
-    rt = runtime(request)
     path = rt.settings.parts_dir / f"{part_number}.toml"
     existed = path.exists()
     text = dumps(spec.model_dump(mode="json", exclude_none=True),

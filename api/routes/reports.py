@@ -24,11 +24,11 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Annotated
 
-from fastapi import APIRouter, Depends, File, HTTPException, Path as PathParam, Query, Request, Response, UploadFile, \
-    status
+from fastapi import APIRouter, File, HTTPException, Path as PathParam, Query, Response, UploadFile, status
 
-from api import auth
-from api.routes.common import blocking, read_upload, runtime
+from api.deps import EngineerDep, ReaderDep, RuntimeDep
+from api.routes.common import blocking, read_upload
+from api.schemas.reports import DiscoveryList, DiscoveryReport, Iso230Report, StoredDiscoveryReport
 
 log = logging.getLogger(__name__)
 
@@ -63,10 +63,10 @@ def _unprocessable(exc: Exception) -> HTTPException:
     return HTTPException(status.HTTP_422_UNPROCESSABLE_CONTENT, str(exc))
 
 
-@router.post("/iso230", responses={413: {"description": "file too large"}, 422: {"description": "bad recording"}})
-async def iso230_report(request: Request, recording: UploadFile = File(..., description="laser / rotary "
-                        "calibrator recording (CSV)"), who: auth.Principal = Depends(auth.engineer)) -> dict:
-    rt = runtime(request)
+@router.post("/iso230", response_model=Iso230Report,
+             responses={413: {"description": "file too large"}, 422: {"description": "bad recording"}})
+async def iso230_report(rt: RuntimeDep, who: EngineerDep, recording: UploadFile = File(..., description="laser / "
+                        "rotary calibrator recording (CSV)")) -> dict:
     text = await read_upload(recording, rt.settings.max_upload_bytes, "recording")
     try:
         return await blocking(_iso230, text, recording.filename or "recording.csv")
@@ -138,12 +138,11 @@ def _list_reports(folder: Path) -> list[dict]:
     return entries
 
 
-@router.post("/discovery", responses={413: {"description": "file too large"}, 422: {"description": "bad input"}})
-async def discovery_report(request: Request, response: Response,
+@router.post("/discovery", response_model=DiscoveryReport, response_model_exclude_unset=True,
+             responses={413: {"description": "file too large"}, 422: {"description": "bad input"}})
+async def discovery_report(response: Response, rt: RuntimeDep, who: EngineerDep,
                            model: UploadFile = File(..., description="axis model (TOML)"),
-                           recording: UploadFile = File(..., description="recording (CSV)"),
-                           who: auth.Principal = Depends(auth.engineer)) -> dict:
-    rt = runtime(request)
+                           recording: UploadFile = File(..., description="recording (CSV)")) -> dict:
     limit = rt.settings.max_upload_bytes
     model_text = await read_upload(model, limit, "model")
     rec_text = await read_upload(recording, limit, "recording")
@@ -165,21 +164,21 @@ async def discovery_report(request: Request, response: Response,
     return report
 
 
-@router.get("/discovery")
-async def list_discovery_reports(request: Request, limit: Annotated[int, Query(ge=1, le=1000)] = 100,
-                                 who: auth.Principal = Depends(auth.reader)) -> dict:
+@router.get("/discovery", response_model=DiscoveryList, response_model_exclude_unset=True)
+async def list_discovery_reports(rt: RuntimeDep, who: ReaderDep,
+                                 limit: Annotated[int, Query(ge=1, le=1000)] = 100) -> dict:
     """The stored discovery reports, newest first: a summary each."""
-    items = await blocking(_list_reports, discovery_folder(runtime(request)))
+    items = await blocking(_list_reports, discovery_folder(rt))
     return {"total": len(items), "items": items[:limit]}
 
 
-@router.get("/discovery/{report_id}", responses={404: {"description": "no such report"}})
-async def get_discovery_report(report_id: uuid.UUID, request: Request,
-                               who: auth.Principal = Depends(auth.reader)) -> dict:
+@router.get("/discovery/{report_id}", response_model=StoredDiscoveryReport, response_model_exclude_unset=True,
+            responses={404: {"description": "no such report"}})
+async def get_discovery_report(report_id: uuid.UUID, rt: RuntimeDep, who: ReaderDep) -> dict:
     """One stored report: who made it, when, from which files, the report itself, and
     its pictures (``plots``: name, what it shows, url; none for a report stored before
     the API kept them)."""
-    entry = await blocking(_read_entry, discovery_folder(runtime(request)), report_id)
+    entry = await blocking(_read_entry, discovery_folder(rt), report_id)
     return {**entry, "plots": _plot_links(entry)}
 
 
@@ -207,11 +206,11 @@ def _read_plot(folder: Path, report_id: uuid.UUID, name: str) -> bytes:
             responses={200: {"content": {"image/png": {}}, "description": "the plot (PNG)"},
                        404: {"description": "no such report, or no such plot of it"},
                        422: {"description": "not a report id, or not a plot's name"}})
-async def get_discovery_plot(report_id: uuid.UUID, request: Request,
-                             name: str = PathParam(pattern=r"^[a-z_]{1,40}\.png$",
-                                                   description="a plot's name as the report's `plots` lists it"),
-                             who: auth.Principal = Depends(auth.reader)) -> Response:
+async def get_discovery_plot(
+    report_id: uuid.UUID, rt: RuntimeDep, who: ReaderDep,
+    name: str = PathParam(pattern=r"^[a-z_]{1,40}\.png$", description="a plot's name as the report's `plots` lists it"),
+) -> Response:
     """One of a stored run's pictures (``image/png``): the residual before and after
     the effects found, against position, time or direction, or the periodogram."""
-    data = await blocking(_read_plot, discovery_folder(runtime(request)), report_id, name)
+    data = await blocking(_read_plot, discovery_folder(rt), report_id, name)
     return Response(data, media_type="image/png", headers={"Cache-Control": "private, no-cache"})

@@ -5,11 +5,12 @@ from __future__ import annotations
 import asyncio
 from typing import Annotated, Literal
 
-from fastapi import APIRouter, Depends, HTTPException, Query, Request, status
+from fastapi import APIRouter, HTTPException, Query, status
 
-from api import auth
-from api.routes.common import blocking, runtime
+from api.deps import OperatorDep, ReaderDep, RuntimeDep
+from api.routes.common import blocking
 from api.runtime import Busy
+from api.schemas.station import AlarmList, Axes, StationStatus
 from station.sequencer.engine import EngineStateError
 
 router = APIRouter(prefix="/api/v1", tags=["station"])
@@ -18,9 +19,9 @@ router = APIRouter(prefix="/api/v1", tags=["station"])
 ALARM_KINDS = ("fault", "alarm")
 
 
-@router.get("/station")
-async def get_station(request: Request, who: auth.Principal = Depends(auth.reader)) -> dict:
-    return runtime(request).station_status()
+@router.get("/station", response_model=StationStatus)
+async def get_station(rt: RuntimeDep, who: ReaderDep) -> dict:
+    return rt.station_status()
 
 
 async def _read(rt, coro, timeout: float) -> tuple[object, str | None]:
@@ -31,19 +32,18 @@ async def _read(rt, coro, timeout: float) -> tuple[object, str | None]:
         return None, f"{type(exc).__name__}: {exc}"
 
 
-@router.get("/axes")
-async def get_axes(request: Request, who: auth.Principal = Depends(auth.reader)) -> dict:
+@router.get("/axes", response_model=Axes, response_model_exclude_unset=True)
+async def get_axes(rt: RuntimeDep, who: ReaderDep) -> dict:
     """Z and C as their drives report them (``setpoint``: the last target commanded,
     null after a stop), and the grating's reading of Z. A device that does not answer
     in time shows ``error`` instead of failing the request."""
-    rt = runtime(request)
     st = rt.station
     timeout = rt.settings.command_timeout_s / 2
     out: dict = {}
     for name, ax, unit in (("Z", st.z, "mm"), ("C", st.c, "deg")):
         s, err = await _read(rt, ax.status(), timeout)
         # the drive's last commanded target (None after a stop): the driver keeps it
-        setpoint = getattr(ax, "_last_target", None)
+        setpoint = ax.setpoint
         out[name] = {"unit": unit, "error": err, "setpoint": setpoint} if s is None else {
             "unit": unit, "setpoint": setpoint, "position": s.position, "velocity": s.velocity, "state": s.state.value,
             "enabled": s.enabled, "homed": s.homed, "moving": s.moving, "in_position": s.in_position,
@@ -58,12 +58,11 @@ async def get_axes(request: Request, who: auth.Principal = Depends(auth.reader))
     return out
 
 
-@router.get("/alarms")
-async def get_alarms(request: Request, limit: Annotated[int, Query(ge=1, le=1000)] = 100,
-                     who: auth.Principal = Depends(auth.reader)) -> dict:
+@router.get("/alarms", response_model=AlarmList)
+async def get_alarms(rt: RuntimeDep, who: ReaderDep, limit: Annotated[int, Query(ge=1, le=1000)] = 100) -> dict:
     """This station's faults and alarms from the event log, newest first (other stations
     writing the same database have their own)."""
-    store = runtime(request).store
+    store = rt.store
     items = []
     for kind in ALARM_KINDS:
         items += await blocking(store.events, kind=kind, limit=limit, newest_first=True, station=store.station_id,
@@ -72,11 +71,14 @@ async def get_alarms(request: Request, limit: Annotated[int, Query(ge=1, le=1000
     return {"items": [e.to_json() for e in items[:limit]]}
 
 
-@router.post("/station/{command}", responses={409: {"description": "the station's state does not allow it"}})
-async def station_command(command: Literal["pause", "resume", "stop", "abort", "reset", "home"], request: Request,
-                          who: auth.Principal = Depends(auth.operator)) -> dict:
+@router.post("/station/{command}", response_model=StationStatus,
+             responses={409: {"description": "the station's state does not allow it"},
+                        504: {"description": "the drives did not answer in time"}})
+async def station_command(command: Literal["pause", "resume", "stop", "abort", "reset", "home"], rt: RuntimeDep,
+                          who: OperatorDep) -> dict:
+    """Pause, resume, stop (controlled), abort, reset or home; answers the station's status after it."""
     try:
-        return await runtime(request).command(command, who.who)
+        return await rt.command(command, who.who)
     except (EngineStateError, Busy) as exc:
         raise HTTPException(status.HTTP_409_CONFLICT, str(exc)) from None
     except asyncio.TimeoutError:

@@ -17,13 +17,13 @@ Only a Bearer caller can rotate: a panel session has no token of its own to swap
 from __future__ import annotations
 
 import dataclasses
-from datetime import datetime
 
-from fastapi import APIRouter, Body, Depends, HTTPException, Request, Response, status
+from fastapi import APIRouter, Body, HTTPException, Request, Response, status
 from pydantic import BaseModel, ConfigDict, Field
 
-from api import auth
-from api.routes.common import blocking, runtime
+from api.deps import ReaderDep, RuntimeDep
+from api.routes.common import blocking
+from api.schemas.tokens import OldToken, RotatedToken
 from station.store.tokens import DEFAULT_GRACE_S, MAX_LIFETIME_S, TokenStateError
 
 router = APIRouter(prefix="/api/v1", tags=["tokens"])
@@ -43,36 +43,18 @@ class RotateRequest(BaseModel):
                                                    "token's lifetime; not longer than it)")
 
 
-class OldToken(BaseModel):
-    id: int
-    prefix: str = Field(description="the old token's public prefix")
-    expires_at: datetime = Field(description="when the old token stops working (end of the grace)")
-
-
-class RotatedToken(BaseModel):
-    token: str = Field(description="the new token: shown once, stored only as a hash")
-    id: int
-    prefix: str = Field(description="the new token's public prefix (st_<prefix>_...)")
-    name: str
-    role: str
-    expires_at: datetime | None = Field(description="when the new token expires (null: never)")
-    old: OldToken
-
-
 @router.post("/tokens/rotate", response_model=RotatedToken,
              responses={400: {"description": "a panel session: no token to rotate"},
                         409: {"description": "the token was already rotated"},
                         422: {"description": "a longer life than the token's own, or a bad body"}})
-async def rotate_own_token(request: Request, response: Response,
-                           body: RotateRequest | None = Body(None),
-                           who: auth.Principal = Depends(auth.reader)) -> RotatedToken:
+async def rotate_own_token(request: Request, response: Response, rt: RuntimeDep, who: ReaderDep,
+                           body: RotateRequest | None = Body(None)) -> RotatedToken:
     """Swap the calling token for a new one; the old one keeps working for ``grace_s``."""
     if "authorization" not in request.headers:
         raise HTTPException(status.HTTP_400_BAD_REQUEST,
                             "a panel session has no token of its own to rotate: call with "
                             "'Authorization: Bearer <token>', or ask an administrator (station token rotate)")
     body = body or RotateRequest()
-    rt = runtime(request)
     try:
         old, new, token = await blocking(rt.tokens.rotate, who.token_id, grace_s=body.grace_s,
                                          expires_in_s=body.expires_in_s, keep_expiry=True, self_service=True,
