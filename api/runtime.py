@@ -314,7 +314,7 @@ class StationRuntime:
         """An entry of the audit log (the store's event log, kind "audit"): who changed what."""
         self.store.log_event("audit", f"{who}: {what}")
 
-    def _start_job(self, kind: str, coro, on_end: Callable[[concurrent.futures.Future], None], *,
+    def start_job(self, kind: str, coro, on_end: Callable[[concurrent.futures.Future], None], *,
                    key: str | None = None, started: asyncio.Future | None = None) -> Job:
         """Run ``coro`` on the station loop as the job; ``on_end(future)`` on the API loop
         once it is done (so whoever hears of the end finds the station no longer busy)."""
@@ -349,9 +349,9 @@ class StationRuntime:
             if existing is not None:
                 return existing, False
         if self.busy:
-            raise Busy(self._busy_text())
+            raise Busy(self.busy_text())
         started = asyncio.get_running_loop().create_future()
-        self._start_job("inspection", self._run_inspection(part, serial, order_id, idempotency_key, started),
+        self.start_job("inspection", self._run_inspection(part, serial, order_id, idempotency_key, started),
                         self._inspection_ended, key=idempotency_key, started=started)
         try:
             iid = await asyncio.wait_for(asyncio.shield(started), timeout=30.0)
@@ -369,7 +369,6 @@ class StationRuntime:
         try:
             service = self.session.service_for(part)
             outcome = await service.inspect(part, serial, order_id=order_id, idempotency_key=key)
-            await self._observe(outcome)
             return _Ended(outcome=outcome, seconds=time.monotonic() - t0, iid=outcome.id,
                           monitor=self.session.watch.state())
         except asyncio.CancelledError:
@@ -386,15 +385,6 @@ class StationRuntime:
             return _Ended(iid=iid, reason=reason)
         finally:
             unsubscribe()
-
-    async def _observe(self, outcome) -> None:
-        """On the station loop: a production inspection's evidence on the station's charts
-        (its alarms logged and kept on the outcome). A failure to log an alarm does not
-        undo the inspection: the watch is in ``needs_check`` all the same."""
-        try:
-            await self.session.observe(outcome)
-        except Exception:  # noqa: BLE001 - the inspection is recorded; the charts' trouble is logged
-            log.exception("putting inspection %s on the station's charts failed", outcome.id)
 
     @staticmethod
     def _ended_of(fut: concurrent.futures.Future) -> _Ended | None:
@@ -456,9 +446,9 @@ class StationRuntime:
         ``family``) as the job; returns its record (state running) once the master's
         inspection has its id. Busy while another job runs."""
         if self.busy:
-            raise Busy(self._busy_text())
+            raise Busy(self.busy_text())
         started = asyncio.get_running_loop().create_future()
-        self._start_job("check", self._run_check(cert, family, started),
+        self.start_job("check", self._run_check(cert, family, started),
                         lambda fut: self._check_ended(fut, cert.master_id), started=started)
         iid = await asyncio.wait_for(asyncio.shield(started), timeout=30.0)
         rec = self.checks.get(iid) or self._keep_check(CheckRecord(iid, cert.master_id))
@@ -536,7 +526,7 @@ class StationRuntime:
         the station's model from the next inspection); not while a job runs (Busy).
         Returns (proposal, the station's model version after it)."""
         if self.busy:
-            raise Busy(f"cannot decide on a model proposal while a job runs: {self._busy_text()}")
+            raise Busy(f"cannot decide on a model proposal while a job runs: {self.busy_text()}")
 
         async def decide():
             p = await self.session.decide(proposal_id, approve, who, note)
@@ -554,7 +544,7 @@ class StationRuntime:
             if rec.state == "running":
                 await asyncio.to_thread(self.store.finish, iid, "faulted", None, reason)
 
-    def _busy_text(self) -> str:
+    def busy_text(self) -> str:
         job = self.job
         if job is None:
             return "busy"
@@ -572,7 +562,7 @@ class StationRuntime:
             await self.thread.run(self._engine_command, name, who)
         elif name in ("reset", "home"):
             if self.busy:
-                raise Busy(self._busy_text())
+                raise Busy(self.busy_text())
             if name == "reset":
                 try:
                     await self.thread.call(asyncio.wait_for(self.engine.reset(), timeout=self.settings.command_timeout_s))
@@ -580,7 +570,7 @@ class StationRuntime:
                     raise EngineStateError(ended.reason) from None
             else:
                 await self.thread.run(self._check_can_home)
-                self._start_job("home", self._home(), lambda fut: None)
+                self.start_job("home", self._home(), lambda fut: None)
         else:
             raise ValueError(f"unknown command {name!r}")
         with contextlib.suppress(StoreError):

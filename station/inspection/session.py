@@ -17,7 +17,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
-from station.inspection.documents import DocumentStream
+from station.inspection.documents import DocumentStream, InspectionStart, InspectionStop
 from station.inspection.scan import CameraGeometry, ScanSettings
 from station.inspection.service import InspectionOutcome, InspectionService
 from station.inspection.writers import EngineEventLog, ScanLogWriter, StoreWriter
@@ -85,6 +85,9 @@ class Session:
         self.documents.subscribe(ScanLogWriter(self.store))
         if self.watch is None:
             self.watch = StationWatch(gate_um=self.settings.model_u_um)
+        #: the station's control charts watch every production inspection's documents
+        self._purposes: dict[str, str] = {}
+        self.documents.subscribe(self._watch_documents)
         #: model proposals and the approved changes (docs/monitor.md, The loop)
         self.proposals = ProposalBook(self.store.data_dir)
         approved = self.proposals.approved_changes()
@@ -213,15 +216,21 @@ class Session:
                                  purpose="production" if evidence else "master")
 
     async def inspect(self, part: PartSpec, serial: str, **kw) -> InspectionOutcome:
-        """One production inspection; its evidence goes on the station's charts."""
-        return await self.observe(await self.service_for(part).inspect(part, serial, **kw))
+        """One production inspection; its evidence goes on the station's charts (the
+        charts subscribe to its documents)."""
+        return await self.service_for(part).inspect(part, serial, **kw)
 
-    async def observe(self, out: InspectionOutcome) -> InspectionOutcome:
-        """Put a production inspection's evidence on the station's charts (its alarms
-        logged and kept on the outcome)."""
-        if out.state == "complete":
-            out.alarms = await self._log_alarms(self.watch.observe_inspection(out.holes), out.id)
-        return out
+    async def _watch_documents(self, doc) -> None:
+        """A subscriber: a complete production inspection's holes on the station's charts,
+        the alarms they raise logged and kept on the outcome (checks on the master are
+        judged by their certificate instead, ``check_master``)."""
+        if isinstance(doc, InspectionStart):
+            self._purposes[doc.inspection_id] = doc.purpose
+        elif isinstance(doc, InspectionStop):
+            purpose = self._purposes.pop(doc.inspection_id, None)
+            out = doc.outcome
+            if purpose == "production" and out is not None and out.state == "complete":
+                out.alarms = await self._log_alarms(self.watch.observe_inspection(out.holes), out.id)
 
     async def check_master(self, cert, family: PartSpec, *, seed: int = 0) -> MasterCheckOutcome:
         """Inspect the certified master (``cert``: a ``MasterCertificate`` of the part
