@@ -16,8 +16,6 @@ Where the world plugs in (see also docs/drivers.md):
 
 from __future__ import annotations
 
-import asyncio
-import threading
 import tomllib
 from dataclasses import dataclass, field, fields
 from pathlib import Path
@@ -27,6 +25,7 @@ from sim.encoder.twin import SerialEncoderTwin
 from sim.servo.modbus_face import ModbusDriveTwin
 from sim.servo.null_modem import PtyNullModem
 from sim.servo.physics import ServoAxisConfig, ServoAxisPhysics
+from station.loopthread import LoopThread
 
 DEFAULT_SCENARIO = Path(__file__).with_name("scenarios") / "default.toml"
 
@@ -196,57 +195,37 @@ class TwinStation:
 
 
 class TwinsThread:
-    """A TwinStation in its own event loop on a background thread (``with TwinsThread() as t:``)."""
+    """A TwinStation in its own event loop on a background thread (``with TwinsThread() as t:``),
+    for synchronous callers; the thread is :class:`station.loopthread.LoopThread`, which
+    enters the TwinStation (starting its servers) on that loop and leaves it there."""
+
+    #: how long stopping the servers and joining the thread may take
+    STOP_TIMEOUT_S = 10.0
 
     def __init__(self, station: TwinStation | None = None, start_timeout_s: float = 10.0):
         self.station = station or TwinStation()
         self.start_timeout_s = start_timeout_s
-        self._loop: asyncio.AbstractEventLoop | None = None
-        self._thread: threading.Thread | None = None
-        self._ready = threading.Event()
-        self._error: BaseException | None = None
-        self._stop_event: asyncio.Event | None = None
+        self._runner = LoopThread("twins")
 
     def start(self) -> dict[str, Any]:
-        self._thread = threading.Thread(target=self._run, name="twins", daemon=True)
-        self._thread.start()
-        if not self._ready.wait(self.start_timeout_s):
-            raise TimeoutError("the twins did not start in time")
-        if self._error is not None:
-            raise self._error
+        """Start the servers; returns where they listen (:meth:`TwinStation.endpoints`)."""
+        self._runner.start(self.start_timeout_s)
+        try:
+            self._runner.enter(lambda: self.station, timeout=self.start_timeout_s)
+        except TimeoutError:
+            self._runner.stop(self.STOP_TIMEOUT_S)
+            raise TimeoutError("the twins did not start in time") from None
+        except BaseException:
+            self._runner.stop(self.STOP_TIMEOUT_S)
+            raise
         return self.station.endpoints()
-
-    def _run(self) -> None:
-        asyncio.run(self._main())
-
-    async def _main(self) -> None:
-        self._loop = asyncio.get_running_loop()
-        self._stop_event = asyncio.Event()
-        try:
-            await self.station.start()
-        except BaseException as exc:  # noqa: BLE001 - reported to start()
-            self._error = exc
-            self._ready.set()
-            return
-        self._ready.set()
-        try:
-            await self._stop_event.wait()
-        finally:
-            await self.station.stop()
 
     def call(self, fn: Callable[[], Any]) -> Any:
         """Run ``fn`` in the twins' loop thread and return its result (thread-safe access)."""
-        assert self._loop is not None
-        fut = asyncio.run_coroutine_threadsafe(_call(fn), self._loop)
-        return fut.result(self.start_timeout_s)
+        return self._runner.call(fn, timeout=self.start_timeout_s)
 
     def stop(self) -> None:
-        if self._loop is not None and self._stop_event is not None and self._thread is not None:
-            if self._thread.is_alive():
-                self._loop.call_soon_threadsafe(self._stop_event.set)
-        if self._thread is not None:
-            self._thread.join(timeout=10.0)
-            self._thread = None
+        self._runner.stop(self.STOP_TIMEOUT_S)
 
     def __enter__(self):
         self.start()
@@ -254,7 +233,3 @@ class TwinsThread:
 
     def __exit__(self, *exc):
         self.stop()
-
-
-async def _call(fn):
-    return fn()

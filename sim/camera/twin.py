@@ -95,6 +95,13 @@ class CameraTwin(Camera):
         self._last: Frame | None = None
         self.last_truth: ViewTruth | None = None
 
+    @property
+    def frames_delivered(self) -> int:
+        """Frames ``grab`` has returned since the twin was made (frozen ones included):
+        the sequence number of the last frame. Read-only, for benches that count what
+        an inspection grabbed."""
+        return self._sequence
+
     async def connect(self) -> None:
         if self.faults.is_active(FaultKind.DROP_CONNECTION):
             raise CommunicationLost("camera does not answer", self.name)

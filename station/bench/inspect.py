@@ -27,7 +27,7 @@ FAST = 1e5
 
 async def _runs(settings, n: int, data: Path, time_scale: float, progress=None):
     from sim.camera import renderer as render_mod
-    from station.inspection.session import open_session
+    from station.runtime import open_session
     from station.parts import load_part
 
     spec = load_part(PART)
@@ -53,11 +53,11 @@ async def _runs(settings, n: int, data: Path, time_scale: float, progress=None):
             s.engine.subscribe(lambda ev: None)
             for i in range(n):
                 render_s[0] = 0.0
-                seq0 = s.station.camera._sequence
+                seq0 = s.station.camera.frames_delivered
                 w0, c0 = time.perf_counter(), time.process_time()
                 out = await s.inspect(spec, f"BENCH-{i:03d}")
                 wall, cpu = time.perf_counter() - w0, time.process_time() - c0
-                frames[0] = s.station.camera._sequence - seq0
+                frames[0] = s.station.camera.frames_delivered - seq0
                 outs.append(out)
                 costs.append((wall, cpu, render_s[0], frames[0]))
                 if progress:

@@ -1,7 +1,7 @@
 """Crash safety: SIGKILL the inspecting process at random points, many times.
 
-A child process inspects parts back to back on the twins and prints an inspection's id
-only after ``inspect`` returned (after the commit). It is killed with SIGKILL after a
+A child process (``python -m testkit.crash_child``) inspects parts back to back on the
+twins and prints an inspection's id only after ``inspect`` returned (after the commit). It is killed with SIGKILL after a
 random delay (one kill in four in its start-up, the others after it is ready: through
 homing, scanning, committing), then the store is
 opened as the station opens it (recovery) and checked:
@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import pytest
 
-from station.bench.reliability import crash_trials
+from testkit.crash import crash_trials
 
 KILLS = 8
 

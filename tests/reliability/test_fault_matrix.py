@@ -1,10 +1,10 @@
 """The fault matrix: every twin fault kind in every phase of an inspection, on the twins.
 
-Each cell (``station.bench.reliability.matrix_cells``) switches its fault on when the
-inspection reaches its phase (homing, moving, settling, capturing, measuring, storing),
-on the device that phase uses, and off after the outcome (persistent) or after the
-first call it met (transient, ``-once``). Then, in the SAME session (no restart), the
-next part is inspected. Every cell must end clean:
+Each cell (``testkit.cells.matrix_cells``) switches its fault on (``testkit.injector``:
+hooks on the engine's messages) when the inspection reaches its phase (homing, moving,
+settling, capturing, measuring, storing), on the device that phase uses, and off after
+the outcome (persistent) or after the first call it met (transient, ``-once``). Then,
+in the SAME session (no restart), the next part is inspected. Every cell must end clean:
 
 * persistent faults: the inspection is faulted, with the reason (naming the device and
   the error), stored as faulted with that reason and a fault (or, for the store, an
@@ -23,8 +23,10 @@ from __future__ import annotations
 
 import pytest
 
-from station.bench.reliability import Cell, SessionThread, matrix_cells, run_cell
 from station.parts import load_part
+from testkit.cells import Cell, matrix_cells
+from testkit.matrix import run_cell
+from testkit.session import SessionThread
 
 PART = "ZDZG-22.2-12.3851"
 CELLS = sorted(matrix_cells(), key=lambda c: (c.kind, c.transient))

@@ -1,6 +1,6 @@
 """Fuzzing the station's readers of outside input, with hypothesis.
 
-Each target (``station.bench.reliability.fuzz_targets``) is fed mutations of valid
+Each target (``testkit.fuzz.fuzz_targets``) is fed mutations of valid
 seed texts (cuts, inserts of random and awkward text -- nan, inf, 1e999, NUL, BOM,
 unbalanced quotes and brackets -- duplicated and swapped lines) and plain random text:
 the recording parser, the compensation readers (table CSV, segments CSV, JSON,
@@ -17,7 +17,7 @@ from __future__ import annotations
 import pytest
 from hypothesis import HealthCheck, given, settings
 
-from station.bench.reliability import (
+from testkit.fuzz import (
     fuzz_one,
     fuzz_targets,
     modbus_scripts,

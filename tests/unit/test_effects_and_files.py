@@ -19,7 +19,7 @@ from station.effects import (
     ThermalExpansion,
     effect_from_dict,
 )
-from station.bench.reliability import AXIS_MODEL_SEED, RECORDING_SEED
+from testkit.fuzz import AXIS_MODEL_SEED, RECORDING_SEED
 from station.recording import RecordingError, parse_recording
 
 # the same files the fuzzer starts from (one copy of the seed data)
