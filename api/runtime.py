@@ -31,7 +31,9 @@ from __future__ import annotations
 import asyncio
 import concurrent.futures
 import contextlib
+import functools
 import logging
+import math
 import time
 from collections import OrderedDict
 from dataclasses import dataclass, field
@@ -45,7 +47,7 @@ from api.sessions import SessionStore
 from api.singleflight import SingleFlight
 from api.settings import Settings
 from api.station_thread import StationThread, to_loop
-from station.inspection.documents import InspectionStart
+from station.inspection.documents import CheckDocument, FrameDocument, HoleDocument, InspectionStart
 from station.inspection.session import Session
 from station.runtime import open_session
 from station.parts.spec import PartSpec
@@ -129,6 +131,38 @@ class Job:
     idempotency_key: str | None = None
     inspection_id: asyncio.Future | None = None  # resolves to the inspection's id (API loop)
     started: float = 0.0
+
+
+def _finite(x) -> float | None:
+    """A number for JSON: NaN and infinities (a hole not found has no diameter) as None."""
+    return None if x is None or not math.isfinite(x) else float(x)
+
+
+def document_event(doc) -> tuple[str, dict] | None:
+    """An inspection document as a live event (``frame``, ``hole``, ``characteristic``:
+    the SSE ``check`` event is a check on the master), its name and data; None for the
+    documents the hub has its own events for (start and stop: ``job`` and ``result``)."""
+    if isinstance(doc, FrameDocument) and doc.frame is not None:
+        f = doc.frame
+        return "frame", {
+            "inspection_id": doc.inspection_id, "hole": doc.hole, "index": doc.index,
+            "axial_mm": _finite(f.axial_mm), "angle_deg": _finite(f.angle_deg),
+            "diameter_mm": _finite(f.diameter_mm), "confidence": _finite(f.confidence),
+            "grating_mm": _finite(f.grating_mm), "z_cmd_mm": _finite(f.z_cmd_mm), "c_cmd_deg": _finite(f.c_cmd_deg)}
+    if isinstance(doc, HoleDocument) and doc.hole is not None:
+        h = doc.hole
+        return "hole", {
+            "inspection_id": doc.inspection_id, "hole": h.name, "found": h.found,
+            "position_mm": _finite(h.position_mm), "position_u_mm": _finite(h.position_u_mm),
+            "diameter_mm": _finite(h.diameter_mm), "diameter_u_mm": _finite(h.diameter_u_mm),
+            "angle_deg": _finite(h.angle_deg), "frames": len(h.frames), "reason": h.reason}
+    if isinstance(doc, CheckDocument) and doc.characteristic is not None:
+        c = doc.characteristic
+        return "characteristic", {
+            "inspection_id": doc.inspection_id, "id": c.id, "nominal": c.nominal,
+            "lower_limit": c.lower_limit, "upper_limit": c.upper_limit, "measured": _finite(c.measured),
+            "uncertainty_k2": _finite(c.uncertainty_k2), "pass": c.passed}
+    return None
 
 
 class _StartWatcher:
@@ -264,6 +298,7 @@ class StationRuntime:
             devices.camera = shared
             self.camera = live
         session.engine.subscribe(self._on_engine_event)
+        session.documents.subscribe(self._on_document)
 
     async def close(self) -> None:
         """Abort a running job (the axes stop), end the live streams, close the station
@@ -309,6 +344,15 @@ class StationRuntime:
         if ev.kind == "fault":
             data["error"] = ev.data.get("error")
         self.hub.publish(ev.kind, **data)
+
+    def _on_document(self, doc) -> None:
+        """The SSE hub as a subscriber of the inspections' documents (called on the
+        station loop; the event goes out on the API loop): each measurement frame, hole
+        and characteristic as the inspection finds it, before its result."""
+        event = document_event(doc)
+        if event is not None:
+            name, data = event
+            self._to_api(functools.partial(self.hub.publish, name, **data))
 
     def audit(self, who: str, what: str) -> None:
         """An entry of the audit log (the store's event log, kind "audit"): who changed what."""

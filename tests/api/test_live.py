@@ -55,6 +55,16 @@ def test_sse_delivers_state_progress_and_the_result(api):
     assert started and started[0]["inspection_id"] == r.json()["id"]
     result = seen[-1][1]
     assert kinds[-1] == "result" and result["id"] == r.json()["id"] and result["result"] == "pass"
+    # the inspection's documents, live: every measurement frame, each hole, each characteristic
+    iid = r.json()["id"]
+    frames = [d for k, d in seen if k == "frame"]
+    holes = [d for k, d in seen if k == "hole"]
+    chars = [d for k, d in seen if k == "characteristic"]
+    assert frames and all(d["inspection_id"] == iid for d in frames + holes + chars), sorted(set(kinds))
+    assert sorted(h["hole"] for h in holes) == ["hole_1", "hole_2"] and all(h["found"] for h in holes)
+    assert sum(h["frames"] for h in holes) == len(frames)
+    assert kinds.index("frame") < kinds.index("hole") < kinds.index("characteristic") < kinds.index("result")
+    assert {c["id"]: c["measured"] for c in chars} == {c["id"]: c["measured"] for c in result["characteristics"]}
 
 
 def test_mjpeg_delivers_jpeg_frames(api):
