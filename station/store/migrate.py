@@ -38,6 +38,12 @@ def current_revision(connection: Connection) -> str | None:
     return MigrationContext.configure(connection).get_current_revision()
 
 
+#: how long a station starting beside others waits for another's migration of a new
+#: SQLite database (the whole migration of an empty database: seconds; two minutes
+#: leaves room for a loaded PC, and a real lock-up still ends in an error)
+MIGRATION_WAIT_S = 120.0
+
+
 def upgrade_engine(engine: Engine) -> None:
     """Bring the engine's database to the newest revision, in one write transaction.
 
@@ -46,12 +52,25 @@ def upgrade_engine(engine: Engine) -> None:
     advisory lock is taken before Alembic reads the current revision (and released by
     the commit). Either way the second process waits, then finds nothing to do."""
     with engine.connect().execution_options(**{WRITE_OPTION: True}) as conn:
-        if conn.dialect.name == "postgresql":
-            conn.exec_driver_sql(f"SELECT pg_advisory_xact_lock({ADVISORY_LOCK_CLASS}, {MIGRATION_LOCK_KEY})")
-        cfg = alembic_config()
-        cfg.attributes["connection"] = conn
-        command.upgrade(cfg, "head")
-        conn.commit()
+        restore_ms = None
+        if conn.dialect.name == "sqlite":
+            # the stations behind the first wait for its migration, which takes seconds on
+            # a loaded PC (Alembic's imports, every revision), not the few seconds an
+            # ordinary write waits: set on the raw connection before the first statement
+            # begins the write transaction, and put back before it returns to the pool
+            raw = conn.connection.dbapi_connection
+            restore_ms = raw.execute("PRAGMA busy_timeout").fetchone()[0]
+            raw.execute(f"PRAGMA busy_timeout = {int(MIGRATION_WAIT_S * 1000)}")
+        try:
+            if conn.dialect.name == "postgresql":
+                conn.exec_driver_sql(f"SELECT pg_advisory_xact_lock({ADVISORY_LOCK_CLASS}, {MIGRATION_LOCK_KEY})")
+            cfg = alembic_config()
+            cfg.attributes["connection"] = conn
+            command.upgrade(cfg, "head")
+            conn.commit()
+        finally:
+            if restore_ms is not None:
+                conn.connection.dbapi_connection.execute(f"PRAGMA busy_timeout = {int(restore_ms)}")
 
 
 def upgrade_to_head(url: str) -> None:
