@@ -71,16 +71,28 @@ postgres:
 	    || echo "WARNING: could not install postgresql: the PostgreSQL tests will fail"; \
 	fi
 
-# Everything on SQLite (the plant test on PostgreSQL), then the store, API and
+# Everything on SQLite (the plant test on PostgreSQL), and beside it the store, API and
 # reliability tests again with every store on PostgreSQL. Of the fault matrix, the
-# second run takes the cells where a fault meets the database (the storing column, the
-# store's own failures, the vision error that ends in a commit); its other cells test
-# the drivers and the engine, which do not depend on the backend (docs/plant.md).
+# PostgreSQL run takes the cells where a fault meets the database (the storing column,
+# the store's own failures, the vision error that ends in a commit); its other cells
+# test the drivers and the engine, which do not depend on the backend (docs/plant.md).
+# The two runs go at once: the suite mostly waits (twins' motion, settles, timeouts;
+# a third of its wall time is CPU), so two streams on two cores take about as long as
+# the longer one. Each has its own temporary folder; the PostgreSQL run's output
+# follows the SQLite run's; make fails when either fails.
 PG_TESTS := tests/unit/test_store.py tests/unit/test_record_cache.py tests/api tests/reliability
 PG_SELECT := not test_cell or storing or store_ or vision_error
+TEST_TMP ?= $(or $(TMPDIR),/tmp)/bore-station-tests
 test: $(STAMP) chromium postgres
-	$(BIN)/python -m pytest -q
-	$(BIN)/python -m pytest -q --db postgresql $(PG_TESTS) -k "$(PG_SELECT)"
+	@mkdir -p $(TEST_TMP); \
+	$(BIN)/python -m pytest -q --basetemp=$(TEST_TMP)/postgresql --db postgresql $(PG_TESTS) -k "$(PG_SELECT)" \
+	  > $(TEST_TMP)/postgresql.log 2>&1 & pg=$$!; \
+	echo "== every test on SQLite (the PostgreSQL run goes beside it: $(TEST_TMP)/postgresql.log)"; \
+	$(BIN)/python -m pytest -q --basetemp=$(TEST_TMP)/sqlite; sqlite=$$?; \
+	wait $$pg; postgresql=$$?; \
+	echo; echo "== the store, API and reliability tests on PostgreSQL"; cat $(TEST_TMP)/postgresql.log; \
+	echo; echo "== SQLite run: exit $$sqlite; PostgreSQL run: exit $$postgresql"; \
+	[ $$sqlite -eq 0 ] && [ $$postgresql -eq 0 ]
 
 bench: $(STAMP)
 	$(BIN)/station bench kinematics
