@@ -49,6 +49,9 @@ class CalibrationOrder(BaseModel):
                           description="a built-in artefact's id (`station/data/masters/artefacts/<id>.toml`)")
     poses: int = Field(default=40, ge=1, le=200, description="poses to measure (chosen for observability)")
     propose: bool = Field(default=False, description="make a model proposal of the observable parameters")
+    min_significance: float = Field(default=2.0, ge=0.0, le=10.0,
+                                    description="propose an observable parameter only when the calibration differs "
+                                                "from the present model by more than this many u (0: every one)")
     seed: int = Field(default=0, ge=0, description="simulation only: the artefact's making in the twin's world")
 
 
@@ -101,7 +104,8 @@ async def _calibrate(rt, run: _Run, cert):
     proposal = None
     if run.order.propose:
         try:
-            proposal = await propose_from_calibration(session, outcome, cert.artefact_id)
+            proposal = await propose_from_calibration(session, outcome, cert.artefact_id,
+                                                      min_significance=run.order.min_significance)
         except ProposalError as exc:
             await asyncio.to_thread(session.store.log_event, "alarm", f"no model proposal: {exc}")
     # the twin's truth is an annotation for tests and benches, not a result served to clients

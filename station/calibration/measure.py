@@ -41,12 +41,14 @@ from station.inspection.scan import CameraGeometry, ScanSettings, approach, wrap
 from station.motion import AxisLimits
 from station.sequencer import messages as m
 
-#: the grating row's standard uncertainty in a run (um): the grating's 0.05 um plus the
-#: slide's repeatability per approach (ISO 230-2 s, 0.3 um for a ball-screw slide of this
-#: class: the scenario's and the axis check's figure), which moves the carriage between
-#: the reference reading and each pose; the camera sees the same move, so its axial rows
-#: carry it too (inside their 1 um)
-SIGMA_GRATING_RUN_UM = math.hypot(0.05, 0.3)
+#: the slide's repeatability per approach (ISO 230-2 s, 0.3 um for a ball-screw slide of
+#: this class: the scenario's and the axis check's figure): the nominal of the
+#: identification's noise model (``identify.NoiseModel``), which estimates it from the run
+SLIDE_REPEATABILITY_UM = 0.3
+#: the grating row's standard uncertainty in a run (um), for planning: the grating's
+#: 0.05 um plus the repeatability, which moves the carriage between the reference reading
+#: and each pose (the identification has both as terms of its own)
+SIGMA_GRATING_RUN_UM = math.hypot(0.05, SLIDE_REPEATABILITY_UM)
 
 
 @dataclass(frozen=True)
@@ -56,8 +58,8 @@ class MeasureSettings:
     #: still after each move (s), as the scans' settle
     settle_s: float = 0.05
     #: approaches of the reference position, one grating reading each: their mean's
-    #: repeatability (0.3 / sqrt(10) = 0.1 um) is common to every grating row (a limit:
-    #: not yet a term of the fit)
+    #: repeatability (0.3 / sqrt(10) = 0.1 um) is common to every grating row (a
+    #: nuisance of the fit: ``identify.NoiseModel``)
     reference_approaches: int = 10
     #: a detection further than this (mm on the wall) from where the target should be
     #: is not taken for it: the error motions move a target by tens of um, the next
@@ -67,6 +69,9 @@ class MeasureSettings:
     min_confidence: float = 0.3
     approach_z_mm: float = 0.5
     approach_c_deg: float = 0.5
+    #: a sighting's vision u where the vision stage states none (px; as
+    #: ``ScanSettings.vision_centre_u_px``)
+    vision_centre_u_px: float = 0.05
 
     def scan_settings(self) -> ScanSettings:
         """The scan settings whose approach and settle this plan uses (for the cycle ledger)."""
@@ -133,6 +138,9 @@ def calibration_plan(cert: ArtefactCertificate, design: Sightings, geo: CameraGe
     grating = np.full(M, np.nan)
     tang: dict[int, list[float]] = {}
     axial: dict[int, list[float]] = {}
+    #: the vision stage's own u of each reading (um), per sighting
+    tang_u: dict[int, list[float]] = {}
+    axial_u: dict[int, list[float]] = {}
     c_now = 0.0
     frames = 0
     total = M * settings.frames_per_pose
@@ -170,6 +178,8 @@ def calibration_plan(cert: ArtefactCertificate, design: Sightings, geo: CameraGe
                 h = min(near, key=lambda h: math.hypot(h.x_px - ex, h.y_px - ey))
                 tang.setdefault(k, []).append((h.x_px - cx) * s * 1e3)
                 axial.setdefault(k, []).append((cy - h.y_px) * s * 1e3)
+                tang_u.setdefault(k, []).append(_u_px(getattr(h, "x_u_px", None), settings) * s * 1e3)
+                axial_u.setdefault(k, []).append(_u_px(getattr(h, "y_u_px", None), settings) * s * 1e3)
         grating[p] = float(np.mean(readings))
 
     found = np.array(sorted(tang), dtype=int)
@@ -177,9 +187,18 @@ def calibration_plan(cert: ArtefactCertificate, design: Sightings, geo: CameraGe
                "z_mm": float(design.z_mm[design.pose[k]]), "c_deg": float(design.c_deg[design.pose[k]])}
               for k in range(design.pose.size) if k not in tang]
     kept = Sightings(design.z_mm.copy(), design.c_deg % 360.0, design.pose[found], design.target[found])
+    # a sighting's u: the mean of its frames' own (as ``scan.vision_u_px``: the frames of
+    # one pose see the same wall, so their errors are not independent)
     obs = Observations(kept, grating, np.array([np.mean(tang[k]) for k in found]),
-                       np.array([np.mean(axial[k]) for k in found]))
+                       np.array([np.mean(axial[k]) for k in found]), reference_approaches=len(ref),
+                       tangential_u_um=np.array([np.mean(tang_u[k]) for k in found]),
+                       axial_u_um=np.array([np.mean(axial_u[k]) for k in found]))
     return CalibrationRun(obs, float(z_reference_mm), ref_um, missed, frames)
+
+
+def _u_px(u: float | None, settings: MeasureSettings) -> float:
+    """A reading's own u (px), else the fixed one."""
+    return float(u) if u is not None and math.isfinite(u) and u > 0 else settings.vision_centre_u_px
 
 
 async def run_calibration(session, cert: ArtefactCertificate, design: Sightings, z_reference_mm: float,

@@ -42,6 +42,7 @@ from station.calibration.identify import (
     sightings_for_poses,
     weighted_system,
 )
+from station.kinematics.parameters import motion_names
 from station.kinematics.rigid import RAD_PER_ARCSEC
 
 #: a term of a combination smaller than this share of its largest is rounding
@@ -81,8 +82,9 @@ class ObservabilityReport:
 
 
 def whitened(par: Parameterisation, cert: ArtefactCertificate, design: Sightings,
-             sigma_vision_um: float = SIGMA_VISION_UM, sigma_grating_um: float = SIGMA_GRATING_UM) -> np.ndarray:
-    J = jacobian(par, design, len(cert.targets), cert.radius_mm)
+             sigma_vision_um: float = SIGMA_VISION_UM, sigma_grating_um: float = SIGMA_GRATING_UM,
+             free_carriage_off_nodes: bool = False) -> np.ndarray:
+    J = jacobian(par, design, len(cert.targets), cert.radius_mm, free_carriage_off_nodes)
     return weighted_system(J, design.z_mm.size, cert, par.size, sigma_vision_um, sigma_grating_um)[0]
 
 
@@ -115,7 +117,13 @@ def _rref(B: np.ndarray) -> np.ndarray:
 _NODE = re.compile(r"@(-?[0-9.]+(?:mm|deg))$")
 
 
-def _describe(par: Parameterisation, w: np.ndarray, z_grid, c_grid, radius_mm: float) -> str:
+def _describe(par: Parameterisation, w: np.ndarray, z_grid, c_grid, radius_mm: float, free: bool = False) -> str:
+    names = [par.names[i] for i in np.nonzero(w)[0]]
+    ezz = motion_names(par.z_body)[2] + "@"
+    if free and names and all(n.startswith(ezz) for n in names):
+        return ("EZZ at a node seen only from poses off the z nodes, where the grating reads the carriage there and "
+                "not at the node (a lead error, finer structure between): a view at the node (centred, or offset "
+                "tangentially) sees it")
     eff = pose_effects(par, z_grid, c_grid, radius_mm)
     w = w / np.linalg.norm(w)
     radial = np.abs(eff["radial_um"] @ w).max()
@@ -149,10 +157,14 @@ def _describe(par: Parameterisation, w: np.ndarray, z_grid, c_grid, radius_mm: f
 def analyse(par: Parameterisation, cert: ArtefactCertificate, design: Sightings, *,
             candidate_poses: Sightings | None = None, candidate_features: list[tuple[str, list[CertifiedTarget]]] | None = None,
             sigma_vision_um: float = SIGMA_VISION_UM, sigma_grating_um: float = SIGMA_GRATING_UM,
-            rtol: float = RANK_RTOL, half_field_mm=(1.0, 1.0)) -> ObservabilityReport:
-    """The observability report of ``design`` on ``cert``; with candidates, suggestions."""
+            rtol: float = RANK_RTOL, half_field_mm=(1.0, 1.0),
+            free_carriage_off_nodes: bool = False) -> ObservabilityReport:
+    """The observability report of ``design`` on ``cert``; with candidates, suggestions.
+    ``free_carriage_off_nodes``: as the noise model identifies a run (EZZ's nodes seen
+    only from poses at the z nodes; ``identify.jacobian``)."""
     P = par.size
-    A = whitened(par, cert, design, sigma_vision_um, sigma_grating_um)
+    free = free_carriage_off_nodes
+    A = whitened(par, cert, design, sigma_vision_um, sigma_grating_um, free)
     rank, s, V0 = rank_of(A, rtol)
     null_fraction = (V0[:P] ** 2).sum(axis=1)
     observable = null_fraction < 1e-6
@@ -170,7 +182,7 @@ def analyse(par: Parameterisation, cert: ArtefactCertificate, design: Sightings,
         key = (stripped, tuple(np.round(coef, 4)), same_node if same_node else tuple(par.names[i] for i in nz))
         groups.setdefault(key, []).append(w / np.linalg.norm(w))
         if key not in labels:
-            labels[key] = (_describe(par, w, z_grid, c_grid, cert.radius_mm), "")
+            labels[key] = (_describe(par, w, z_grid, c_grid, cert.radius_mm, free), "")
         if same_node:
             labels[key] = (labels[key][0], labels[key][1] + ("," if labels[key][1] else "") + node_labels.pop())
     combos = []
@@ -186,12 +198,13 @@ def analyse(par: Parameterisation, cert: ArtefactCertificate, design: Sightings,
                                   np.stack(ws, axis=1)))
     if candidate_poses is not None or candidate_features:
         _suggest(par, cert, design, combos, rank, candidate_poses, candidate_features or [],
-                 sigma_vision_um, sigma_grating_um, rtol, half_field_mm, s[0])
+                 sigma_vision_um, sigma_grating_um, rtol, half_field_mm, s[0], free)
     cond = float(s[0] / s[rank - 1]) if rank else float("inf")
     return ObservabilityReport(rank, A.shape[1], P, cond, rtol, s, observable, combos)
 
 
-def _suggest(par, cert, design, combos, rank, cand: Sightings | None, features, sv, sg, rtol, half_field_mm, s0):
+def _suggest(par, cert, design, combos, rank, cand: Sightings | None, features, sv, sg, rtol, half_field_mm, s0,
+             free: bool = False):
     """For each candidate pose (alone) and feature (new targets, sighted at their
     centred poses): the rank it adds; for each combination, the candidates that see it
     (their whitened rows move the combination by more than ``rtol * s0``)."""
@@ -214,7 +227,7 @@ def _suggest(par, cert, design, combos, rank, cand: Sightings | None, features, 
                       np.r_[design.pose, extra.pose + design.z_mm.size], np.r_[design.target, extra.target])
         trials.append((label, par, ext, d))
     for label, p, c, d in trials:
-        A = whitened(p, c, d, sv, sg)
+        A = whitened(p, c, d, sv, sg, free)
         r, _, _ = rank_of(A, rtol)
         gain = r - rank - 2 * (len(c.targets) - T)  # new targets bring their own (prior) rank
         if gain <= 0:

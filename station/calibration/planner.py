@@ -51,11 +51,13 @@ def subset(cand: Sightings, chosen) -> Sightings:
 
 
 def plan_poses(par: Parameterisation, cert: ArtefactCertificate, cand: Sightings, n_poses: int, *,
-               sigma_vision_um: float = SIGMA_VISION_UM, sigma_grating_um: float = SIGMA_GRATING_UM) -> np.ndarray:
-    """Indices of ``n_poses`` candidates chosen greedily for D-optimality."""
+               sigma_vision_um: float = SIGMA_VISION_UM, sigma_grating_um: float = SIGMA_GRATING_UM,
+               free_carriage_off_nodes: bool = False) -> np.ndarray:
+    """Indices of ``n_poses`` candidates chosen greedily for D-optimality
+    (``free_carriage_off_nodes``: as the noise model identifies a run)."""
     T = len(cert.targets)
     P = par.size
-    J = jacobian(par, cand, T, cert.radius_mm)
+    J = jacobian(par, cand, T, cert.radius_mm, free_carriage_off_nodes)
     M, K = cand.z_mm.size, cand.pose.size
     # whitened rows of each candidate pose: its grating row and its sightings' rows
     rows_of = []

@@ -1,10 +1,14 @@
 """A self-calibration's result as a model proposal (issue 21, stage 3; docs/calibration.md).
 
 The proposal changes **only the parameters the run observed** (the observability
-report's estimable ones), each by the identified value minus the station's present
-value, with the identification's standard uncertainty; every other parameter keeps the
-station's current value (the named unobservable combinations cannot be told apart by
-this artefact and plan, so nothing is claimed about them). It goes through the same
+report's estimable ones) **and contradicts**: each whose identified value differs from
+the station's present one by more than ``MIN_SIGNIFICANCE`` (2) u changes by that
+difference, with the identification's standard uncertainty; an observable parameter
+within 2 u of the present value is confirmed and kept (the present value came from a
+laser campaign, often far more precise than what the camera sees through a short arm);
+every other parameter keeps the station's current value (the named unobservable
+combinations cannot be told apart by this artefact and plan, so nothing is claimed
+about them). It goes through the same
 approval flow as the master checks' proposals (``station model proposals``,
 ``/api/v1/model-proposals``, the store's audit log).
 
@@ -114,14 +118,36 @@ def _node_neighbours(nodes: tuple[float, ...], k: int, kind: str) -> tuple[float
     return lo, (nodes[0] + 360.0 if kind == "rotary" else None)
 
 
-def calibration_changes(par, result, prior: StationModel) -> list[Change]:
-    """The changes of the observable model parameters (identified minus the station's
-    present value), each with its u; the rest are left as they are."""
+#: an observable parameter is changed only when the calibration contradicts the present
+#: model: identified minus present beyond this many u (k = 2, the coverage factor of an
+#: expanded uncertainty). A parameter seen only weakly (EAC through the 11.1 mm arm: u of
+#: tens of arcsec, where the laser campaign behind the model had 1) would otherwise be
+#: replaced by a value far less certain than the one the station has
+MIN_SIGNIFICANCE = 2.0
+
+
+def significant(par, result, prior: StationModel, min_significance: float = MIN_SIGNIFICANCE) -> np.ndarray:
+    """(n_model,) bool: observable, and identified minus the present value beyond
+    ``min_significance`` u."""
+    before = par.values_from_model(prior)
+    obs = np.asarray(result.observable[:par.size], dtype=bool)
+    u = np.where(obs, np.asarray(result.u[:par.size], dtype=float), np.inf)
+    with np.errstate(invalid="ignore"):
+        return obs & (np.abs(np.asarray(result.value[:par.size]) - before) > min_significance * u)
+
+
+def calibration_changes(par, result, prior: StationModel, min_significance: float = MIN_SIGNIFICANCE) -> list[Change]:
+    """The changes of the observable model parameters the calibration contradicts
+    (identified minus the station's present value, beyond ``min_significance`` u), each
+    with its u; the rest are left as they are: the unobservable ones (nothing is known
+    of them), the confirmed ones (the present value is within the calibration's
+    expanded uncertainty, and was measured at least as well)."""
     before = par.values_from_model(prior)
     keys = [f.name for f in fields(SixDof)]
+    change = significant(par, result, prior, min_significance)
     out: list[Change] = []
     for j, slot in enumerate(par.slots):
-        if not result.observable[j]:
+        if not change[j]:
             continue
         name, unit, u = par.names[j], par.units[j], float(result.u[j])
         value = float(result.value[j])
@@ -141,10 +167,12 @@ def calibration_changes(par, result, prior: StationModel) -> list[Change]:
     return out
 
 
-def _curve_pictures(par, result, prior: StationModel, after: StationModel) -> list[dict]:
+def _curve_pictures(par, result, prior: StationModel, after: StationModel,
+                    min_significance: float = MIN_SIGNIFICANCE) -> list[dict]:
     """Per curve with an observed node: the present and proposed curves (sampled, in the
     identification's gauge: zero at the first node) and the identified nodes."""
     before_v = par.values_from_model(prior)
+    changed = significant(par, result, prior, min_significance)
     out = []
     for body in par.base.joint_bodies:
         nodes, unit = par.nodes_of(body)
@@ -167,20 +195,30 @@ def _curve_pictures(par, result, prior: StationModel, after: StationModel) -> li
                 "before_nodes": [float(before_v[j]) for j in idx],
                 "value": [float(result.value[j]) for j in idx],
                 "u": [float(result.u[j]) if result.observable[j] else None for j in idx],
-                "observable": [bool(result.observable[j]) for j in idx]})
+                "observable": [bool(result.observable[j]) for j in idx],
+                "changed": [bool(changed[j]) for j in idx]})
     return out
 
 
 def calibration_proposal(outcome, base_version: str, reason: str | None = None,
-                         artefact_id: str = "") -> Proposal:
-    """The proposal from a ``station.calibration.run.CalibrationOutcome``: the observable
-    parameters' changes, the unobservable combinations named in its explanation, and the
-    picture's data (``explanation.curves``). ProposalError when nothing is observable."""
+                         artefact_id: str = "", min_significance: float = MIN_SIGNIFICANCE) -> Proposal:
+    """The proposal from a ``station.calibration.run.CalibrationOutcome``: the changes of
+    the observable parameters the calibration contradicts, the confirmed and the
+    unobservable ones named in its explanation, and the picture's data
+    (``explanation.curves``). ProposalError when nothing is observable, or nothing
+    observed contradicts the present model."""
     par, res = outcome.par, outcome.result
     prior = par.base
-    changes = calibration_changes(par, res, prior)
-    if not changes:
+    changes = calibration_changes(par, res, prior, min_significance)
+    n_seen = int(np.count_nonzero(res.observable[: par.size]))
+    if not n_seen:
         raise ProposalError("the calibration observed no parameter of the station's model: nothing to propose")
+    if not changes:
+        raise ProposalError(f"the calibration confirms the station's model: each of the {n_seen} observable "
+                            f"parameters is within {min_significance:g} u of its present value; nothing to propose")
+    seat = [s[0] == "static" and s[1] == ARTEFACT_SEAT_BODY for s in par.slots]
+    confirmed = [n for n, o, c, m in zip(par.names, res.observable[:par.size],
+                                         significant(par, res, prior, min_significance), seat) if o and not c and not m]
     after = prior
     for c in changes:
         after = c.apply(after)
@@ -188,8 +226,11 @@ def calibration_proposal(outcome, base_version: str, reason: str | None = None,
     n_kept = int(par.size - np.count_nonzero(res.observable[: par.size]))
     description = (
         f"self-calibration on artefact {artefact_id or '?'}: {len(changes)} observable parameter(s) of the error "
-        f"model take their identified values (rank {res.rank}, residual rms {res.residual_rms_um:.2f} um, "
-        f"chi2/dof {res.chi2_per_dof:.2f}). The {n_kept} parameters this artefact and plan cannot see keep the "
+        f"model take their identified values, each differing from the present one by more than "
+        f"{min_significance:g} u (rank {res.rank}, residual rms {res.residual_rms_um:.2f} um, "
+        f"chi2/dof {res.chi2_per_dof:.2f}). {len(confirmed)} observable parameter(s) are within "
+        f"{min_significance:g} u of the present model, which they keep (confirmed). The {n_kept} parameters "
+        f"this artefact and plan cannot see keep the "
         f"station's current values: nothing is claimed about them"
         + (f" (unobservable combinations: {'; '.join(unobs[:8])}{' ...' if len(unobs) > 8 else ''})" if unobs else "")
         + ". The artefact's seat on the table (installation of M) is the run's nuisance and is not proposed.")
@@ -201,17 +242,21 @@ def calibration_proposal(outcome, base_version: str, reason: str | None = None,
         "residual_rms_um": float(res.residual_rms_um), "chi2_per_dof": float(res.chi2_per_dof),
         "unobservable": unobs,
         "unchanged_parameters": [n for j, n in enumerate(par.names) if not res.observable[j]],
-        "curves": _curve_pictures(par, res, prior, after),
+        "confirmed_parameters": confirmed,
+        "min_significance": float(min_significance),
+        "curves": _curve_pictures(par, res, prior, after, min_significance),
     }
     return Proposal(uuid.uuid4().hex[:12], datetime.now(timezone.utc).isoformat(), base_version,
                     reason or f"self-calibration on artefact {artefact_id}", changes, {}, {},
                     explanation=explanation)
 
 
-async def propose_from_calibration(session, outcome, artefact_id: str) -> Proposal:
+async def propose_from_calibration(session, outcome, artefact_id: str,
+                                   min_significance: float = MIN_SIGNIFICANCE) -> Proposal:
     """Build the proposal on the session's present model, keep it in the session's
     proposal book (its picture written) and log it (the audit trail)."""
-    p = calibration_proposal(outcome, session.model_version, artefact_id=artefact_id)
+    p = calibration_proposal(outcome, session.model_version, artefact_id=artefact_id,
+                             min_significance=min_significance)
     await asyncio.to_thread(session.proposals.add, p)
     await asyncio.to_thread(session.store.log_event, "proposal",
                             f"model proposal {p.id} on {p.base_version}: self-calibration on artefact {artefact_id}, "
@@ -247,8 +292,13 @@ def _draw(p: Proposal, curves: list[dict], path: Path) -> Path:
         nodes = np.array(c["nodes"])
         val = np.array(c["value"])
         u = np.array([np.nan if v is None else v for v in c["u"]], dtype=float)
-        ax.errorbar(nodes[obs], val[obs], yerr=2.0 * u[obs], fmt="o", color="C3", ms=4, capsize=2,
-                    label="identified (2u)")
+        changed = np.array(c.get("changed", c["observable"]), dtype=bool)
+        ax.errorbar(nodes[changed], val[changed], yerr=2.0 * u[changed], fmt="o", color="C3", ms=4, capsize=2,
+                    label="identified (2u): changed")
+        kept = obs & ~changed
+        if kept.any():
+            ax.errorbar(nodes[kept], val[kept], yerr=2.0 * u[kept], fmt="o", mfc="none", color="C2", ms=4,
+                        capsize=2, label="identified (2u): confirms the model, kept")
         if (~obs).any():
             ax.plot(nodes[~obs], np.array(c["before_nodes"])[~obs], "x", color="0.3", label="not observable: kept")
         ax.axhline(0.0, color="k", lw=0.4)

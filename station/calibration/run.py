@@ -11,23 +11,33 @@ offsets. C's nodes are the targets' angles (every 45 deg for CA-22.2-5x8).
 from __future__ import annotations
 
 import asyncio
+import functools
 import time
 from dataclasses import dataclass
 
 import numpy as np
 
 from station.calibration.artefact import ArtefactCertificate
-from station.calibration.identify import Identification, Parameterisation, identify
-from station.calibration.measure import SIGMA_GRATING_RUN_UM, CalibrationRun, MeasureSettings, run_calibration
+from station.calibration.identify import Identification, NoiseModel, Parameterisation, identify
+from station.calibration.measure import (
+    SIGMA_GRATING_RUN_UM,
+    SLIDE_REPEATABILITY_UM,
+    CalibrationRun,
+    MeasureSettings,
+    run_calibration,
+)
 from station.calibration.observability import ObservabilityReport, analyse
 from station.calibration.planner import candidate_poses, plan_poses, subset
 
 
 def artefact_parameterisation(model, cert: ArtefactCertificate) -> Parameterisation:
-    """The parameterisation whose nodes are the artefact's rings (z) and angles (C)."""
+    """The parameterisation whose nodes are the artefact's rings (z) and angles (C),
+    shaped by the station's present model: between the nodes each curve keeps the
+    model's own shape (its finer table, its effects), and only the node values' changes
+    are interpolated (as the proposal applies them)."""
     rings = tuple(sorted({float(t.nominal_position_mm) for t in cert.targets}))
     angles = tuple(sorted({float(t.nominal_angle_deg) for t in cert.targets}))
-    return Parameterisation(model, z_nodes_mm=rings, c_nodes_deg=angles)
+    return Parameterisation(model, z_nodes_mm=rings, c_nodes_deg=angles, shaped=True)
 
 
 @dataclass
@@ -55,6 +65,9 @@ class CalibrationOutcome:
             "sightings": int(self.run.observations.design.pose.size),
             "missed": self.run.missed,
             "machine_s": None if self.cycle is None else self.cycle.get("machine_s"),
+            # the noise model's figures of this run (sigmas as estimated from the residuals,
+            # the camera's scale at the view offsets, the grating reference's offset)
+            "noise": {k: v for k, v in self.result.noise.items() if k != "carriage_um"},
         }
 
 
@@ -70,7 +83,8 @@ async def calibrate(session, cert: ArtefactCertificate, *, n_poses: int = 40, se
     par = artefact_parameterisation(st.model, cert)
     cand = candidate_poses(cert)
     say(f"planning {n_poses} poses among {cand.z_mm.size} candidate views")
-    design = subset(cand, plan_poses(par, cert, cand, n_poses, sigma_grating_um=SIGMA_GRATING_RUN_UM))
+    design = subset(cand, plan_poses(par, cert, cand, n_poses, sigma_grating_um=SIGMA_GRATING_RUN_UM,
+                                     free_carriage_off_nodes=True))
     say(f"measuring {design.z_mm.size} poses, {design.pose.size} target sightings")
     with st.artefact_on_table(cert, seed=seed):
         run, cycle = await run_calibration(session, cert, design, par.z_nodes_mm[0], settings)
@@ -79,9 +93,10 @@ async def calibrate(session, cert: ArtefactCertificate, *, n_poses: int = 40, se
         say(f"{len(run.missed)} sighting(s) not found: " + ", ".join(f"{x['target']}" for x in run.missed[:5]))
     say("identifying")
     # off the event loop: it carries the drives' heartbeats (seconds of linear algebra)
-    res = await asyncio.to_thread(identify, par, st.model, cert, run.observations,
-                                  sigma_grating_um=SIGMA_GRATING_RUN_UM)
+    res = await asyncio.to_thread(functools.partial(identify, par, st.model, cert, run.observations,
+                                                    noise=NoiseModel(repeatability_um=SLIDE_REPEATABILITY_UM)))
     rep = await asyncio.to_thread(analyse, par, cert, run.observations.design,
-                                  candidate_poses=cand if suggestions else None, sigma_grating_um=SIGMA_GRATING_RUN_UM)
+                                  candidate_poses=cand if suggestions else None, sigma_grating_um=SIGMA_GRATING_RUN_UM,
+                                  free_carriage_off_nodes=True)
     truth = None if truth_model is None else par.values_from_model(truth_model)
     return CalibrationOutcome(par, res, rep, run, cycle, truth, time.perf_counter() - t0)

@@ -11,7 +11,8 @@ import typer
 
 bench_app = typer.Typer(help="Benchmarks: speed and accuracy, medians over repeats.", no_args_is_help=True)
 
-_BENCHES = ("kinematics", "vision", "vision_bound", "drivers", "discovery", "inspect", "reliability", "api", "soak")
+_BENCHES = ("kinematics", "vision", "vision_bound", "drivers", "discovery", "inspect", "reliability", "api", "soak",
+            "calibration")
 
 
 def register(app: typer.Typer) -> None:

@@ -29,6 +29,9 @@ def register(app: typer.Typer) -> None:
         json: bool = typer.Option(False, "--json", help="one JSON object on stdout"),
         propose: bool = typer.Option(False, "--propose", help="make a model proposal of the observable parameters "
                                      "(approve it with station model approve)"),
+        min_significance: float = typer.Option(2.0, "--min-significance", help="with --propose: change an observable "
+                                               "parameter only when it differs from the present model by more than "
+                                               "this many u (0: every one)"),
     ) -> None:
         """Measure the artefact at planned (Z, C) poses with the camera and the grating,
         identify the error model's parameters with the certificate as prior, and report
@@ -48,6 +51,8 @@ def register(app: typer.Typer) -> None:
             fail(f"{scenario}: no such scenario file", 2)
         if poses < 1:
             fail(f"--poses must be at least 1, not {poses}", 2)
+        if not 0.0 <= min_significance <= 10.0:
+            fail(f"--min-significance must be within 0 ... 10, not {min_significance}", 2)
         try:
             cert = load_artefact(artefact)
         except ValueError as exc:
@@ -65,7 +70,8 @@ def register(app: typer.Typer) -> None:
                     from station.monitor.proposals import ProposalError
 
                     try:
-                        proposal = await propose_from_calibration(s, outcome, cert.artefact_id)
+                        proposal = await propose_from_calibration(s, outcome, cert.artefact_id,
+                                                                  min_significance=min_significance)
                     except ProposalError as exc:
                         say(f"no model proposal: {exc}")
                 return outcome, proposal

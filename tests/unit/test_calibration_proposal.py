@@ -13,7 +13,7 @@ from station.calibration.artefact import load_artefact
 from station.calibration.identify import Observations, identify, predict
 from station.calibration.observability import analyse
 from station.calibration.planner import candidate_poses
-from station.calibration.proposal import apply_node_change, calibration_proposal, node_term
+from station.calibration.proposal import MIN_SIGNIFICANCE, apply_node_change, calibration_proposal, node_term
 from station.calibration.run import artefact_parameterisation
 from station.kinematics.model import load_model
 from station.monitor.proposals import Change, ProposalBook, ProposalError, apply_changes
@@ -44,16 +44,25 @@ def test_only_observable_parameters_change(outcome, tmp_path):
     p = calibration_proposal(out, "base@0", artefact_id="CA-22.2-5x8")
     obs = res.observable[:par.size]
     seat = np.array([s[0] == "static" and s[1] == "M" for s in par.slots])
-    assert len(p.changes) == int((obs & ~seat).sum()) >= 13
+    before = par.values_from_model(model)
+    dev = np.abs(res.value[:par.size] - before) / np.where(obs, res.u[:par.size], np.inf)
+    changed = obs & ~seat & (dev > MIN_SIGNIFICANCE)
+    # the world is 2 um / 2 arcsec off everywhere: EZZ's nodes (u ~0.1 um) are contradicted,
+    # EAC's (u of tens of arcsec through the 11.1 mm arm) are confirmed and kept
+    assert len(p.changes) == int(changed.sum()) >= 4
+    assert any(n.startswith("EAC") for n in p.explanation["confirmed_parameters"])
+    assert set(p.explanation["confirmed_parameters"]) == {n for n, o, c in zip(par.names, obs, changed)
+                                                          if o and not c and not n.endswith("_M")}
     assert all(c.u is not None and c.u > 0 for c in p.changes)
     assert all(c.term.startswith(("node.", "installation.")) for c in p.changes)
     assert "keep the station's current values" in p.explanation["description"]
 
-    before = par.values_from_model(model)
     after = par.values_from_model(apply_changes(model, p.changes))
-    keep = obs & ~seat
-    assert np.allclose(after[keep], res.value[:par.size][keep], atol=1e-6)
-    assert np.allclose(after[~keep], before[~keep], atol=1e-6)  # unobservable (and the seat) unchanged
+    assert np.allclose(after[changed], res.value[:par.size][changed], atol=1e-6)
+    assert np.allclose(after[~changed], before[~changed], atol=1e-6)  # unobservable, confirmed, the seat: unchanged
+    # nothing contradicted: no proposal
+    with pytest.raises(ProposalError, match="confirms the station's model"):
+        calibration_proposal(out, "base@0", artefact_id="CA-22.2-5x8", min_significance=1e6)
 
     # the approval flow: kept with its picture, approved, applied at the next start
     book = ProposalBook(tmp_path)
@@ -64,6 +73,7 @@ def test_only_observable_parameters_change(outcome, tmp_path):
     book.decide(p.id, True, "engineer")
     again = par.values_from_model(apply_changes(model, book.approved_changes()))
     assert np.allclose(again, after, atol=1e-9)
+    assert obs.sum() > changed.sum()
 
 
 def test_node_change_is_the_nodes_hat(outcome):
