@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import math
 import tomllib
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
@@ -46,10 +46,38 @@ class HoleTruth:
 
 
 @dataclass(frozen=True)
+class SurfaceDefect:
+    """A surface defect as it really is on the bore wall (ground truth; issue 23).
+
+    Pores and scratches sit at ``axial_mm`` / ``angle_deg`` (the centroid of their area);
+    ``orientation_deg`` is the direction of their length on the unrolled wall, from the
+    circumferential direction (increasing angle) towards increasing axial position.
+    Burrs and chips sit on the rim of the hole named ``hole``, ``at_deg`` round it (the
+    same sense on the unrolled wall); their length is along the rim, their width the
+    mean height into (burr) or depth out of (chip) the hole. ``reflectance``: share of
+    the wall's level (None: the kind's default, ``sim.camera.defects``); ``seed``: the
+    irregular outline. Sizes in mm.
+    """
+
+    name: str
+    kind: str
+    length_mm: float
+    width_mm: float
+    axial_mm: float = 0.0
+    angle_deg: float = 0.0
+    orientation_deg: float = 0.0
+    hole: str | None = None
+    at_deg: float = 0.0
+    reflectance: float | None = None
+    seed: int = 0
+
+
+@dataclass(frozen=True)
 class PartTruth:
     part_number: str = "ZDZG-22.2-12.3851"
     bore_diameter_mm: float = 22.2
     holes: tuple[HoleTruth, ...] = ()
+    defects: tuple[SurfaceDefect, ...] = ()
 
 
 #: the paper's standard sample (Table 4): both holes 0.7 mm, at 71.03 and 85.19 mm.
@@ -228,6 +256,22 @@ class World:
                 out.append((h, du, dv))
         return out
 
+    def defects_near(self, point: TruePoint, half_width_mm: float, half_height_mm: float):
+        """Pores and scratches in a window around the point, as (defect, tangential mm,
+        axial mm) offsets from it, as ``holes_near`` places the holes (rim defects go
+        with their holes)."""
+        scale = self.drift.ambient.part_scale(point.time_s)
+        r = self.part.bore_diameter_mm / 2.0 * scale
+        out = []
+        for d in self.part.defects:
+            if d.hole is not None:
+                continue
+            du = math.radians((d.angle_deg - point.angle_deg + 180.0) % 360.0 - 180.0) * r
+            dv = d.axial_mm * scale - point.axial_mm
+            if abs(du) <= half_width_mm + d.length_mm and abs(dv) <= half_height_mm + d.length_mm:
+                out.append((d, du, dv))
+        return out
+
     # -------------------------------------------------------------- wiring
     def attach(self, twins: Any) -> None:
         """Plug into a running ``sim.twins.TwinStation``: the drives' carriages move
@@ -254,8 +298,8 @@ def world_from_dict(data: dict[str, Any], source: str = "<dict>", base: Path | N
     model, a world that agrees with it), ``[world.temperature]`` (start_c, rise_c,
     tau_s), ``[world.repeatability]`` (z_um, c_arcsec, seed), the drift physics
     (``[world.screw_heating]``, ``[world.ambient]``, ``[world.wear]``,
-    ``[world.collision]``: sim.drift) and ``[[world.holes]]`` (name, axial_mm,
-    angle_deg, diameter_mm)."""
+    ``[world.collision]``: sim.drift), ``[[world.holes]]`` (name, axial_mm,
+    angle_deg, diameter_mm) and ``[[world.defects]]`` (``SurfaceDefect``'s fields)."""
     model_path = data.get("model")
     if model_path is not None:
         p = Path(model_path)
@@ -292,8 +336,27 @@ def world_from_dict(data: dict[str, Any], source: str = "<dict>", base: Path | N
             except KeyError as exc:
                 raise ValueError(f"{source}: world.holes[{i}] lacks {exc.args[0]!r}") from None
         holes = tuple(holes)
+    defects = []
+    names = {h.name for h in holes}
+    for i, d in enumerate(data.get("defects", [])):
+        try:
+            extra = set(d) - {f.name for f in fields(SurfaceDefect)}
+            if extra:
+                raise ValueError(f"unknown keys {sorted(extra)}")
+            defect = SurfaceDefect(**{k: v for k, v in d.items()})
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"{source}: world.defects[{i}]: {exc}") from None
+        from sim.camera.defects import KINDS, RIM_KINDS
+
+        if defect.kind not in KINDS:
+            raise ValueError(f"{source}: world.defects[{i}]: kind {defect.kind!r} is not one of {', '.join(KINDS)}")
+        if (defect.kind in RIM_KINDS) != (defect.hole is not None):
+            raise ValueError(f"{source}: world.defects[{i}]: burrs and chips name their hole, pores and scratches none")
+        if defect.hole is not None and defect.hole not in names:
+            raise ValueError(f"{source}: world.defects[{i}]: no hole named {defect.hole!r}")
+        defects.append(defect)
     part = PartTruth(str(data.get("part_number", STANDARD_SAMPLE.part_number)),
-                     float(data.get("bore_diameter_mm", STANDARD_SAMPLE.bore_diameter_mm)), holes)
+                     float(data.get("bore_diameter_mm", STANDARD_SAMPLE.bore_diameter_mm)), holes, tuple(defects))
     try:
         return World(model, part, temperature, repeatability, drift_from_dict(data, source))
     except ValueError as exc:

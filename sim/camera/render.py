@@ -100,6 +100,8 @@ class Frame:
     image: np.ndarray  # uint8, (height, width)
     holes: list[HoleTruth] = field(default_factory=list)
     params: FrameParams | None = None
+    #: ``sim.camera.defects.DefectTruth`` of each surface defect rendered (issue 23)
+    defects: list = field(default_factory=list)
 
 
 def _groove_profile(rng: np.random.Generator, length_px: float, params: FrameParams, step_px: float = 0.25):
@@ -234,12 +236,16 @@ def _vignetting_gain(width_px: int, height_px: int, cx: float, cy: float, streng
 
 
 def render_frame(params: FrameParams, holes: list[HoleSpec], seed: int | None = 0,
-                 wall: np.ndarray | None = None) -> Frame:
-    """Render one frame; the same (params, holes, seed, wall) gives the same image.
+                 wall: np.ndarray | None = None, defects=()) -> Frame:
+    """Render one frame; the same (params, holes, seed, wall, defects) gives the same image.
 
     ``wall``: the wall's radiance from :func:`wall_patch` (not modified), for a camera
     that looks at the same patch of wall again; without it the patch is drawn from
     ``seed``. The holes, blur, vignetting and the sensor's noise are drawn per frame.
+    ``defects``: ``sim.camera.defects.DefectSpec`` (pores, scratches, burrs and chips at
+    the holes' rims), painted after the holes and before the blur; their shapes come
+    from their own seeds, so without defects the frame is exactly what it was before
+    they existed, and with them only the defects differ.
     """
     rng = np.random.default_rng(seed)
     w, h = params.width_px, params.height_px
@@ -250,15 +256,21 @@ def render_frame(params: FrameParams, holes: list[HoleSpec], seed: int | None = 
         if wall.shape != (h, w):
             raise ValueError(f"wall patch is {wall.shape[1]} x {wall.shape[0]} px, the frame {w} x {h}")
         radiance = wall.astype(np.float32, copy=True)
+    # the bare wall, before the holes: scratches and burrs take its smooth level
+    bare = radiance.copy() if defects else None
     truths: list[HoleTruth] = []
+    inner_levels: list[float] = []
     for hole in holes:
         (x0, y0, x1, y1), cover, partial, (icx, icy) = hole_coverage(hole, params)
+        inner = params.hole_level_dn
         if cover.size:
             # the hole's far side: dark, with a faint low-frequency sheen
             inner = params.hole_level_dn * (1.0 + 0.03 * rng.standard_normal())
             patch = radiance[y0:y1, x0:x1]
             radiance[y0:y1, x0:x1] = patch * (1.0 - cover) + inner * cover
+        inner_levels.append(float(inner))
         truths.append(HoleTruth(hole.x_px, hole.y_px, hole.diameter_px, icx, icy, partial, hole.aspect))
+    defect_truths = paint_defects(radiance, bare, params, holes, inner_levels, defects) if defects else []
     if params.blur_sigma_px > 0:
         radiance = cv2.GaussianBlur(radiance, (0, 0), params.blur_sigma_px, borderType=cv2.BORDER_REFLECT)
     if params.vignetting:
@@ -269,7 +281,106 @@ def render_frame(params: FrameParams, holes: list[HoleSpec], seed: int | None = 
     noise = np.sqrt(signal / params.gain_e_per_dn) * rng.standard_normal((h, w), dtype=np.float32)
     noise += params.read_noise_dn * rng.standard_normal((h, w), dtype=np.float32)
     image = np.clip(np.rint(signal + noise), 0, 255).astype(np.uint8)
-    return Frame(image=image, holes=truths, params=params)
+    return Frame(image=image, holes=truths, params=params, defects=defect_truths)
+
+
+#: supersampling per axis for defect outlines: 64 samples -> area to 1/64 of a pixel,
+#: far below what a 0.01 mm size tolerance (1 px at 0.01 mm/px) needs
+DEFECT_SUPERSAMPLE = 8
+
+
+def _defect_coverage(geom, params: FrameParams) -> tuple[tuple[int, int, int, int], np.ndarray, bool, tuple]:
+    """Area fraction of each pixel inside a defect's outline, over its box (as
+    :func:`hole_coverage`: sensor pixels ask which ideal points they see; pixels the
+    outline may cut are supersampled through the lens's local Jacobian)."""
+    lens = params.lens
+    w, h = params.width_px, params.height_px
+    distorted = lens is not None and lens.has_distortion
+    bx0, by0, bx1, by1 = geom.bbox_ideal(0.0)
+    ox, oy = geom.outline_points()
+    ex = np.concatenate([np.asarray(ox, float), [bx0, bx1, bx1, bx0]])
+    ey = np.concatenate([np.asarray(oy, float), [by0, by0, by1, by1]])
+    cx, cy = (bx0 + bx1) / 2, (by0 + by1) / 2
+    if distorted:
+        ex, ey = lens.distort_px(ex, ey)
+        icx, icy = (float(v) for v in lens.distort_px(np.array(cx), np.array(cy)))
+    else:
+        icx, icy = float(cx), float(cy)
+    partial = bool(ex.min() < -0.5 or ey.min() < -0.5 or ex.max() > w - 0.5 or ey.max() > h - 0.5)
+    x0 = int(np.clip(np.floor(ex.min()) - 3, 0, w))
+    x1 = int(np.clip(np.ceil(ex.max()) + 4, 0, w))
+    y0 = int(np.clip(np.floor(ey.min()) - 3, 0, h))
+    y1 = int(np.clip(np.ceil(ey.max()) + 4, 0, h))
+    if x1 <= x0 or y1 <= y0:
+        return (x0, y0, x0, y0), np.zeros((0, 0)), True, (icx, icy)
+    if distorted:
+        gx, gy = ideal_pixel_grid(lens, w, h)
+        xu, yu = gx[y0:y1, x0:x1], gy[y0:y1, x0:x1]
+    else:
+        yy, xx = np.mgrid[y0:y1, x0:x1].astype(np.float64)
+        xu, yu = xx, yy
+    cover = geom.inside(xu, yu).astype(np.float64)
+    # a pixel's corner is 0.71 px from its centre; the lens's local scale is within a few %
+    band = geom.near(xu, yu, 1.5)
+    if band.any():
+        off = (np.arange(DEFECT_SUPERSAMPLE) + 0.5) / DEFECT_SUPERSAMPLE - 0.5
+        sox, soy = (o.ravel()[None, :] for o in np.meshgrid(off, off))
+        cx_, cy_ = xu[band][:, None], yu[band][:, None]
+        if distorted:
+            jxx, jxy, jyx, jyy = (j[y0:y1, x0:x1][band][:, None] for j in _grid_jacobian(lens, w, h))
+            sx, sy = cx_ + jxx * sox + jxy * soy, cy_ + jyx * sox + jyy * soy
+        else:
+            sx, sy = cx_ + sox, cy_ + soy
+        cover[band] = geom.inside(sx, sy).mean(axis=1)
+    return (x0, y0, x1, y1), cover, partial, (icx, icy)
+
+
+def paint_defects(radiance: np.ndarray, bare: np.ndarray, params: FrameParams, holes: list[HoleSpec],
+                  inner_levels: list[float], defects) -> list:
+    """Paint surface defects into ``radiance`` (in place, before blur and noise); their truths.
+
+    ``bare``: the wall before the holes; ``inner_levels``: each hole's far-side level as
+    painted. A pore's floor is a level of its own; a scratch's is the wall's smooth level
+    (the cross-hatch cut away) times its reflectance; a burr takes its area out of its
+    hole and shows the wall's smooth level there (torn metal, not honed) times its
+    reflectance; a chip takes its area out of the wall and shows its hole's level (or
+    its own reflectance of the wall's level).
+    """
+    from sim.camera.defects import DEFAULT_REFLECTANCE, geometry
+
+    out = []
+    lens = params.lens
+    for spec in defects:
+        geom = geometry(spec, holes)
+        (x0, y0, x1, y1), cover, partial, _ = _defect_coverage(geom, params)
+        truth = geom.truth()
+        if lens is not None and lens.has_distortion:
+            ix, iy = (float(v) for v in lens.distort_px(np.array(truth.x_px), np.array(truth.y_px)))
+        else:
+            ix, iy = truth.x_px, truth.y_px
+        out.append(replace(truth, image_x_px=ix, image_y_px=iy, partial=partial))
+        if not cover.size:
+            continue
+        refl = spec.reflectance if spec.reflectance is not None else DEFAULT_REFLECTANCE[spec.kind]
+        patch = radiance[y0:y1, x0:x1]
+        c = cover.astype(np.float32)
+        if spec.kind == "pore":
+            # a cavity in shadow: one dark level, with the holes' faint sheen (its own seed)
+            sheen = 1.0 + 0.03 * np.random.default_rng(spec.shape_seed + 1).standard_normal()
+            radiance[y0:y1, x0:x1] = patch * (1.0 - c) + np.float32(refl * params.wall_level_dn * sheen) * c
+        elif spec.kind == "scratch":
+            # the furrow's floor is smooth: the wall's local level without its grooves and grain
+            smooth = cv2.GaussianBlur(bare[y0:y1, x0:x1], (0, 0), 4.0, borderType=cv2.BORDER_REFLECT)
+            radiance[y0:y1, x0:x1] = patch * (1.0 - c) + np.float32(refl) * smooth * c
+        elif spec.kind == "burr":
+            # torn metal, not honed: the wall's smooth level (no grooves) times its reflectance
+            inner = np.float32(inner_levels[spec.hole])
+            smooth = cv2.GaussianBlur(bare[y0:y1, x0:x1], (0, 0), 4.0, borderType=cv2.BORDER_REFLECT)
+            radiance[y0:y1, x0:x1] = patch + (np.float32(refl) * smooth - inner) * c
+        else:  # chip
+            level = inner_levels[spec.hole] if refl is None else refl * params.wall_level_dn
+            radiance[y0:y1, x0:x1] = patch + (np.float32(level) - bare[y0:y1, x0:x1]) * c
+    return out
 
 
 #: the ranges random frames are drawn from.  "station": the bench's envelope (hole

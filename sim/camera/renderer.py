@@ -48,8 +48,9 @@ class RendererLost(RuntimeError):
 
 
 def render_image(params: FrameParams, specs: list[HoleSpec], seed: int, wall_key: tuple[int, int],
-                 wall_seed: int, walls: OrderedDict) -> np.ndarray:
-    """Render one frame over the wall patch of ``wall_key`` (kept in ``walls``)."""
+                 wall_seed: int, walls: OrderedDict, defects=()) -> np.ndarray:
+    """Render one frame over the wall patch of ``wall_key`` (kept in ``walls``), with the
+    surface defects in view (``sim.camera.defects.DefectSpec``)."""
     wall = walls.get(wall_key)
     if wall is None or wall.shape != (params.height_px, params.width_px):
         wall = wall_patch(params, wall_seed)
@@ -58,14 +59,14 @@ def render_image(params: FrameParams, specs: list[HoleSpec], seed: int, wall_key
             walls.popitem(last=False)
     else:
         walls.move_to_end(wall_key)
-    return render_frame(params, specs, seed, wall=wall).image
+    return render_frame(params, specs, seed, wall=wall, defects=defects).image
 
 
 _WORKER_WALLS: OrderedDict = OrderedDict()
 
 
-def _render_in_worker(params, specs, seed, wall_key, wall_seed) -> np.ndarray:
-    return render_image(params, specs, seed, wall_key, wall_seed, _WORKER_WALLS)
+def _render_in_worker(params, specs, seed, wall_key, wall_seed, defects=()) -> np.ndarray:
+    return render_image(params, specs, seed, wall_key, wall_seed, _WORKER_WALLS, defects)
 
 
 def _ready() -> bool:
@@ -119,8 +120,8 @@ class RendererProcess:
             raise RendererLost(f"cannot start the renderer process: {exc}") from exc
 
     async def render(self, params: FrameParams, specs: list[HoleSpec], seed: int,
-                     wall_key: tuple[int, int], wall_seed: int) -> np.ndarray:
-        return await self._call(_render_in_worker, params, specs, seed, wall_key, wall_seed,
+                     wall_key: tuple[int, int], wall_seed: int, defects=()) -> np.ndarray:
+        return await self._call(_render_in_worker, params, specs, seed, wall_key, wall_seed, tuple(defects),
                                 timeout=RENDER_TIMEOUT_S)
 
     async def _call(self, fn, *args, timeout: float):

@@ -34,6 +34,8 @@ import numpy as np
 from drivers.interfaces import CommunicationLost, DeviceTimeout, Frame
 from drivers.interfaces import Camera, CameraTiming
 from sim.camera.lens import BrownLens
+from sim.camera.defects import DefectSpec
+from sim.camera.defects import geometry as defect_geometry
 from sim.camera.render import FrameParams, HoleSpec
 from sim.camera.renderer import RendererLost, RendererProcess, render_image
 from sim.faults import CAMERA_FAULTS, FaultKind, FaultSwitch
@@ -44,13 +46,16 @@ log = logging.getLogger("sim.camera")
 
 @dataclass(frozen=True)
 class ViewTruth:
-    """Ground truth of one frame: where the camera looked and which holes it saw."""
+    """Ground truth of one frame: where the camera looked and which holes and surface
+    defects it saw."""
 
     axial_mm: float
     angle_deg: float
     z_motor_mm: float
     c_motor_deg: float
     holes: tuple = ()  # (name, x_px, y_px, diameter_px, diameter_mm, partial)
+    #: ``sim.camera.defects.DefectTruth`` with name, mm and the part frame filled
+    defects: tuple = ()
 
 
 @dataclass
@@ -125,6 +130,12 @@ class CameraTwin(Camera):
 
     def view(self) -> tuple[list[HoleSpec], ViewTruth]:
         """The holes in view at the drives' present positions, in ideal pixels."""
+        specs, _defects, truth = self.scene()
+        return specs, truth
+
+    def scene(self) -> tuple[list[HoleSpec], list[DefectSpec], ViewTruth]:
+        """The holes and the surface defects in view at the drives' present positions,
+        in ideal pixels, and the frame's truth."""
         t = self.z.now()
         z_motor = self.z.motor_position(t)
         c_motor = self.c.motor_position(self.c.now())
@@ -132,14 +143,50 @@ class CameraTwin(Camera):
         p = self.optics.params
         s = self.optics.mm_per_px
         cx, cy = (p.width_px - 1) / 2.0, (p.height_px - 1) / 2.0
-        specs, truth = [], []
+        specs, truth, names = [], [], []
         for hole, du_mm, dv_mm in self.world.holes_near(point, p.width_px * s / 2, p.height_px * s / 2):
             x, y, d = cx + du_mm / s, cy - dv_mm / s, hole.diameter_mm / s
             specs.append(HoleSpec(x, y, d))
+            names.append(hole.name)
             r = d / 2
             partial = x - r < -0.5 or y - r < -0.5 or x + r > p.width_px - 0.5 or y + r > p.height_px - 0.5
             truth.append((hole.name, x, y, d, hole.diameter_mm, partial))
-        return specs, ViewTruth(point.axial_mm, point.angle_deg, z_motor, c_motor, tuple(truth))
+        defect_specs, defect_truths = self._defects_in_view(point, specs, names)
+        return specs, defect_specs, ViewTruth(point.axial_mm, point.angle_deg, z_motor, c_motor, tuple(truth),
+                                              tuple(defect_truths))
+
+    def _defects_in_view(self, point, holes: list[HoleSpec], names: list[str]):
+        """The part's surface defects in view, as the renderer's specs (image axes: x
+        along increasing angle, y along decreasing axial position, so a direction on the
+        unrolled wall turns the other way in the image) and their truths in px, mm and
+        the part's frame (a rim defect's part position from its rendered centre)."""
+        p = self.optics.params
+        s = self.optics.mm_per_px
+        cx, cy = (p.width_px - 1) / 2.0, (p.height_px - 1) / 2.0
+        specs, named = [], []
+        for d, du_mm, dv_mm in self.world.defects_near(point, p.width_px * s / 2, p.height_px * s / 2):
+            specs.append(DefectSpec(d.kind, cx + du_mm / s, cy - dv_mm / s, d.length_mm / s, d.width_mm / s,
+                                    -d.orientation_deg, d.reflectance, None, d.seed))
+            named.append(d)
+        for d in self.world.part.defects:
+            if d.hole is not None and d.hole in names:
+                specs.append(DefectSpec(d.kind, 0.0, 0.0, d.length_mm / s, d.width_mm / s, -d.at_deg, d.reflectance,
+                                        names.index(d.hole), d.seed))
+                named.append(d)
+        radius_mm = self.world.part.bore_diameter_mm / 2.0
+        part_holes = {h.name: h for h in self.world.part.holes}
+        truths = []
+        for spec, d in zip(specs, named):
+            t = defect_geometry(spec, holes).truth().with_scale(s)
+            if d.hole is None:
+                axial, angle = d.axial_mm, d.angle_deg  # the world's own place
+            else:
+                # the rendered centre's offset from its hole, on the part
+                hole_px, hole = holes[spec.hole], part_holes[d.hole]
+                axial = hole.axial_mm + (hole_px.y_px - t.y_px) * s
+                angle = hole.angle_deg + float(np.rad2deg((t.x_px - hole_px.x_px) * s / radius_mm))
+            truths.append(replace(t, name=d.name, axial_mm=float(axial), part_angle_deg=float(angle) % 360.0))
+        return specs, truths
 
     async def grab(self) -> Frame:
         if not self._connected:
@@ -164,11 +211,11 @@ class CameraTwin(Camera):
             image = np.zeros((p.height_px, p.width_px), dtype=np.uint8)
             self.last_truth = None
         else:
-            specs, truth = self.view()
+            specs, defects, truth = self.scene()
             seed = int(self._rng.integers(0, 2**31))
             # rendering a frame takes tens of ms: off the event loop (and, with a
             # renderer process, off this interpreter's GIL, as a real camera's pixels are)
-            image = await self._render(p, specs, seed, truth)
+            image = await self._render(p, specs, seed, truth, defects)
             self.last_truth = truth
         self._sequence += 1
         out = Frame(image, time.time(), self._sequence)
@@ -186,18 +233,20 @@ class CameraTwin(Camera):
         return (round(truth.axial_mm / s),
                 round(np.deg2rad(truth.angle_deg) * self.world.part.bore_diameter_mm / 2.0 / s))
 
-    async def _render(self, p: FrameParams, specs: list[HoleSpec], seed: int, truth: ViewTruth) -> np.ndarray:
+    async def _render(self, p: FrameParams, specs: list[HoleSpec], seed: int, truth: ViewTruth,
+                      defects: list[DefectSpec] = ()) -> np.ndarray:
         """The frame's pixels: in the renderer process when there is one, else in a thread."""
         key = self._wall_key(truth)
         wall_seed = hash((self._seed, key)) & 0x7FFFFFFF
+        extra = {"defects": list(defects)} if defects else {}
         if self._renderer is not None:
             try:
-                return await self._renderer.render(p, specs, seed, key, wall_seed)
+                return await self._renderer.render(p, specs, seed, key, wall_seed, **extra)
             except RendererLost as exc:
                 # the twin's own machinery failed, not the camera: render here from now on
                 log.warning("camera twin: %s; rendering in a thread from now on", exc)
                 self._stop_renderer()
-        return await asyncio.to_thread(render_image, p, specs, seed, key, wall_seed, self._walls)
+        return await asyncio.to_thread(render_image, p, specs, seed, key, wall_seed, self._walls, **extra)
 
 
 def small_optics(width_px: int = 320, height_px: int = 256, mm_per_px: float = 0.01) -> CameraOptics:

@@ -1,4 +1,4 @@
-"""``station vision ...``: measure compensating holes in a frame; calibrate the camera."""
+"""``station vision ...``: measure compensating holes in a frame; find surface defects; calibrate the camera."""
 
 from __future__ import annotations
 
@@ -10,7 +10,8 @@ from rich.table import Table
 
 from station.cli.common import err_console, fail, out_console, print_json
 
-vision_app = typer.Typer(help="Vision: sub-pixel hole measurement and camera calibration.", no_args_is_help=True)
+vision_app = typer.Typer(help="Vision: sub-pixel hole measurement, surface defects and camera calibration.",
+                         no_args_is_help=True)
 
 
 def _pattern(text: str) -> tuple[int, int]:
@@ -65,6 +66,44 @@ def measure(
             "-" if h.diameter_mm is None else f"{h.diameter_mm:.4f}",
             "yes" if h.partial else "no", f"{h.confidence:.2f}", f"{h.fit_rms_px:.3f}", f"{h.edge_contrast_dn:.0f}",
         )
+    out_console.print(table)
+
+
+@vision_app.command("defects")
+def defects_cmd(
+    image: Path = typer.Argument(..., help="frame of the bore wall (any format OpenCV reads)"),
+    mm_per_px: float = typer.Option(..., "--mm-per-px", help="scale at the bore wall (sizes in mm; which dark "
+                                                             "discs are holes)"),
+    blur_px: Optional[float] = typer.Option(None, "--blur-px", help="the camera's blur (Gaussian sigma, px) if "
+                                                                    "known; else read from the frame"),
+    as_json: bool = typer.Option(False, "--json", help="one JSON object on stdout"),
+) -> None:
+    """Find and measure surface defects in IMAGE: pores, scratches, and burrs and chips at
+    the holes' edges (docs/surface.md)."""
+    from station.vision.defects import detect_defects
+    from station.vision.imageio import ImageReadError, read_grey
+
+    if not mm_per_px > 0:
+        fail(f"{image}: --mm-per-px must be positive, not {mm_per_px}")
+    if blur_px is not None and not blur_px > 0:
+        fail(f"{image}: --blur-px must be positive, not {blur_px}")
+    try:
+        frame = read_grey(image)
+    except ImageReadError as exc:
+        fail(str(exc))
+    if min(frame.shape) < 64:
+        fail(f"{image}: {frame.shape[1]} x {frame.shape[0]} px is too small to model the wall (at least 64 x 64)")
+    found = detect_defects(frame, mm_per_px, blur_px=blur_px)
+    if as_json:
+        print_json({"image": str(image), "mm_per_px": mm_per_px, "defects": [d.to_dict() for d in found]})
+        return
+    table = Table(title=f"{image.name}: {len(found)} defect(s)")
+    for col in ("kind", "x px", "y px", "length mm", "u mm", "width mm", "u mm", "angle deg", "hole", "conf"):
+        table.add_column(col, justify="right")
+    for d in found:
+        table.add_row(d.kind, f"{d.x_px:.1f}", f"{d.y_px:.1f}", f"{d.length_mm:.3f}", f"{d.size_u_mm:.3f}",
+                      f"{d.width_mm:.3f}", f"{d.width_u_mm:.3f}", f"{d.angle_deg:.0f}",
+                      "-" if d.hole is None else str(d.hole), f"{d.confidence:.2f}")
     out_console.print(table)
 
 

@@ -1,0 +1,204 @@
+"""``station bench defects``: surface defects found and measured on rendered frames (issue 23).
+
+Frames with seeded defects (``sim.camera.defects.random_defect_frame``: the vision
+bench's envelope of walls, 0-2 compensating holes of 0.6-1.0 mm, 0-2 pores, scratches,
+burrs and chips each) and as many clean frames (the same walls and holes, no defect) go
+through ``station.vision.defects.detect_defects``. The figures are the issue's
+acceptance: recall of the defects above the spec's limit size, per kind; false defects
+per 100 clean frames; size errors (length and width: median, 90th percentile, the share
+within 10 % or 0.02 mm, the share within the stated 2 u); and CPU ms per frame on one
+core. The benchmark needs the renderer, so it imports ``sim`` (the CLI is allowed to;
+the measuring code never does).
+
+The limits (mm). The part spec names no surface criteria yet (part B adds them); the
+issue's example is "no pore over 0.2 mm in the sealing zones" and "no burr at a
+compensating hole". So: pores and scratches 0.2 mm long; burrs and chips at least
+0.05 mm along the rim and 0.02 mm high (deep), the smallest a 10 um/px camera resolves
+from a rim whose edge wanders by ~0.003 mm where grooves cross it (docs/surface.md).
+Smaller defects are found too, and counted apart.
+"""
+
+from __future__ import annotations
+
+import statistics
+import time
+from collections import defaultdict
+
+import numpy as np
+import typer
+
+#: (length, width) limits per kind, mm: recall is judged on the defects at or above both
+LIMITS_MM = {"pore": (0.2, 0.0), "scratch": (0.2, 0.0), "burr": (0.05, 0.02), "chip": (0.05, 0.02)}
+#: a size is right within 10 % or 0.02 mm, whichever is larger (issue 23)
+SIZE_TOL_REL, SIZE_TOL_MM = 0.10, 0.02
+KINDS = ("pore", "scratch", "burr", "chip")
+
+
+def match(truths, found, mm_per_px: float) -> tuple[list[tuple], list[int]]:
+    """Pair each true defect with the nearest unclaimed detection whose centre lies
+    within half its length (at least 0.06 mm): (truth, detection or None) pairs, and the
+    indices of the detections no truth claimed (false defects). Nearest first, so two
+    defects side by side do not swap."""
+    pairs, used = [], set()
+    cand = []
+    for ti, t in enumerate(truths):
+        for di, d in enumerate(found):
+            dist = float(np.hypot(d.x_px - t.x_px, d.y_px - t.y_px))
+            if dist < max(0.06 / mm_per_px, 0.5 * t.length_px):
+                cand.append((dist, ti, di))
+    taken: dict[int, int] = {}
+    for dist, ti, di in sorted(cand):
+        if ti in taken or di in used:
+            continue
+        taken[ti] = di
+        used.add(di)
+    for ti, t in enumerate(truths):
+        pairs.append((t, found[taken[ti]] if ti in taken else None))
+    return pairs, [di for di in range(len(found)) if di not in used]
+
+
+def _within(err_mm: float, truth_mm: float) -> bool:
+    return abs(err_mm) <= max(SIZE_TOL_REL * truth_mm, SIZE_TOL_MM)
+
+
+def _sizes(rows: list[tuple]) -> dict:
+    """Size errors (mm) of matched defects of the right kind: rows of (truth, detection)."""
+    out = {}
+    for dim in ("length", "width"):
+        err = np.array([getattr(d, f"{dim}_mm") - getattr(t, f"{dim}_mm") for t, d in rows])
+        u = np.array([(d.size_u_mm if dim == "length" else d.width_u_mm) for t, d in rows])
+        ok = [_within(e, getattr(t, f"{dim}_mm")) for e, (t, _) in zip(err, rows)]
+        out[dim] = {
+            "n": len(rows),
+            "median_abs_err_mm": float(np.median(np.abs(err))) if rows else None,
+            "p90_abs_err_mm": float(np.percentile(np.abs(err), 90)) if rows else None,
+            "mean_err_mm": float(np.mean(err)) if rows else None,
+            "within_tol": float(np.mean(ok)) if rows else None,
+            "within_2u": float(np.mean(np.abs(err) <= 2 * u)) if rows else None,
+        }
+    return out
+
+
+def run(frames: int = 100, seed: int = 50000, envelope: str = "station", mm_per_px: float = 0.010,
+        progress=None) -> dict:
+    """``frames`` frames with defects and ``frames`` clean ones; ``progress()`` after each."""
+    import cv2
+
+    from sim.camera.defects import random_defect_frame  # the CLI side may import sim
+    from station.vision.defects import detect_defects
+    from station.vision.measure import warm_up
+
+    cv2.setNumThreads(1)
+    tick = progress or (lambda: None)
+    warm_up()
+    per_kind: dict[str, list[tuple]] = defaultdict(list)
+    false_clean, false_defect = [], []
+    cpu_ms, n_holes = [], 0
+    for clean in (False, True):
+        for i in range(frames):
+            # clean frames from their own seeds: other walls than the defect frames'
+            s = seed + i + (1_000_000 if clean else 0)
+            f = random_defect_frame(s, {} if clean else None, mm_per_px=mm_per_px, envelope=envelope)
+            n_holes += len(f.holes)
+            c0 = time.process_time()
+            found = detect_defects(f.image, mm_per_px)
+            cpu_ms.append(1000.0 * (time.process_time() - c0))
+            pairs, false = match(f.defects, found, mm_per_px)
+            for t, d in pairs:
+                per_kind[t.kind].append((t, d))
+            (false_clean if clean else false_defect).extend((s, found[k]) for k in false)
+            tick()
+    kinds = {}
+    for kind in KINDS:
+        rows = per_kind.get(kind, [])
+        lo_len, lo_wid = LIMITS_MM[kind]
+        above = [(t, d) for t, d in rows if t.length_mm >= lo_len and t.width_mm >= lo_wid]
+        right = [(t, d) for t, d in rows if d is not None and d.kind == kind]
+        kinds[kind] = {
+            "seeded": len(rows),
+            "found": len(right),
+            "found_other_kind": sum(1 for _, d in rows if d is not None and d.kind != kind),
+            "limit_mm": {"length": lo_len, "width": lo_wid},
+            "above_limit": len(above),
+            "above_limit_found": sum(1 for _, d in above if d is not None and d.kind == kind),
+            "recall_above_limit": (sum(1 for _, d in above if d is not None and d.kind == kind) / len(above)
+                                   if above else None),
+            "below_limit": len(rows) - len(above),
+            "recall_below_limit": (sum(1 for t, d in rows if (t.length_mm < lo_len or t.width_mm < lo_wid)
+                                       and d is not None and d.kind == kind) / (len(rows) - len(above))
+                                   if len(rows) > len(above) else None),
+            "sizes": _sizes(right),
+        }
+    all_right = [(t, d) for rows in per_kind.values() for t, d in rows if d is not None and d.kind == t.kind]
+    sizes_all = _sizes(all_right)
+    return {
+        "frames_with_defects": frames,
+        "clean_frames": frames,
+        "seed": seed,
+        "envelope": envelope,
+        "mm_per_px": mm_per_px,
+        "holes": n_holes,
+        "kinds": kinds,
+        "false_per_100_clean_frames": 100.0 * len(false_clean) / frames,
+        "false_per_100_defect_frames": 100.0 * len(false_defect) / frames,
+        "false_clean": [dict(seed=s, kind=d.kind, x_px=round(d.x_px, 1), y_px=round(d.y_px, 1),
+                             length_mm=round(d.length_mm, 4), significance=round(d.significance, 1))
+                        for s, d in false_clean],
+        "false_defect_frames": [dict(seed=s, kind=d.kind, x_px=round(d.x_px, 1), y_px=round(d.y_px, 1),
+                                     length_mm=round(d.length_mm, 4), significance=round(d.significance, 1))
+                                for s, d in false_defect],
+        "sizes_all": sizes_all,
+        "median_cpu_ms_per_frame": statistics.median(cpu_ms),
+        "p90_cpu_ms_per_frame": float(np.percentile(cpu_ms, 90)),
+        "acceptance": {"recall_above_limit": 0.95, "false_per_100_clean_frames": 1.0,
+                       "size_tolerance": f"{SIZE_TOL_REL:.0%} or {SIZE_TOL_MM} mm"},
+    }
+
+
+def _fmt(v, digits=3):
+    return "-" if v is None else (f"{v:.{digits}f}" if isinstance(v, float) else str(v))
+
+
+def register(bench_app: typer.Typer) -> None:
+    @bench_app.command("defects")
+    def defects(
+        frames: int = typer.Option(100, "--frames", min=1,
+                                   help="frames with seeded defects, and as many clean ones (1280x1024; 100: ~400 "
+                                        "defects, about a minute)"),
+        seed: int = typer.Option(50000, "--seed", help="first seed (the detector was tuned on 7000-7349)"),
+        envelope: str = typer.Option("station", "--envelope", help="station (default) or wide (stress test)"),
+        as_json: bool = typer.Option(False, "--json", help="one JSON object on stdout"),
+    ) -> None:
+        """Surface defects: recall above the limit per kind, false defects on clean walls, size errors, CPU time."""
+        from rich.progress import Progress
+        from rich.table import Table
+
+        from station.cli.common import out_console, print_json
+
+        with Progress(console=out_console, transient=True, disable=as_json) as bar:
+            task = bar.add_task("rendering and inspecting frames", total=2 * frames)
+            r = run(frames, seed, envelope, progress=lambda: bar.advance(task))
+        if as_json:
+            print_json(r)
+            return
+        t = Table(title=f"defects: {r['frames_with_defects']} frames with defects + {r['clean_frames']} clean, "
+                        f"seed {r['seed']}, {r['holes']} holes (one core)")
+        for c in ("kind", "seeded", "limit mm", "above", "recall", "below: recall", "other kind",
+                  "L med mm", "L p90 mm", "L in tol", "W med mm", "W p90 mm", "W in tol", "L in 2u"):
+            t.add_column(c, justify="right")
+        for kind, k in r["kinds"].items():
+            sl, sw = k["sizes"]["length"], k["sizes"]["width"]
+            lim = k["limit_mm"]
+            t.add_row(kind, str(k["seeded"]), f"{lim['length']}" + (f" x {lim['width']}" if lim["width"] else ""),
+                      str(k["above_limit"]), _fmt(k["recall_above_limit"]), _fmt(k["recall_below_limit"]),
+                      str(k["found_other_kind"]), _fmt(sl["median_abs_err_mm"], 4), _fmt(sl["p90_abs_err_mm"], 4),
+                      _fmt(sl["within_tol"]), _fmt(sw["median_abs_err_mm"], 4), _fmt(sw["p90_abs_err_mm"], 4),
+                      _fmt(sw["within_tol"]), _fmt(sl["within_2u"]))
+        out_console.print(t)
+        out_console.print(
+            f"false defects: {r['false_per_100_clean_frames']:.1f} per 100 clean frames (goal <= 1), "
+            f"{r['false_per_100_defect_frames']:.1f} per 100 frames with defects; CPU "
+            f"{r['median_cpu_ms_per_frame']:.0f} ms per frame (median; 90th percentile "
+            f"{r['p90_cpu_ms_per_frame']:.0f} ms), holes measured included")
+        out_console.print("recall goal >= 0.95 above the limit; sizes right within 10 % or 0.02 mm "
+                          "(L = length, W = width; 'in 2u' = error within twice the stated uncertainty)")

@@ -1,0 +1,267 @@
+"""Surface defects (issue 23): the twin renders them with their truth, the vision stage
+finds and measures them, clean walls and clean rims give none, the CLI's JSON.
+
+Frames are 640 x 512 (a quarter of the station's) to keep the file fast; the bench
+(``station bench defects``) judges the full envelope on full frames.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import hashlib
+import json
+
+import cv2
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from sim.camera.defects import DefectSpec, geometry, random_defect_frame
+from sim.camera.render import FrameParams, HoleSpec, random_frame, render_frame
+from station.bench.defects import match
+from station.cli import app
+from station.vision.defects import detect_defects, honing_directions
+
+MM_PER_PX = 0.010
+SMALL = dict(width_px=640, height_px=512)
+
+
+def _within(measured_mm: float, truth_mm: float) -> bool:
+    """The issue's size tolerance: 10 % or 0.02 mm, whichever is larger."""
+    return abs(measured_mm - truth_mm) <= max(0.1 * truth_mm, 0.02)
+
+
+# ---------------------------------------------------------------- the renderer
+def test_frames_without_defects_are_byte_identical_to_before_defects_existed():
+    # sha1 of random_frame's images before defects were added to the renderer (the vision
+    # benches' frames): any change to the wall, the holes or the noise's random stream fails
+    assert hashlib.sha1(random_frame(1).image.tobytes()).hexdigest() == "05c8661898c5fbd25b1022b9515d8658141753eb"
+    assert hashlib.sha1(random_frame(1000).image.tobytes()).hexdigest() == "ae9d3b4b06dbb0ffddbf2592676f8d6ce68d0d3a"
+
+
+def test_defects_change_only_their_own_pixels():
+    p = FrameParams(**SMALL)
+    holes = [HoleSpec(200.3, 250.7, 70.0)]
+    defects = [DefectSpec("pore", 450.2, 150.6, 25.0, 20.0, 30.0, 0.3, shape_seed=4),
+               DefectSpec("burr", length_px=15.0, width_px=5.0, angle_deg=40.0, hole=0, shape_seed=5)]
+    plain = render_frame(p, holes, seed=9)
+    with_defects = render_frame(p, holes, seed=9, defects=defects)
+    changed = np.argwhere(plain.image != with_defects.image)
+    assert changed.size
+    # the blur (1.2 px) spreads a change ~4 sigma; nothing moves further from a defect's box
+    boxes = [geometry(d, holes).bbox_ideal(5.0) for d in defects]
+    inside = [any(x0 <= x <= x1 and y0 <= y <= y1 for x0, y0, x1, y1 in boxes) for y, x in changed]
+    assert all(inside)
+
+
+def test_pore_truth_is_its_outline():
+    spec = DefectSpec("pore", 100.0, 80.0, 30.0, 22.0, 20.0, shape_seed=7)
+    g = geometry(spec, [])
+    t = g.truth()
+    # the outline is scaled so its greatest dimension is the spec's, its centroid on the spec's centre
+    assert t.length_px == pytest.approx(30.0, abs=0.05)
+    yy, xx = np.mgrid[40:121, 50:151].astype(float)
+    sub = (np.arange(8) + 0.5) / 8 - 0.5
+    area = sum(g.inside(xx + dx, yy + dy).sum() for dx in sub for dy in sub) / 64.0
+    assert area == pytest.approx(t.area_px2, rel=0.01)
+    inside = g.inside(xx, yy)
+    assert xx[inside].mean() == pytest.approx(100.0, abs=0.2) and yy[inside].mean() == pytest.approx(80.0, abs=0.2)
+
+
+# ---------------------------------------------------------------- detection and measurement
+@pytest.fixture(scope="module")
+def one_of_each():
+    """A station-like frame (blur 1.4 px, grooves 6 %, grain 2 %, 30 e-/DN) with a hole
+    and one defect of each kind above the bench's limits."""
+    p = FrameParams(wall_level_dn=150.0, hole_level_dn=50.0, groove_depth=0.06, grain=0.02, blotch=0.03,
+                    blur_sigma_px=1.4, gain_e_per_dn=30.0, read_noise_dn=1.5, vignetting=0.2, **SMALL)
+    holes = [HoleSpec(220.4, 300.2, 75.0)]
+    defects = [
+        DefectSpec("pore", 470.3, 120.6, 30.0, 24.0, 35.0, 0.35, shape_seed=11),
+        DefectSpec("scratch", 480.0, 380.0, 90.0, 3.0, 100.0, 0.6, shape_seed=12),
+        DefectSpec("burr", length_px=14.0, width_px=4.0, angle_deg=300.0, reflectance=1.0, hole=0, shape_seed=13),
+        DefectSpec("chip", length_px=12.0, width_px=3.5, angle_deg=120.0, hole=0, shape_seed=14),
+    ]
+    f = render_frame(p, holes, seed=21, defects=defects)
+    f.defects = [d.with_scale(MM_PER_PX) for d in f.defects]
+    return f, detect_defects(f.image, MM_PER_PX)
+
+
+@pytest.mark.parametrize("kind", ["pore", "scratch", "burr", "chip"])
+def test_each_kind_is_found_and_measured(one_of_each, kind):
+    f, found = one_of_each
+    pairs, false = match(f.defects, found, MM_PER_PX)
+    assert not false, [(found[i].kind, found[i].x_px, found[i].y_px) for i in false]
+    ((truth, d),) = [(t, d) for t, d in pairs if t.kind == kind]
+    assert d is not None and d.kind == kind
+    assert _within(d.length_mm, truth.length_mm), (d.length_mm, truth.length_mm)
+    assert _within(d.width_mm, truth.width_mm), (d.width_mm, truth.width_mm)
+    # and within the stated uncertainty (k = 3), which is tighter than the tolerance for
+    # small defects: a rim height off by 30 % passes 0.02 mm but not this
+    assert abs(d.length_px - truth.length_px) <= 3 * d.length_u_px, (d.length_px, truth.length_px, d.length_u_px)
+    assert abs(d.width_px - truth.width_px) <= 3 * d.width_u_px, (d.width_px, truth.width_px, d.width_u_px)
+    assert np.hypot(d.x_px - truth.x_px, d.y_px - truth.y_px) < 3.0
+    assert d.size_mm == d.length_mm and d.size_u_mm > 0 and 0.5 < d.confidence <= 1.0
+    if kind in ("burr", "chip"):
+        assert d.hole == 0
+        # the height from the area-true rim profile: on this frame within 0.8 px (0.008 mm);
+        # an integral that lost 30 % of a defect's area reads the chip 1.1 px shallow
+        assert abs(d.width_px - truth.width_px) <= 0.8
+
+
+def test_random_frames_above_the_limits_are_found_within_tolerance():
+    """Frames of the bench's kind (seeds apart from the dev seeds and the bench's), each
+    defect above the limits found with its kind and its length right."""
+    found_n = total = 0
+    for seed in (91001, 91002, 91003):
+        f = random_defect_frame(seed, {"pore": 1, "scratch": 1, "burr": 1, "chip": 1}, n_holes=1, **SMALL)
+        pairs, false = match(f.defects, detect_defects(f.image, MM_PER_PX), MM_PER_PX)
+        assert not false
+        for t, d in pairs:
+            limit = {"pore": (0.2, 0), "scratch": (0.2, 0), "burr": (0.05, 0.02), "chip": (0.05, 0.02)}[t.kind]
+            if t.length_mm >= limit[0] and t.width_mm >= limit[1]:
+                total += 1
+                if d is not None and d.kind == t.kind and _within(d.length_mm, t.length_mm):
+                    found_n += 1
+    assert total >= 6 and found_n == total
+
+
+def test_sizes_are_sub_pixel_not_pixel_counts():
+    """Pores 0.5 px apart in size measure 0.5 px apart (within 0.25 px): the size comes
+    from the integrated darkening, which a thresholded blob's pixel count cannot give."""
+    p = FrameParams(groove_depth=0.0, grain=0.01, blotch=0.0, blur_sigma_px=1.5, gain_e_per_dn=60.0,
+                    read_noise_dn=0.5, vignetting=0.0, width_px=256, height_px=256)
+    lengths = []
+    for length in (20.0, 20.5, 21.0, 21.5):
+        spec = DefectSpec("pore", 128.3, 127.8, length, length * 0.8, 10.0, 0.3, shape_seed=2)
+        f = render_frame(p, [], seed=5, defects=[spec])
+        (d,) = detect_defects(f.image, MM_PER_PX, holes=[])
+        lengths.append(d.length_px)
+    steps = np.diff(lengths)
+    assert np.all(np.abs(steps - 0.5) < 0.25), lengths
+
+
+# ---------------------------------------------------------------- clean walls and rims
+def test_clean_walls_give_no_defects():
+    """The honing cross-hatch (grooves up to 24 % deep), grain, blotches and vignetting of
+    the station envelope, and holes with clean rims: nothing is a defect."""
+    for seed in range(92001, 92007):
+        f = random_defect_frame(seed, {}, **SMALL)
+        found = detect_defects(f.image, MM_PER_PX)
+        assert found == [], (seed, [(d.kind, d.x_px, d.y_px, d.length_mm) for d in found])
+
+
+def test_a_clean_rim_gives_no_burr_or_chip_even_on_deep_grooves_and_low_contrast():
+    p = FrameParams(wall_level_dn=140.0, hole_level_dn=84.0, groove_depth=0.08, grain=0.03, blotch=0.05,
+                    blur_sigma_px=1.8, gain_e_per_dn=25.0, read_noise_dn=2.0, vignetting=0.35, **SMALL)
+    holes = [HoleSpec(180.2, 200.7, 70.0), HoleSpec(450.6, 300.1, 95.0)]
+    for seed in (1, 2, 3):
+        f = render_frame(p, holes, seed=seed)
+        found = detect_defects(f.image, MM_PER_PX)
+        assert [d for d in found if d.kind in ("burr", "chip")] == []
+
+
+def test_the_honing_directions_are_read_from_the_frame():
+    f = random_frame(3)
+    small = cv2.resize(f.image.astype(np.float32), (640, 512), interpolation=cv2.INTER_AREA)
+    darkness = 1.0 - small / cv2.GaussianBlur(small, (0, 0), 8.0)
+    a1, a2 = honing_directions(darkness, np.ones(darkness.shape, bool))
+    assert a1 == pytest.approx(30.0, abs=0.3) and a2 == pytest.approx(150.0, abs=0.3)
+
+
+# ---------------------------------------------------------------- the twin's part
+def test_the_twin_renders_the_parts_defects_where_they_are_on_the_wall():
+    from sim.camera.twin import CameraTwin, small_optics
+    from sim.twins import TwinStation, load_scenario
+    from sim.world import World, world_from_dict
+
+    data = {
+        "holes": [{"name": "hole_2", "axial_mm": 85.19, "angle_deg": 0.0, "diameter_mm": 0.7}],
+        "defects": [
+            {"name": "pore_a", "kind": "pore", "length_mm": 0.3, "width_mm": 0.25, "axial_mm": 85.79,
+             "angle_deg": 2.0, "seed": 1},
+            {"name": "burr_a", "kind": "burr", "length_mm": 0.15, "width_mm": 0.05, "hole": "hole_2", "at_deg": 90.0,
+             "seed": 3},
+        ],
+    }
+    world = world_from_dict(data)
+    assert isinstance(world, World) and len(world.part.defects) == 2
+
+    class Clock:
+        t = 0.0
+
+        def __call__(self):
+            return self.t
+
+    clock = Clock()
+    twins = TwinStation(load_scenario(), clock=clock)
+    world.attach(twins)
+    z, c = twins.physics["Z"], twins.physics["C"]
+    for ax in (z, c):
+        ax.enable(True)
+        assert ax.home()
+    clock.t += 60.0
+    cam = CameraTwin(world, z, c, small_optics(640, 512), seed=3)
+    asyncio.run(cam.connect())
+    assert z.start_move(85.19)
+    clock.t += 60.0
+    frame = asyncio.run(cam.grab())
+    truth = {d.name: d for d in cam.last_truth.defects}
+    assert set(truth) == {"pore_a", "burr_a"}
+    # the pore's truth in the part's frame is the world's, and in px where the view puts it
+    assert truth["pore_a"].axial_mm == pytest.approx(85.79, abs=1e-9)
+    assert truth["pore_a"].part_angle_deg == pytest.approx(2.0, abs=1e-9)
+    # the burr sits up the bore from its hole (at_deg 90: towards increasing axial = up)
+    (_, hx, hy, *_rest) = cam.last_truth.holes[0]
+    assert truth["burr_a"].y_px < hy - 30 and abs(truth["burr_a"].x_px - hx) < 1.0
+    found = detect_defects(frame.image, MM_PER_PX)
+    pairs, false = match(list(truth.values()), found, MM_PER_PX)
+    assert not false and all(d is not None and d.kind == t.kind for t, d in pairs)
+
+
+def test_a_scenario_defect_that_names_no_such_hole_is_refused():
+    from sim.world import world_from_dict
+
+    with pytest.raises(ValueError, match="no hole named"):
+        world_from_dict({"defects": [{"name": "b", "kind": "burr", "length_mm": 0.1, "width_mm": 0.03,
+                                      "hole": "hole_9"}]})
+    with pytest.raises(ValueError, match="kind"):
+        world_from_dict({"defects": [{"name": "x", "kind": "crack", "length_mm": 0.1, "width_mm": 0.03}]})
+
+
+# ---------------------------------------------------------------- the CLI
+runner = CliRunner()
+
+
+def test_cli_json_is_one_object_with_the_defects(one_of_each, tmp_path):
+    f, _ = one_of_each
+    path = tmp_path / "wall.png"
+    cv2.imwrite(str(path), f.image)
+    result = runner.invoke(app, ["vision", "defects", str(path), "--mm-per-px", "0.01", "--json"])
+    assert result.exit_code == 0, result.output
+    out = json.loads(result.stdout)
+    kinds = sorted(d["kind"] for d in out["defects"])
+    assert kinds == ["burr", "chip", "pore", "scratch"]
+    for d in out["defects"]:
+        assert {"kind", "x_px", "y_px", "length_px", "width_px", "confidence", "size_mm", "size_u_mm"} <= set(d)
+    table = runner.invoke(app, ["vision", "defects", str(path), "--mm-per-px", "0.01"])
+    assert table.exit_code == 0 and "4 defect(s)" in table.stdout
+
+
+@pytest.mark.parametrize("content", [b"not an image\n", b""])
+def test_cli_bad_input_names_the_file(tmp_path, content):
+    bad = tmp_path / "broken.png"
+    bad.write_bytes(content)
+    result = runner.invoke(app, ["vision", "defects", str(bad), "--mm-per-px", "0.01", "--json"])
+    assert result.exit_code == 2
+    assert "broken.png" in result.stderr and "not an image" in result.stderr
+    assert "Traceback" not in result.output and result.stdout == ""
+
+
+def test_cli_refuses_a_scale_that_is_not_positive(tmp_path):
+    path = tmp_path / "w.png"
+    cv2.imwrite(str(path), np.full((128, 128), 120, np.uint8))
+    result = runner.invoke(app, ["vision", "defects", str(path), "--mm-per-px", "0", "--json"])
+    assert result.exit_code == 2 and "w.png" in result.stderr and result.stdout == ""
+    missing = runner.invoke(app, ["vision", "defects", str(tmp_path / "nope.png"), "--mm-per-px", "0.01"])
+    assert missing.exit_code == 2 and "nope.png" in missing.stderr and "no such file" in missing.stderr
