@@ -165,6 +165,47 @@ def _grid_jacobian(lens: BrownLens, width_px: int, height_px: int) -> tuple[np.n
     return jxx, jxy, jyx, jyy
 
 
+def _pixel_box(ex: np.ndarray, ey: np.ndarray, w: int, h: int) -> tuple[bool, int, int, int, int]:
+    """The sensor pixels an outline (its points on the sensor) may touch, with a margin
+    for the blur's start, clipped to the frame; and whether the outline runs off it."""
+    partial = bool(ex.min() < -0.5 or ey.min() < -0.5 or ex.max() > w - 0.5 or ey.max() > h - 0.5)
+    x0 = int(np.clip(np.floor(ex.min()) - 3, 0, w))
+    x1 = int(np.clip(np.ceil(ex.max()) + 4, 0, w))
+    y0 = int(np.clip(np.floor(ey.min()) - 3, 0, h))
+    y1 = int(np.clip(np.ceil(ey.max()) + 4, 0, h))
+    return partial, x0, y0, x1, y1
+
+
+def _ideal_centres(lens: BrownLens | None, w: int, h: int, box: tuple[int, int, int, int]):
+    """The ideal coordinates of the box's pixel centres (from the frame's cached grid
+    through a distorting lens; the pixel indices themselves without one)."""
+    x0, y0, x1, y1 = box
+    if lens is not None and lens.has_distortion:
+        gx, gy = ideal_pixel_grid(lens, w, h)
+        return gx[y0:y1, x0:x1], gy[y0:y1, x0:x1]
+    yy, xx = np.mgrid[y0:y1, x0:x1].astype(np.float64)
+    return xx, yy
+
+
+def _edge_coverage(inside, xu: np.ndarray, yu: np.ndarray, band: np.ndarray, n: int, lens: BrownLens | None,
+                   w: int, h: int, box: tuple[int, int, int, int]) -> np.ndarray:
+    """Area fraction inside (``inside(x, y)``: a boolean array) of the pixels in ``band``,
+    from n x n sub-samples per pixel. Through a distorting lens the sub-samples follow
+    its local Jacobian: inside one pixel the distortion is linear to ~1e-5 px (its
+    second derivative is ~1e-4 / px)."""
+    x0, y0, x1, y1 = box
+    off = (np.arange(n) + 0.5) / n - 0.5
+    ox, oy = (o.ravel()[None, :] for o in np.meshgrid(off, off))
+    cx_, cy_ = xu[band][:, None], yu[band][:, None]
+    if lens is not None and lens.has_distortion:
+        jxx, jxy, jyx, jyy = (j[y0:y1, x0:x1][band][:, None] for j in _grid_jacobian(lens, w, h))
+        sx = cx_ + jxx * ox + jxy * oy
+        sy = cy_ + jyx * ox + jyy * oy
+    else:
+        sx, sy = cx_ + ox, cy_ + oy
+    return inside(sx, sy).mean(axis=1)
+
+
 def hole_coverage(hole: HoleSpec, params: FrameParams) -> tuple[tuple[int, int, int, int], np.ndarray, bool, tuple]:
     """Area fraction of each pixel inside the hole, over the hole's bounding box.
 
@@ -182,39 +223,19 @@ def hole_coverage(hole: HoleSpec, params: FrameParams) -> tuple[tuple[int, int, 
     else:
         icx, icy = np.array(hole.x_px), np.array(hole.y_px)
     w, h = params.width_px, params.height_px
-    partial = bool(ex.min() < -0.5 or ey.min() < -0.5 or ex.max() > w - 0.5 or ey.max() > h - 0.5)
-    x0 = int(np.clip(np.floor(ex.min()) - 3, 0, w))
-    x1 = int(np.clip(np.ceil(ex.max()) + 4, 0, w))
-    y0 = int(np.clip(np.floor(ey.min()) - 3, 0, h))
-    y1 = int(np.clip(np.ceil(ey.max()) + 4, 0, h))
+    partial, x0, y0, x1, y1 = _pixel_box(ex, ey, w, h)
     if x1 <= x0 or y1 <= y0:
         return (x0, y0, x0, y0), np.zeros((0, 0)), True, (float(icx), float(icy))
-    distorted = lens is not None and lens.has_distortion
-    if distorted:
-        # the ideal coordinates of the pixel centres, from the frame's cached grid
-        gx, gy = ideal_pixel_grid(lens, w, h)
-        xu, yu = gx[y0:y1, x0:x1], gy[y0:y1, x0:x1]
-    else:
-        yy, xx = np.mgrid[y0:y1, x0:x1].astype(np.float64)
-        xu, yu = xx, yy
+    box = (x0, y0, x1, y1)
+    xu, yu = _ideal_centres(lens, w, h, box)
     q = _inside(hole, xu, yu)
     cover = (q < 1.0).astype(np.float64)
     # band where a pixel may be cut by the edge: distance ~ (q-1)*b, pixel half-diagonal
     # 0.71 px, widened for the local magnification of the lens
     band = np.abs(q - 1.0) * b < 1.5
     if band.any():
-        off = (np.arange(SUPERSAMPLE) + 0.5) / SUPERSAMPLE - 0.5
-        ox, oy = (o.ravel()[None, :] for o in np.meshgrid(off, off))
-        cx_, cy_ = xu[band][:, None], yu[band][:, None]
-        if distorted:
-            # sub-samples through the lens's local Jacobian: inside one pixel the
-            # distortion is linear to ~1e-5 px (its second derivative is ~1e-4 / px)
-            jxx, jxy, jyx, jyy = (j[y0:y1, x0:x1][band][:, None] for j in _grid_jacobian(lens, w, h))
-            sx = cx_ + jxx * ox + jxy * oy
-            sy = cy_ + jyx * ox + jyy * oy
-        else:
-            sx, sy = cx_ + ox, cy_ + oy
-        cover[band] = (_inside(hole, sx, sy) < 1.0).mean(axis=1)
+        cover[band] = _edge_coverage(lambda x, y: _inside(hole, x, y) < 1.0, xu, yu, band, SUPERSAMPLE, lens, w, h,
+                                     box)
     return (x0, y0, x1, y1), cover, partial, (float(icx), float(icy))
 
 
@@ -306,32 +327,16 @@ def _defect_coverage(geom, params: FrameParams) -> tuple[tuple[int, int, int, in
         icx, icy = (float(v) for v in lens.distort_px(np.array(cx), np.array(cy)))
     else:
         icx, icy = float(cx), float(cy)
-    partial = bool(ex.min() < -0.5 or ey.min() < -0.5 or ex.max() > w - 0.5 or ey.max() > h - 0.5)
-    x0 = int(np.clip(np.floor(ex.min()) - 3, 0, w))
-    x1 = int(np.clip(np.ceil(ex.max()) + 4, 0, w))
-    y0 = int(np.clip(np.floor(ey.min()) - 3, 0, h))
-    y1 = int(np.clip(np.ceil(ey.max()) + 4, 0, h))
+    partial, x0, y0, x1, y1 = _pixel_box(ex, ey, w, h)
     if x1 <= x0 or y1 <= y0:
         return (x0, y0, x0, y0), np.zeros((0, 0)), True, (icx, icy)
-    if distorted:
-        gx, gy = ideal_pixel_grid(lens, w, h)
-        xu, yu = gx[y0:y1, x0:x1], gy[y0:y1, x0:x1]
-    else:
-        yy, xx = np.mgrid[y0:y1, x0:x1].astype(np.float64)
-        xu, yu = xx, yy
+    box = (x0, y0, x1, y1)
+    xu, yu = _ideal_centres(lens, w, h, box)
     cover = geom.inside(xu, yu).astype(np.float64)
     # a pixel's corner is 0.71 px from its centre; the lens's local scale is within a few %
     band = geom.near(xu, yu, 1.5)
     if band.any():
-        off = (np.arange(DEFECT_SUPERSAMPLE) + 0.5) / DEFECT_SUPERSAMPLE - 0.5
-        sox, soy = (o.ravel()[None, :] for o in np.meshgrid(off, off))
-        cx_, cy_ = xu[band][:, None], yu[band][:, None]
-        if distorted:
-            jxx, jxy, jyx, jyy = (j[y0:y1, x0:x1][band][:, None] for j in _grid_jacobian(lens, w, h))
-            sx, sy = cx_ + jxx * sox + jxy * soy, cy_ + jyx * sox + jyy * soy
-        else:
-            sx, sy = cx_ + sox, cy_ + soy
-        cover[band] = geom.inside(sx, sy).mean(axis=1)
+        cover[band] = _edge_coverage(geom.inside, xu, yu, band, DEFECT_SUPERSAMPLE, lens, w, h, box)
     return (x0, y0, x1, y1), cover, partial, (icx, icy)
 
 

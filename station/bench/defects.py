@@ -27,6 +27,8 @@ from collections import defaultdict
 import numpy as np
 import typer
 
+from station.bench.vision import fmt_cell
+
 #: (length, width) limits per kind, mm: recall is judged on the defects at or above both
 LIMITS_MM = {"pore": (0.2, 0.0), "scratch": (0.2, 0.0), "burr": (0.05, 0.02), "chip": (0.05, 0.02)}
 #: a size is right within 10 % or 0.02 mm, whichever is larger (issue 23)
@@ -155,10 +157,6 @@ def run(frames: int = 100, seed: int = 50000, envelope: str = "station", mm_per_
     }
 
 
-def _fmt(v, digits=3):
-    return "-" if v is None else (f"{v:.{digits}f}" if isinstance(v, float) else str(v))
-
-
 def register(bench_app: typer.Typer) -> None:
     @bench_app.command("defects")
     def defects(
@@ -190,10 +188,11 @@ def register(bench_app: typer.Typer) -> None:
             sl, sw = k["sizes"]["length"], k["sizes"]["width"]
             lim = k["limit_mm"]
             t.add_row(kind, str(k["seeded"]), f"{lim['length']}" + (f" x {lim['width']}" if lim["width"] else ""),
-                      str(k["above_limit"]), _fmt(k["recall_above_limit"]), _fmt(k["recall_below_limit"]),
-                      str(k["found_other_kind"]), _fmt(sl["median_abs_err_mm"], 4), _fmt(sl["p90_abs_err_mm"], 4),
-                      _fmt(sl["within_tol"]), _fmt(sw["median_abs_err_mm"], 4), _fmt(sw["p90_abs_err_mm"], 4),
-                      _fmt(sw["within_tol"]), _fmt(sl["within_2u"]))
+                      str(k["above_limit"]), fmt_cell(k["recall_above_limit"]), fmt_cell(k["recall_below_limit"]),
+                      str(k["found_other_kind"]), fmt_cell(sl["median_abs_err_mm"], 4),
+                      fmt_cell(sl["p90_abs_err_mm"], 4), fmt_cell(sl["within_tol"]),
+                      fmt_cell(sw["median_abs_err_mm"], 4), fmt_cell(sw["p90_abs_err_mm"], 4),
+                      fmt_cell(sw["within_tol"]), fmt_cell(sl["within_2u"]))
         out_console.print(t)
         out_console.print(
             f"false defects: {r['false_per_100_clean_frames']:.1f} per 100 clean frames (goal <= 1), "

@@ -159,7 +159,8 @@ def run(frames: int = 400, seed: int = 1000, envelope: str = "station", photomet
     }
 
 
-def _fmt(v, digits=3):
+def fmt_cell(v, digits=3):
+    """A table cell of a bench report: "-" for no value, floats to ``digits`` places."""
     return "-" if v is None else (f"{v:.{digits}f}" if isinstance(v, float) else str(v))
 
 
@@ -194,10 +195,10 @@ def register(bench_app: typer.Typer) -> None:
         for c in cols:
             t.add_column(c, justify="right")
         for name, m in r["methods"].items():
-            t.add_row(SHORT[name], _fmt(m["median_centre_err_px"]), _fmt(m["worst_centre_err_px"]),
-                      _fmt(m["median_diameter_err_px"]), _fmt(m["worst_diameter_err_px"]), _fmt(m["phantoms"]),
-                      _fmt(m["misses"]), _fmt(m["partial_flag_errors"]), _fmt(m["median_ms_per_frame"], 1),
-                      _fmt(m["median_cpu_ms_per_frame"], 1))
+            t.add_row(SHORT[name], fmt_cell(m["median_centre_err_px"]), fmt_cell(m["worst_centre_err_px"]),
+                      fmt_cell(m["median_diameter_err_px"]), fmt_cell(m["worst_diameter_err_px"]),
+                      fmt_cell(m["phantoms"]), fmt_cell(m["misses"]), fmt_cell(m["partial_flag_errors"]), fmt_cell(m["median_ms_per_frame"], 1),
+                      fmt_cell(m["median_cpu_ms_per_frame"], 1))
         out_console.print(t)
         out_console.print("c = centre error, d = diameter error (px, whole holes); ms = median per frame "
                           "(wall clock; cpu = process CPU time), cv2.setNumThreads(1)")

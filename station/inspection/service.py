@@ -211,7 +211,8 @@ class InspectionService:
         except BaseException as exc:
             # a bug or a cancellation before the plan ended: the subscribers must still
             # see the inspection end (the record is finished; the event log let go)
-            reason = f"{type(exc).__name__}: {exc}" if str(exc) else f"{type(exc).__name__}: the inspection's task ended"
+            why = str(exc) or "the inspection's task ended"
+            reason = f"{type(exc).__name__}: {why}"
             outcome = InspectionOutcome(iid, part.part_number, serial, "faulted", None, reason)
             try:
                 await self._stop(outcome, [])

@@ -63,7 +63,8 @@ def test_an_inspection_is_start_frames_holes_checks_stop_and_the_store_is_one_su
     with Store(data_dir=tmp_path) as store:
         rec = store.get(out.id)
         assert rec.state == "complete" and rec.result == out.result
-        assert {c.characteristic_id: c.measured for c in rec.characteristics} == {c.id: c.measured for c in out.characteristics}
+        stored = {c.characteristic_id: c.measured for c in rec.characteristics}
+        assert stored == {c.id: c.measured for c in out.characteristics}
         assert all(c.true_value is not None for c in rec.characteristics)
         # the engine's events of the inspection are logged under its id
         assert any(e.kind == "state" for e in store.events(inspection_id=out.id))
