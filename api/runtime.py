@@ -33,7 +33,6 @@ import concurrent.futures
 import contextlib
 import functools
 import logging
-import math
 import time
 from collections import OrderedDict
 from dataclasses import dataclass, field
@@ -53,6 +52,7 @@ from station.runtime import open_session
 from station.parts.spec import PartSpec
 from station.sequencer.engine import EngineEvent, EngineStateError, PlanEnded
 from station.store import DuplicateIdempotencyKey, StoreError
+from station.store.repository import finite_json
 from station.store.tokens import TokenRepository
 
 log = logging.getLogger("api")
@@ -133,11 +133,6 @@ class Job:
     started: float = 0.0
 
 
-def _finite(x) -> float | None:
-    """A number for JSON: NaN and infinities (a hole not found has no diameter) as None."""
-    return None if x is None or not math.isfinite(x) else float(x)
-
-
 def document_event(doc) -> tuple[str, dict] | None:
     """An inspection document as a live event (``frame``, ``hole``, ``characteristic``:
     the SSE ``check`` event is a check on the master), its name and data; None for the
@@ -146,22 +141,22 @@ def document_event(doc) -> tuple[str, dict] | None:
         f = doc.frame
         return "frame", {
             "inspection_id": doc.inspection_id, "hole": doc.hole, "index": doc.index,
-            "axial_mm": _finite(f.axial_mm), "angle_deg": _finite(f.angle_deg),
-            "diameter_mm": _finite(f.diameter_mm), "confidence": _finite(f.confidence),
-            "grating_mm": _finite(f.grating_mm), "z_cmd_mm": _finite(f.z_cmd_mm), "c_cmd_deg": _finite(f.c_cmd_deg)}
+            "axial_mm": f.axial_mm, "angle_deg": f.angle_deg,
+            "diameter_mm": f.diameter_mm, "confidence": f.confidence,
+            "grating_mm": f.grating_mm, "z_cmd_mm": f.z_cmd_mm, "c_cmd_deg": f.c_cmd_deg}
     if isinstance(doc, HoleDocument) and doc.hole is not None:
         h = doc.hole
         return "hole", {
             "inspection_id": doc.inspection_id, "hole": h.name, "found": h.found,
-            "position_mm": _finite(h.position_mm), "position_u_mm": _finite(h.position_u_mm),
-            "diameter_mm": _finite(h.diameter_mm), "diameter_u_mm": _finite(h.diameter_u_mm),
-            "angle_deg": _finite(h.angle_deg), "frames": len(h.frames), "reason": h.reason}
+            "position_mm": h.position_mm, "position_u_mm": h.position_u_mm,
+            "diameter_mm": h.diameter_mm, "diameter_u_mm": h.diameter_u_mm,
+            "angle_deg": h.angle_deg, "frames": len(h.frames), "reason": h.reason}
     if isinstance(doc, CheckDocument) and doc.characteristic is not None:
         c = doc.characteristic
         return "characteristic", {
             "inspection_id": doc.inspection_id, "id": c.id, "nominal": c.nominal,
-            "lower_limit": c.lower_limit, "upper_limit": c.upper_limit, "measured": _finite(c.measured),
-            "uncertainty_k2": _finite(c.uncertainty_k2), "pass": c.passed}
+            "lower_limit": c.lower_limit, "upper_limit": c.upper_limit, "measured": c.measured,
+            "uncertainty_k2": c.uncertainty_k2, "pass": c.passed}
     return None
 
 
@@ -352,7 +347,8 @@ class StationRuntime:
         event = document_event(doc)
         if event is not None:
             name, data = event
-            self._to_api(functools.partial(self.hub.publish, name, **data))
+            # JSON has no NaN: a hole not found has no diameter (null)
+            self._to_api(functools.partial(self.hub.publish, name, **finite_json(data)))
 
     def audit(self, who: str, what: str) -> None:
         """An entry of the audit log (the store's event log, kind "audit"): who changed what."""

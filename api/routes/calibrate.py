@@ -26,7 +26,7 @@ from pydantic import BaseModel, ConfigDict, Field
 
 from api.deps import EngineerDep, ReaderDep, RuntimeDep
 from api.routes.common import blocking
-from api.routes.inspections import _json_safe
+from station.store.repository import finite_json
 from api.runtime import Busy
 from api.schemas.calibration import CalibrationRun
 from station.store import StoreError
@@ -124,7 +124,7 @@ def _ended(rt, run: _Run, fut) -> None:
         with contextlib.suppress(StoreError):
             rt.store.log_event("alarm", f"calibration {run.id} failed: {run.reason}")
     else:
-        run.state, run.result = "complete", _json_safe(doc)
+        run.state, run.result = "complete", finite_json(doc)
         if proposal is not None:
             run.proposal_id = proposal.id
             rt.hub.publish("proposal", event="proposed", id=proposal.id, state=proposal.state,

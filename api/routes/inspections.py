@@ -12,7 +12,6 @@ also its ``findings`` (docs/api.md).
 from __future__ import annotations
 
 import contextlib
-import math
 from datetime import datetime
 from typing import Annotated, Literal
 
@@ -29,6 +28,7 @@ from station.exports.qif import finished_qif_bytes
 from station.parts import PartSpecError
 from station.parts.spec import PART_NUMBER_PATTERN
 from station.store import InspectionNotFound, InspectionStateError, StoreError
+from station.store.repository import finite_json
 
 router = APIRouter(prefix="/api/v1", tags=["job orders and inspections"])
 
@@ -57,18 +57,6 @@ def finding_json(f) -> dict:
             "angle_deg": f.angle_deg, "diameter_mm": f.diameter_mm, "u_mm": f.u_mm}
 
 
-def _json_safe(v):
-    """The stored cycle as JSON allows it: a non-finite number (a ratio to a zero lower
-    bound, say) becomes null rather than failing the whole response."""
-    if isinstance(v, float) and not math.isfinite(v):
-        return None
-    if isinstance(v, dict):
-        return {k: _json_safe(x) for k, x in v.items()}
-    if isinstance(v, (list, tuple)):
-        return [_json_safe(x) for x in v]
-    return v
-
-
 def job_response(rec) -> dict:
     """An inspection record as the API shows it (the twin's truth stays out: simulation
     bookkeeping, not a measurement)."""
@@ -78,8 +66,8 @@ def job_response(rec) -> dict:
         "started_at": rec.started_at.isoformat(), "finished_at": rec.finished_at and rec.finished_at.isoformat(),
         "traceability": dict(rec.traceability),
         # the plan's machine time (s) and how it divides; null while running or when unknown
-        "machine_s": _json_safe(rec.machine_s),
-        "cycle": None if rec.cycle is None else _json_safe(dict(rec.cycle)),
+        "machine_s": finite_json(rec.machine_s),
+        "cycle": None if rec.cycle is None else finite_json(dict(rec.cycle)),
         "links": {"self": f"/api/v1/inspections/{rec.id}", "qif": f"/api/v1/inspections/{rec.id}/qif"},
     }
     if hasattr(rec, "characteristics"):

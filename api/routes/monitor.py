@@ -28,7 +28,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from api import auth
 from api.deps import EngineerDep, ReaderDep, RuntimeDep
 from api.routes.common import blocking
-from api.routes.inspections import _json_safe
+from station.store.repository import finite_json
 from api.routes.parts import load_by_number
 from api.runtime import Busy, StationRuntime
 from api.schemas.monitor import Check, DecidedProposal, Proposal, ProposalList
@@ -108,7 +108,7 @@ async def start_check(order: CheckOrder, response: Response, rt: RuntimeDep, who
     with contextlib.suppress(StoreError):
         await blocking(rt.audit, who.who, f"started check {rec.id} on master {cert.master_id}")
     response.headers["Location"] = f"/api/v1/checks/{rec.id}"
-    return _json_safe(rec.to_json())
+    return finite_json(rec.to_json())
 
 
 @router.get("/checks/{check_id}", response_model=Check, response_model_exclude_unset=True,
@@ -119,7 +119,7 @@ async def get_check(check_id: str, rt: RuntimeDep, who: ReaderDep) -> dict:
         raise HTTPException(status.HTTP_404_NOT_FOUND, f"no check {check_id!r} (this server keeps the last "
                                                        f"checks it ran; the inspection is at /inspections/{{id}})")
     # the master inspection's cycle may hold a number JSON cannot carry (a ratio to a zero bound): null
-    return _json_safe(rec.to_json())
+    return finite_json(rec.to_json())
 
 
 # ---------------------------------------------------------------------- model proposals

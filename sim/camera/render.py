@@ -247,7 +247,7 @@ def wall_patch(params: FrameParams, seed: int | None) -> np.ndarray:
 
 
 @lru_cache(maxsize=4)
-def _vignetting_gain(width_px: int, height_px: int, cx: float, cy: float, strength: float) -> np.ndarray:
+def vignetting_gain(width_px: int, height_px: int, cx: float, cy: float, strength: float) -> np.ndarray:
     """Relative illumination (r^2 law), float32, cached: it is the same for every frame."""
     yy, xx = np.ogrid[0:height_px, 0:width_px]
     r2 = ((xx - cx) ** 2 + (yy - cy) ** 2) / ((width_px / 2) ** 2 + (height_px / 2) ** 2)
@@ -297,7 +297,7 @@ def render_frame(params: FrameParams, holes: list[HoleSpec], seed: int | None = 
     if params.vignetting:
         cx = params.lens.cx_px if params.lens else (w - 1) / 2
         cy = params.lens.cy_px if params.lens else (h - 1) / 2
-        radiance *= _vignetting_gain(w, h, float(cx), float(cy), float(params.vignetting))
+        radiance *= vignetting_gain(w, h, float(cx), float(cy), float(params.vignetting))
     signal = np.clip(radiance, 0, None)
     noise = np.sqrt(signal / params.gain_e_per_dn) * rng.standard_normal((h, w), dtype=np.float32)
     noise += params.read_noise_dn * rng.standard_normal((h, w), dtype=np.float32)

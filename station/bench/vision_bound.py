@@ -249,11 +249,11 @@ def attainability(d_sigma: np.ndarray, centre_cov: np.ndarray, worst_diameter_px
 
 def cases_from_frame(frame) -> list[HoleCase]:
     """The whole holes of one rendered frame (``sim.camera.render.Frame``) with its condition."""
-    from sim.camera.render import _vignetting_gain
+    from sim.camera.render import vignetting_gain
 
     p = frame.params
     w, h = p.width_px, p.height_px
-    gain = _vignetting_gain(w, h, (w - 1) / 2, (h - 1) / 2, float(p.vignetting)) if p.vignetting else None
+    gain = vignetting_gain(w, h, (w - 1) / 2, (h - 1) / 2, float(p.vignetting)) if p.vignetting else None
     out = []
     for t in frame.holes:
         if t.partial:

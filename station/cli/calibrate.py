@@ -9,7 +9,7 @@ from typing import Optional
 
 import typer
 
-from station.cli.common import _default, err_console, fail, out_console, print_json
+from station.cli.common import json_default, err_console, fail, out_console, print_json
 
 
 def register(app: typer.Typer) -> None:
@@ -90,10 +90,10 @@ def register(app: typer.Typer) -> None:
                     "cycle": res.cycle, "wall_s": res.wall_s, "run": res.run.to_json(),
                     "target_deviations_um": [{"name": n, "value": float(v)} for n, v in
                                              zip(res.result.names[res.par.size:], res.result.value[res.par.size:])]}
-            (out / "calibration.json").write_text(_json.dumps(full, indent=2, default=_default, allow_nan=False) + "\n")
+            (out / "calibration.json").write_text(_json.dumps(full, indent=2, default=json_default, allow_nan=False) + "\n")
             rep = {**res.report.to_dict(), "singular_values": res.report.singular_values,
                    "observable": [n for n, o in zip(res.par.names, res.report.observable) if o]}
-            (out / "observability.json").write_text(_json.dumps(rep, indent=2, default=_default) + "\n")
+            (out / "observability.json").write_text(_json.dumps(rep, indent=2, default=json_default) + "\n")
         except OSError as exc:
             fail(f"{out}: {exc.strerror or exc}", 2)
         say(f"rank {doc['observability']['rank']} of {doc['observability']['n_parameters']}, "

@@ -25,7 +25,8 @@ def fail(message: str, code: int = 2) -> NoReturn:
     raise typer.Exit(code)
 
 
-def _default(o: Any):
+def json_default(o: Any):
+    """``json.dumps``' default for numpy scalars and arrays (the CLI's JSON and files)."""
     if isinstance(o, np.generic):
         return o.item()
     if isinstance(o, np.ndarray):
@@ -35,5 +36,5 @@ def _default(o: Any):
 
 def print_json(obj: Any) -> None:
     """Exactly one JSON document on stdout."""
-    sys.stdout.write(json.dumps(obj, indent=2, default=_default, allow_nan=False) + "\n")
+    sys.stdout.write(json.dumps(obj, indent=2, default=json_default, allow_nan=False) + "\n")
     sys.stdout.flush()

@@ -127,16 +127,16 @@ def _has_nul(*values) -> bool:
     return any(isinstance(v, str) and "\x00" in v for v in values)
 
 
-def _finite_json(value: Any) -> Any:
+def finite_json(value: Any) -> Any:
     """A JSON document with every non-finite number as null: JSON has no NaN or
     infinity (PostgreSQL's JSONB refuses them; SQLite would keep a non-standard token),
     so the store keeps what any reader can parse, the same on both backends."""
     if isinstance(value, float) and not math.isfinite(value):
         return None
     if isinstance(value, Mapping):
-        return {k: _finite_json(v) for k, v in value.items()}
+        return {k: finite_json(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
-        return [_finite_json(v) for v in value]
+        return [finite_json(v) for v in value]
     return value
 
 
@@ -481,7 +481,7 @@ class Store:
                 s.add(Finding(inspection_id=inspection_id, **asdict(f)))
             if machine_s is not None:
                 insp.machine_s = float(machine_s)
-                insp.cycle = None if cycle is None else _finite_json(dict(cycle))
+                insp.cycle = None if cycle is None else finite_json(dict(cycle))
             s.flush()
             if result == "pass":
                 verdicts = s.scalars(select(CharacteristicResult.passed)

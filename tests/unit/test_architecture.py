@@ -91,6 +91,19 @@ def test_no_module_reaches_into_another_modules_private_names():
     assert not bad, "\n".join(bad)
 
 
+def test_no_module_imports_another_modules_private_names():
+    ours = ("station", "api", "drivers", "sim", "testkit")
+    bad = []
+    for rel, tree in sources(*PRODUCT):
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ImportFrom) and node.level == 0 and node.module \
+                    and any(_under(node.module, p) for p in ours):
+                for alias in node.names:
+                    if alias.name.startswith("_") and not alias.name.startswith("__"):
+                        bad.append(f"{rel}:{node.lineno}: from {node.module} import {alias.name}")
+    assert not bad, "\n".join(bad)
+
+
 def test_the_checks_above_can_fail():
     """The walkers find what they look for (a check that sees nothing proves nothing)."""
     tree = ast.parse("import sim.world\nfrom station.runtime import open_session\nx = engine._fault\n")
