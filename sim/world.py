@@ -374,3 +374,47 @@ def load_world(scenario_path: str | Path | None = None) -> World:
     p = Path(scenario_path)
     data = tomllib.loads(p.read_text(encoding="utf-8-sig"))
     return world_from_dict(data.get("world", {}), str(p), p.parent)
+
+
+def defect_truth_place(part: PartTruth, d: SurfaceDefect) -> tuple[float, float]:
+    """Where a defect's centroid really is on the part (axial mm, angle deg): pores and
+    scratches where they are given; a burr half its height inside its hole's rim, a chip
+    half its depth outside, ``at_deg`` round the hole (0: towards increasing angle, 90:
+    towards increasing axial position, on the unrolled wall)."""
+    if d.hole is None:
+        return d.axial_mm, d.angle_deg % 360.0
+    h = next(h for h in part.holes if h.name == d.hole)
+    r = h.diameter_mm / 2.0 + (-d.width_mm / 2.0 if d.kind == "burr" else d.width_mm / 2.0)
+    du = r * math.cos(math.radians(d.at_deg))
+    dv = r * math.sin(math.radians(d.at_deg))
+    return h.axial_mm + dv, (h.angle_deg + math.degrees(du / (part.bore_diameter_mm / 2.0))) % 360.0
+
+
+def match_defects(world: "World", found) -> list[tuple[Any, dict | None]]:
+    """Each defect the station reports (``axial_mm``, ``angle_deg``, ``kind``,
+    ``length_mm``) with the world's defect it is (ground truth: an annotation for tests
+    and benches): the nearest true defect of the same family (wall: pore, scratch; rim:
+    burr, chip) whose centroid lies within half its length (at least 0.3 mm) of the
+    report, each true defect taken at most once; None when there is none."""
+    part = world.part
+    r = part.bore_diameter_mm / 2.0
+    truths = [(t, defect_truth_place(part, t)) for t in part.defects]
+    rim = {"burr", "chip"}
+    pairs = []
+    for i, d in enumerate(found):
+        for j, (t, (ax, an)) in enumerate(truths):
+            if (d.kind in rim) != (t.kind in rim):
+                continue
+            dist = math.hypot(d.axial_mm - ax, math.radians((d.angle_deg - an + 180.0) % 360.0 - 180.0) * r)
+            if dist <= max(0.3, t.length_mm / 2.0):
+                pairs.append((dist, i, j))
+    taken_i, taken_j, out = set(), set(), {}
+    for dist, i, j in sorted(pairs):
+        if i in taken_i or j in taken_j:
+            continue
+        taken_i.add(i)
+        taken_j.add(j)
+        t, (ax, an) = truths[j]
+        out[i] = {"name": t.name, "kind": t.kind, "axial_mm": round(ax, 5), "angle_deg": round(an, 5),
+                  "length_mm": t.length_mm, "width_mm": t.width_mm, "place_error_mm": round(dist, 5)}
+    return [(d, out.get(i)) for i, d in enumerate(found)]

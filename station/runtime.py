@@ -220,12 +220,20 @@ class TruthAnnotator:
         self.world = world
 
     def __call__(self, doc) -> None:
-        from station.inspection.documents import CheckDocument
+        from station.inspection.documents import CheckDocument, SurfaceDocument
 
+        if isinstance(doc, SurfaceDocument) and doc.surface is not None:
+            from sim.world import match_defects
+
+            for d, truth in match_defects(self.world, doc.surface.defects):
+                d.truth = truth
+            return
         if not isinstance(doc, CheckDocument) or doc.characteristic is None:
             return
         c = doc.characteristic
         hole_id, _, kind = c.id.rpartition(".")
+        if kind not in ("position", "diameter"):
+            return  # a surface criterion: its truth is each defect's (the surface document's)
         for h in self.world.part.holes:
             if h.name == hole_id:
                 c.true_value = h.axial_mm if kind == "position" else h.diameter_mm
@@ -244,7 +252,7 @@ async def open_session(config: str | Path | None = None, *, scenario: str | Path
     replaces the scenario's; ``station_id``: the station's id on the database, instead
     of the config's."""
     from station.inspection.scan import ScanSettings
-    from station.inspection.session import Session, vision_measure
+    from station.inspection.session import Session, vision_defects, vision_measure
     from station.sequencer.engine import Devices, Engine
     from station.store import Store
 
@@ -258,7 +266,8 @@ async def open_session(config: str | Path | None = None, *, scenario: str | Path
             station.station_id = station_id
         store = Store.open(db_url, data_dir=data_dir, station_id=station.station_id)
         await station.connect()
-        devices = Devices(station.z, station.c, station.encoder, station.camera, measure=vision_measure(station.mm_per_px))
+        devices = Devices(station.z, station.c, station.encoder, station.camera, measure=vision_measure(station.mm_per_px),
+                          surface=vision_defects(station.mm_per_px))
         session = Session(station, store, Engine(devices), settings or ScanSettings())
         annotator = station.truth_annotator()
         if annotator is not None:

@@ -43,6 +43,26 @@ def result_table(outcome, with_truth: bool) -> Table:
     return t
 
 
+def surface_table(surface, simulated: bool) -> Table:
+    """The coverage scan's defects, one row each (with the twin's truth in simulation)."""
+    t = Table(title=f"surface {surface.axial_from_mm:g}..{surface.axial_to_mm:g} mm: {surface.frames} frames, "
+                    f"{surface.recentred} re-centred, {len(surface.defects)} defect(s)")
+    cols = ["defect", "kind", "axial mm", "angle deg", "length mm", "U mm", "where", "verdict"]
+    if simulated:
+        cols += ["truth: place off um", "length off um"]
+    for c in cols:
+        t.add_column(c)
+    for d in surface.defects:
+        row = [d.id, d.kind, f"{d.axial_mm:.3f}", f"{d.angle_deg:.2f}", f"{d.length_mm:.3f}", f"{d.size_u_mm:.3f}",
+               d.hole or d.zone or "-", "[red]over " + d.rejects + "[/]" if d.rejects else "ok"]
+        if simulated:
+            tr = d.truth or {}
+            row += [f"{tr['place_error_mm'] * 1e3:.0f}" if "place_error_mm" in tr else "unmatched",
+                    f"{(d.length_mm - tr['length_mm']) * 1e3:+.0f}" if "length_mm" in tr else "-"]
+        t.add_row(*row)
+    return t
+
+
 def register(app: typer.Typer) -> None:
     @app.command("inspect")
     def inspect(
@@ -54,6 +74,9 @@ def register(app: typer.Typer) -> None:
         data: Path = DataOpt,
         time_scale: float = TimeScaleOpt,
         json: bool = typer.Option(False, "--json", help="one JSON object on stdout (with the twin's truth in simulation)"),
+        surface: Optional[bool] = typer.Option(None, "--surface/--no-surface",
+                                               help="scan the whole inner surface too (default: as the part spec's "
+                                                    "[surface] every_part says)"),
     ) -> None:
         """Run one inspection and print the result table."""
         from drivers.interfaces import DriverError
@@ -66,6 +89,9 @@ def register(app: typer.Typer) -> None:
             spec = load_part(part)
         except (ValueError, KeyError, FileNotFoundError) as exc:
             fail(str(exc), EXIT_ERROR)
+        if surface and spec.surface is None:
+            fail(f"--surface: {spec.part_number} has no [surface] table (docs/part-specs.md, Surface): its surface has "
+                 f"no criteria to judge", EXIT_ERROR)
 
         async def go():
             async with open_session(config, scenario=scenario, time_scale=time_scale, data_dir=data) as session:
@@ -82,7 +108,7 @@ def register(app: typer.Typer) -> None:
                             progress.console.print(f"[yellow]{ev.kind}:[/] {ev.text}")
 
                     session.engine.subscribe(on_event)
-                    outcome = await session.inspect(spec, serial, order_id=order)
+                    outcome = await session.inspect(spec, serial, order_id=order, surface=surface)
                 return outcome, simulated
 
         try:
@@ -103,6 +129,8 @@ def register(app: typer.Typer) -> None:
                 bound = (f", {cyc['ratio']:.2f} x the plan's lower bound of {cyc['lower_bound_s']:.2f} s"
                          if cyc.get("ratio") is not None else "")
                 out_console.print(f"[dim]machine time {cyc['machine_s']:.2f} s ({cyc['basis']}){bound}[/]")
+            if outcome.surface is not None:
+                out_console.print(surface_table(outcome.surface, simulated))
             for a in outcome.alarms:
                 out_console.print(f"[bold yellow]station needs a check:[/] {a.reason}")
             out_console.print(f"[dim]inspection {outcome.id} stored in {data}/[/]")

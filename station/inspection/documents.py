@@ -6,6 +6,7 @@ this order, for every inspection:
     InspectionStart  (one: the id, the part, the serial, the traceability)
     FrameDocument    (one per measurement frame, live, as the plan takes it)
     HoleDocument     (one per spec hole: found and measured, or not found and why)
+    SurfaceDocument  (one when the surface was scanned: its defects and picture)
     CheckDocument    (one per characteristic: measured, limits, U, conformance)
     InspectionStop   (one: the outcome; state, result, reason, findings, machine time)
 
@@ -32,6 +33,7 @@ from typing import TYPE_CHECKING, Any, Awaitable, Callable, ClassVar
 if TYPE_CHECKING:
     from station.inspection.scan import FrameObservation, HoleResult
     from station.inspection.service import CharacteristicOutcome, InspectionOutcome
+    from station.inspection.surface import SurfaceResult
 
 
 @dataclass
@@ -67,6 +69,12 @@ class FrameDocument(Document):
 class HoleDocument(Document):
     kind: ClassVar[str] = "hole"
     hole: "HoleResult | None" = None
+
+
+@dataclass
+class SurfaceDocument(Document):
+    kind: ClassVar[str] = "surface"
+    surface: "SurfaceResult | None" = None
 
 
 @dataclass

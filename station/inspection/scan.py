@@ -38,6 +38,7 @@ from station.kinematics.inverse import compensate
 from station.kinematics.model import StationModel
 from station.motion import AxisLimits, move_time_s
 from station.sequencer import messages as m
+from station.vision.defects import MIN_HOLE_DIAMETER_MM
 
 
 @dataclass(frozen=True)
@@ -110,6 +111,10 @@ class ScanSettings:
     #: scores real whole holes >= 0.77 on the station envelope's dev frames, and 4 of 610
     #: below 0.3 on the wide envelope's 13-15 % grooves: docs/vision.md, Confidence)
     min_confidence: float = 0.3
+    #: a dark disc smaller than this (mm) is a pore, not a hole (the surface
+    #: inspection's rule, ``station.vision.defects.MIN_HOLE_DIAMETER_MM``): never taken
+    #: for a spec hole nor reported as an unexpected one
+    min_hole_mm: float = MIN_HOLE_DIAMETER_MM
     #: re-centre when the hole is further than this from the frame centre (px)
     recentre_px: float = 5.0
     #: standard uncertainty the model leaves at the detection point along the bore
@@ -381,6 +386,8 @@ class ScanResult:
     findings: list[ScanFinding] = field(default_factory=list)
     datum_deg: float | None = None
     frames: int = 0
+    #: the coverage scan's result when the surface was scanned (station.inspection.surface)
+    surface: Any = None
 
 
 @dataclass
@@ -493,7 +500,8 @@ class _BoreScan:
         s = self.geo.mm_per_px
         out = []
         for h in holes or []:
-            if getattr(h, "partial", False) or getattr(h, "confidence", 1.0) < self.settings.min_confidence:
+            if getattr(h, "partial", False) or getattr(h, "confidence", 1.0) < self.settings.min_confidence \
+                    or h.diameter_px * s < self.settings.min_hole_mm:
                 continue
             axial = target[0] + (cy - h.y_px) * s
             angle = (target[1] + math.degrees((h.x_px - cx) * s / self.radius_mm)) % 360.0
@@ -640,7 +648,8 @@ class _BoreScan:
             self.progress_done = min(self.progress_done + 1, total)
             yield m.Progress(self.progress_done, total, f"{t.name} frame {k + 1}")
             whole = [h for h in holes or [] if not getattr(h, "partial", False)
-                     and getattr(h, "confidence", 1.0) >= settings.min_confidence]
+                     and getattr(h, "confidence", 1.0) >= settings.min_confidence
+                     and h.diameter_px * s >= settings.min_hole_mm]
             near = [h for h in whole if math.hypot(h.x_px - cx, h.y_px - cy) <= accept_px]
             h = min(near, key=lambda h: math.hypot(h.x_px - cx, h.y_px - cy)) if near else None
             others = [o for o in whole if o is not h]

@@ -24,13 +24,15 @@ from typing import Mapping
 
 from station import __version__
 from station.inspection.documents import (CheckDocument, DocumentStream, FrameDocument, HoleDocument,
-                                          InspectionStart, InspectionStop)
+                                          InspectionStart, InspectionStop, SurfaceDocument)
 from station.inspection.scan import (CameraGeometry, HoleResult, HoleTarget, ScanFinding, ScanResult, ScanSettings,
                                      bore_scan)
+from station.inspection.surface import SurfaceResult
+from station.inspection.surface_scan import surface_scan
 from station.inspection.writers import ResultNotStored
 from station.kinematics.model import StationModel
 from station.motion import AxisLimits
-from station.parts.spec import PartSpec
+from station.parts.spec import SURFACE_RIM_KINDS, PartSpec
 from drivers.interfaces import DriverError
 from station.sequencer.cycle import cycle_summary, lower_bound, machine_time
 from station.sequencer import messages as m
@@ -70,6 +72,9 @@ class InspectionOutcome:
     cycle: dict | None = None
     #: the alarms the station's charts raised on this inspection's evidence
     alarms: list = field(default_factory=list)
+    #: the coverage scan's defects and unrolled picture (station.inspection.surface);
+    #: None when the part spec asks for no surface inspection
+    surface: SurfaceResult | None = None
 
     def to_json(self, with_truth: bool = False) -> dict:
         chars = []
@@ -81,7 +86,8 @@ class InspectionOutcome:
         return {"id": self.id, "part_number": self.part_number, "serial": self.serial, "state": self.state,
                 "result": self.result, "reason": self.reason, "characteristics": chars,
                 "findings": [dict(f.__dict__) for f in self.findings], "cycle": self.cycle,
-                "alarms": [a.to_json() for a in self.alarms]}
+                "alarms": [a.to_json() for a in self.alarms],
+                "surface": None if self.surface is None else self.surface.to_json(with_truth)}
 
 
 def model_fingerprint(model: StationModel) -> str:
@@ -103,10 +109,54 @@ def hole_targets(part: PartSpec) -> list[HoleTarget]:
 
 
 def scan_plan(model: StationModel, part: PartSpec, geometry: CameraGeometry, settings: ScanSettings,
-              motion: Mapping[str, AxisLimits] | None = None):
-    """The bore scan of ``part`` (a plan returning a ``ScanResult``)."""
-    return bore_scan(model, hole_targets(part), geometry, settings, datum=part.placement.angular_datum,
-                     placement_angle_deg=part.placement.angle_deg, motion=motion)
+              motion: Mapping[str, AxisLimits] | None = None, *, surface: bool = False):
+    """The bore scan of ``part`` (a plan returning a ``ScanResult``), and with
+    ``surface`` the coverage scan of its surface band after the holes (the result's
+    ``surface``)."""
+    holes = bore_scan(model, hole_targets(part), geometry, settings, datum=part.placement.angular_datum,
+                      placement_angle_deg=part.placement.angle_deg, motion=motion)
+    if not surface:
+        return holes
+
+    def both():
+        scan = yield from holes
+        scan.surface = yield from surface_scan(model, part, geometry, settings, scan.holes, motion=motion)
+        return scan
+
+    return both()
+
+
+def wants_surface(part: PartSpec, asked: bool | None) -> bool:
+    """Whether this inspection scans the surface: as the job asks, else as the part spec
+    says (``[surface] every_part``); never for a spec without surface criteria."""
+    if part.surface is None:
+        if asked:
+            raise ValueError(f"{part.part_number} has no [surface] table: its surface has no criteria to judge")
+        return False
+    return part.surface.every_part if asked is None else bool(asked)
+
+
+def judge_surface(part: PartSpec, surface: SurfaceResult) -> list[CharacteristicOutcome]:
+    """The spec's surface criteria against the defects found: per criterion the largest
+    defect of its kind where it applies (0 when none), with that defect's size
+    uncertainty; each defect over a limit names the criterion it breaks."""
+    out = []
+    for c in part.surface_characteristics():
+        if c.hole_id == "surface":
+            zone_ids = {z.id for z in part.surface.zones if getattr(z, f"max_{c.kind}_mm") is not None}
+            mine = [d for d in surface.defects if d.kind == c.kind and d.hole is None and d.zone not in zone_ids]
+        elif c.kind in SURFACE_RIM_KINDS:
+            mine = [d for d in surface.defects if d.kind == c.kind and d.hole == c.hole_id]
+        else:
+            mine = [d for d in surface.defects if d.kind == c.kind and d.hole is None and d.zone == c.hole_id]
+        worst = max(mine, key=lambda d: d.length_mm, default=None)
+        value = 0.0 if worst is None else worst.length_mm
+        u = None if worst is None else worst.size_u_mm
+        for d in mine:
+            if not c.conforms(d.length_mm) and d.rejects is None:
+                d.rejects = c.id
+        out.append(CharacteristicOutcome(c.id, c.nominal, c.lower_limit, c.upper_limit, value, u, c.conforms(value)))
+    return out
 
 
 def motion_limits(devices) -> dict[str, AxisLimits]:
@@ -179,7 +229,10 @@ class InspectionService:
         await ensure_ready(self.engine)
 
     async def inspect(self, part: PartSpec, serial: str, *, order_id: str | None = None,
-                      idempotency_key: str | None = None) -> InspectionOutcome:
+                      idempotency_key: str | None = None, surface: bool | None = None) -> InspectionOutcome:
+        """Inspect one part. ``surface``: scan the whole surface too (None: as the part
+        spec says, ``[surface] every_part``)."""
+        with_surface = wants_surface(part, surface)
         trace = {
             "software_version": __version__,
             "python": platform.python_version(),
@@ -197,7 +250,8 @@ class InspectionService:
                                                      self.purpose))
         try:
             await self.ensure_ready()
-            plan = scan_plan(self.model, part, self.geometry, self.settings, motion_limits(self.engine.devices))
+            plan = scan_plan(self.model, part, self.geometry, self.settings, motion_limits(self.engine.devices),
+                             surface=with_surface)
             restore = self.engine.register_command(m.Emit, self._frame_command(iid))
             try:
                 scan: ScanResult = await self.engine.run(plan)
@@ -219,11 +273,13 @@ class InspectionService:
             except Exception:  # noqa: BLE001 - the first error is the one to raise
                 pass
             raise
-        outcome = self._judge(iid, part, serial, scan.holes)
-        outcome.findings = scan.findings
-        outcome.cycle = self._cycle()
         for r in scan.holes:
             await self.documents.publish(HoleDocument(iid, r))
+        if scan.surface is not None:
+            await self.documents.publish(SurfaceDocument(iid, scan.surface))
+        outcome = self._judge(iid, part, serial, scan.holes, scan.surface)
+        outcome.findings = scan.findings
+        outcome.cycle = self._cycle()
         for c in outcome.characteristics:
             await self.documents.publish(CheckDocument(iid, c))
         return await self._stop(outcome, scan.holes)
@@ -259,7 +315,8 @@ class InspectionService:
             self.engine.note(f"cycle time not computed: {type(exc).__name__}: {exc}")
             return None
 
-    def _judge(self, iid: str, part: PartSpec, serial: str, results: list[HoleResult]) -> InspectionOutcome:
+    def _judge(self, iid: str, part: PartSpec, serial: str, results: list[HoleResult],
+               surface: SurfaceResult | None = None) -> InspectionOutcome:
         by_hole = {r.name: r for r in results}
         chars = []
         reasons = []
@@ -274,8 +331,18 @@ class InspectionService:
                 value, u = r.diameter_mm, r.diameter_u_mm
             ok = value is not None and math.isfinite(value) and c.conforms(value)
             chars.append(CharacteristicOutcome(c.id, c.nominal, c.lower_limit, c.upper_limit, value, u, ok))
+        if surface is not None:
+            surface_chars = judge_surface(part, surface)
+            chars.extend(surface_chars)
+            broken = [d for d in surface.defects if d.rejects]
+            if broken:
+                reasons.append("surface: " + "; ".join(
+                    f"{d.kind} of {d.length_mm:.3f} mm at {d.axial_mm:.2f} mm, {round(d.angle_deg, 1) % 360.0:.1f} deg "
+                    f"over {d.rejects}'s limit" for d in broken[:5]) + (f" (and {len(broken) - 5} more)"
+                                                                         if len(broken) > 5 else ""))
         result = "pass" if all(c.passed for c in chars) else "fail"
         reason = "; ".join(dict.fromkeys(reasons))
         if result == "fail" and not reason:
             reason = "out of tolerance: " + ", ".join(c.id for c in chars if not c.passed)
-        return InspectionOutcome(iid, part.part_number, serial, "complete", result, reason, chars, results)
+        return InspectionOutcome(iid, part.part_number, serial, "complete", result, reason, chars, results,
+                                 surface=surface)

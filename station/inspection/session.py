@@ -40,6 +40,18 @@ def vision_measure(mm_per_px: float):
     return measure
 
 
+def vision_defects(mm_per_px: float):
+    """The surface inspection as the engine calls it: image -> defects
+    (``station.vision.defects.detect_defects``: pores, scratches, and burrs and chips at
+    the frame's holes, which it measures itself)."""
+    from station.vision.defects import detect_defects
+
+    def surface(image):
+        return detect_defects(image, mm_per_px)
+
+    return surface
+
+
 @dataclass
 class MasterCheckOutcome:
     """A check of the station on its certified master: the inspection, each

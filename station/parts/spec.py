@@ -180,6 +180,75 @@ class Placement(_SpecModel):
     angular_datum: str | None = Field(default=None, pattern=HOLE_ID_PATTERN)
 
 
+#: the surface's defect kinds a criterion may limit (docs/surface.md); burrs and chips
+#: are judged at the compensating holes' rims, pores and scratches on the wall
+SURFACE_WALL_KINDS = ("pore", "scratch")
+SURFACE_RIM_KINDS = ("burr", "chip")
+
+
+class _SurfaceLimits(_SpecModel):
+    """The largest defect of each kind allowed (mm: a pore's greatest Feret diameter, a
+    scratch's length); None: that kind is not limited there."""
+
+    max_pore_mm: float | None = None
+    max_scratch_mm: float | None = None
+
+    @field_validator("max_pore_mm", "max_scratch_mm")
+    @classmethod
+    def _positive_limit(cls, v: float | None) -> float | None:
+        if v is not None and not v > 0:
+            raise ValueError(f"must be positive (got {v}); leave it out to set no limit")
+        return v
+
+
+class SurfaceZone(_SurfaceLimits):
+    """A band of the bore with its own limits (a sealing zone: where the cups run), from
+    ``axial_from_mm`` to ``axial_to_mm`` (from the datum face). A defect counts in the
+    zone its centre lies in; a kind the zone does not limit is judged by the surface's
+    limits for the rest of the bore."""
+
+    id: str = Field(pattern=HOLE_ID_PATTERN)
+    axial_from_mm: float
+    axial_to_mm: float
+
+    @model_validator(mode="after")
+    def _ordered(self) -> SurfaceZone:
+        if not self.axial_from_mm < self.axial_to_mm:
+            raise SpecProblems([(("axial_to_mm",), f"must be above axial_from_mm ({self.axial_from_mm:g})")])
+        return self
+
+
+class Surface(_SurfaceLimits):
+    """The inner surface's criteria (issue 23; docs/part-specs.md, Surface): the band the
+    coverage scan looks at (``axial_from_mm`` .. ``axial_to_mm``, default the whole
+    bore), the limits elsewhere in it (``max_pore_mm``, ``max_scratch_mm``), the
+    sealing ``zones`` with theirs, and at every compensating hole's rim the largest
+    burr and chip (``max_burr_mm``, ``max_chip_mm``: length along the rim).
+    ``every_part``: scan every part; false: only when the job asks (a sampling plan:
+    the coverage scan costs a minute of machine time)."""
+
+    every_part: bool = True
+    axial_from_mm: float | None = None
+    axial_to_mm: float | None = None
+    max_burr_mm: float | None = None
+    max_chip_mm: float | None = None
+    zones: list[SurfaceZone] = Field(default_factory=list)
+
+    @field_validator("max_burr_mm", "max_chip_mm")
+    @classmethod
+    def _positive_rim_limit(cls, v: float | None) -> float | None:
+        if v is not None and not v > 0:
+            raise ValueError(f"must be positive (got {v}); leave it out to set no limit")
+        return v
+
+    def limit(self, kind: str, zone: SurfaceZone | None) -> float | None:
+        """The largest ``kind`` allowed in ``zone`` (None: elsewhere)."""
+        key = f"max_{kind}_mm"
+        if zone is not None and getattr(zone, key, None) is not None:
+            return getattr(zone, key)
+        return getattr(self, key, None)
+
+
 @dataclass(frozen=True)
 class Characteristic:
     """One measured characteristic with its limits, as the sequencer and store use it.
@@ -210,6 +279,8 @@ class PartSpec(_SpecModel):
     bore: Bore
     placement: Placement = Field(default_factory=Placement)
     holes: list[Hole] = Field(min_length=1)
+    #: the inner surface's criteria and coverage scan; None: the holes only
+    surface: Surface | None = None
 
     @model_validator(mode="after")
     def _holes_fit_bore(self) -> PartSpec:
@@ -229,6 +300,8 @@ class PartSpec(_SpecModel):
                 problems.append((("holes", i, "position"),
                                  f"the hole spans {lo:g}..{hi:g} mm along the axis, outside the bore "
                                  f"(0..{self.bore.depth_mm:g} mm deep)"))
+        if self.surface is not None:
+            problems.extend(self._surface_problems(seen))
         datum = self.placement.angular_datum
         if datum is not None and datum not in seen:
             problems.append((("placement", "angular_datum"),
@@ -236,6 +309,71 @@ class PartSpec(_SpecModel):
         if problems:
             raise SpecProblems(problems)
         return self
+
+    def _surface_problems(self, hole_ids: dict[str, int]) -> list[tuple[tuple, str]]:
+        sf = self.surface
+        problems: list[tuple[tuple, str]] = []
+        lo, hi = self.surface_band_mm()
+        if not 0.0 <= lo < hi <= self.bore.depth_mm:
+            problems.append((("surface", "axial_to_mm" if hi > self.bore.depth_mm or hi <= lo else "axial_from_mm"),
+                             f"the band {lo:g}..{hi:g} mm must lie in the bore (0..{self.bore.depth_mm:g} mm) "
+                             f"and not be empty"))
+        ids: dict[str, int] = {}
+        for i, z in enumerate(sf.zones):
+            if z.id in ids:
+                problems.append((("surface", "zones", i, "id"), f"{z.id!r} is already the id of zones[{ids[z.id]}]"))
+            ids.setdefault(z.id, i)
+            if z.id in hole_ids:
+                problems.append((("surface", "zones", i, "id"), f"{z.id!r} is the id of a hole"))
+            if z.axial_from_mm < lo or z.axial_to_mm > hi:
+                problems.append((("surface", "zones", i), f"{z.axial_from_mm:g}..{z.axial_to_mm:g} mm is outside the "
+                                                          f"band scanned ({lo:g}..{hi:g} mm)"))
+            for j, other in enumerate(sf.zones[:i]):
+                if z.axial_from_mm < other.axial_to_mm and other.axial_from_mm < z.axial_to_mm:
+                    problems.append((("surface", "zones", i), f"overlaps zones[{j}] ({other.id})"))
+        return problems
+
+    def surface_band_mm(self) -> tuple[float, float]:
+        """The band of the bore the coverage scan looks at (mm from the datum face)."""
+        sf = self.surface
+        lo = 0.0 if sf is None or sf.axial_from_mm is None else sf.axial_from_mm
+        hi = self.bore.depth_mm if sf is None or sf.axial_to_mm is None else sf.axial_to_mm
+        return lo, hi
+
+    def surface_zone(self, axial_mm: float) -> SurfaceZone | None:
+        """The surface zone a place along the bore is in (None: elsewhere or no surface)."""
+        if self.surface is None:
+            return None
+        for z in self.surface.zones:
+            if z.axial_from_mm <= axial_mm <= z.axial_to_mm:
+                return z
+        return None
+
+    def surface_characteristics(self) -> tuple[Characteristic, ...]:
+        """The surface's criteria as characteristics (the largest defect of a kind, in mm,
+        against 0 .. its limit): ``surface.<kind>`` for the band outside the zones,
+        ``surface.<zone>.<kind>`` per zone, ``<hole>.<burr|chip>`` at each hole's rim.
+        Only the kinds the spec limits; none without a surface table."""
+        sf = self.surface
+        if sf is None:
+            return ()
+        out = []
+
+        def add(cid: str, subject: str, kind: str, limit: float | None) -> None:
+            if limit is not None:
+                out.append(Characteristic(id=cid, hole_id=subject, kind=kind, unit=self.unit, nominal=0.0,
+                                          lower_limit=0.0, upper_limit=float(limit)))
+
+        for kind in SURFACE_WALL_KINDS:
+            add(f"surface.{kind}", "surface", kind, getattr(sf, f"max_{kind}_mm"))
+        for z in sf.zones:
+            for kind in SURFACE_WALL_KINDS:
+                if getattr(z, f"max_{kind}_mm") is not None:
+                    add(f"surface.{z.id}.{kind}", z.id, kind, getattr(z, f"max_{kind}_mm"))
+        for h in self.holes:
+            for kind in SURFACE_RIM_KINDS:
+                add(f"{h.id}.{kind}", h.id, kind, getattr(sf, f"max_{kind}_mm"))
+        return tuple(out)
 
     def characteristics(self) -> tuple[Characteristic, ...]:
         """Every characteristic in file order: per hole, diameter then position."""

@@ -131,6 +131,8 @@ class Devices:
     camera: Camera | None = None
     #: image -> list of hole measurements (the vision stage), run off the event loop
     measure: Callable[[Any], Any] | None = None
+    #: image -> list of surface defects (the vision stage's defect detection), off the loop
+    surface: Callable[[Any], Any] | None = None
 
     def axis(self, name: str):
         if name == "Z":
@@ -486,6 +488,14 @@ class Engine:
         self.ledger.add(Step("vision", time.perf_counter() - t0))
         return out
 
+    async def _cmd_measure_surface(self, msg: m.MeasureSurface) -> Any:
+        if self.devices.surface is None:
+            raise EngineStateError("the plan inspects the surface, but the station has no defect detection")
+        t0 = time.perf_counter()
+        out = await asyncio.to_thread(self.devices.surface, msg.image)
+        self.ledger.add(Step("vision", time.perf_counter() - t0))
+        return out
+
     async def _cmd_emit(self, msg: m.Emit) -> None:
         """Nobody registered a command for the plan's documents: an event, nothing more."""
         self._emit("document", msg.name)
@@ -648,6 +658,7 @@ _DEFAULT_COMMANDS: dict[type, Command] = {
     m.ReadEncoder: Engine._cmd_read_encoder,
     m.Capture: Engine._cmd_capture,
     m.Measure: Engine._cmd_measure,
+    m.MeasureSurface: Engine._cmd_measure_surface,
     m.Enable: Engine._cmd_enable,
     m.Home: Engine._cmd_home,
     m.Emit: Engine._cmd_emit,

@@ -75,6 +75,14 @@ class Measure(Msg):
 
 
 @dataclass(frozen=True)
+class MeasureSurface(Msg):
+    """Run the surface inspection on a frame's image; returns its defects
+    (``station.vision.defects.Defect``, image px and mm)."""
+
+    image: Any
+
+
+@dataclass(frozen=True)
 class Checkpoint(Msg):
     """A place where a pause or a controlled stop may take effect."""
 

@@ -134,6 +134,12 @@ class SimWorld:
             raise ValueError("Measure of an image this world did not capture")
         return [] if self._measure is None else self._measure(dict(known[1]))
 
+    def measure_surface(self, image: Any) -> Any:
+        """The defects of a captured frame: none (a plan's world has a clean wall)."""
+        if self._pose_of_image.get(id(image)) is None:
+            raise ValueError("MeasureSurface of an image this world did not capture")
+        return []
+
 
 def summarize_plan(plan: Generator[m.Msg, Any, Any], world: SimWorld | None = None, *,
                    max_messages: int = 1_000_000) -> PlanSummary:
@@ -188,6 +194,8 @@ def summarize_plan(plan: Generator[m.Msg, Any, Any], world: SimWorld | None = No
             answer = world.capture()
         elif isinstance(msg, m.Measure):
             answer = world.measure(msg.image)
+        elif isinstance(msg, m.MeasureSurface):
+            answer = world.measure_surface(msg.image)
         elif isinstance(msg, m.Checkpoint):
             label = msg.label
             out.checkpoints.append(msg.label)

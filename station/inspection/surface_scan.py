@@ -1,0 +1,380 @@
+"""The coverage scan of the bore wall: every place in the spec's band seen, defects
+placed on the part and measured re-centred, the frames stitched into one picture.
+
+The plan (after the holes, so burrs and chips are put at the holes the scan found):
+
+1. **Rings of frames.** The band ``axial_from_mm`` .. ``axial_to_mm`` of the part spec's
+   ``[surface]`` is covered by rings of frames, the table turning forward frame after
+   frame and on into the next ring while Z steps (a helix of stops: C never reverses, so
+   its backlash is taken up once). Neighbouring frames overlap by ``overlap_mm`` (more
+   than the largest pore), so every pore is whole in some frame; a scratch longer than
+   that may be cut by the frames' edges and is joined across them.
+2. **Each frame's defects** (``MeasureSurface``: ``station.vision.defects``) are placed
+   on the part as the holes are (``scan.py``): where compensation put the detection
+   point, moved by what the grating saw that the model did not, plus the defect's offset
+   from the frame's centre. Off the centre that offset carries the lens's distortion
+   (up to 2.7 % at a corner: 0.2 mm), which the station's model does not hold.
+3. **Re-centred measurement.** Sightings of one defect (from overlapping frames) are
+   merged, and each is measured again in a frame centred on it (compensated as any
+   move), where the distortion is below a few um (``recentre_reach_px``): its place,
+   length, width and their uncertainties come from there. Defects near each other share
+   a re-centred frame.
+4. **The picture.** Each frame, flat-fielded (its own smooth level divided out, so the
+   vignetting and the light's blotches do not tile) and reduced to ``picture_mm_per_px``,
+   fills the cell of the unrolled wall nearest its centre (``station.inspection.surface``
+   for the picture's axes). The picture is for people: a seam may show the lens's
+   distortion at a cell's corner (up to ~0.15 mm); the defects' places do not depend on it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Mapping
+
+import cv2
+import numpy as np
+
+from station.inspection.scan import CameraGeometry, HoleResult, ScanSettings, goto, wrap_deg
+from station.inspection.surface import SurfaceDefect, SurfacePicture, SurfaceResult
+from station.kinematics.model import StationModel
+from station.motion import AxisLimits
+from station.parts.spec import PartSpec, SURFACE_RIM_KINDS
+from station.sequencer import messages as m
+
+
+@dataclass(frozen=True)
+class SurfaceSettings:
+    #: neighbouring frames overlap by this much (mm): the largest pore the issue names
+    #: (0.5 mm) and a margin, so every pore is whole in some frame
+    overlap_mm: float = 0.6
+    #: the picture's scale (mm per px on the unrolled wall): a quarter of the camera's
+    #: 0.01, so the whole bore (120 x 70 mm) is 3000 x 1740 px
+    picture_mm_per_px: float = 0.04
+    #: a defect this near a frame's centre (px) is measured where it is: the endoscope's
+    #: barrel distortion there (k1 r^3 / f^2) stays below 0.35 px (3.5 um)
+    recentre_reach_px: float = 200.0
+    #: sightings of one defect from overlapping frames lie within this (mm) plus half the
+    #: longer's length of each other (the distortion moves a corner's sighting ~0.2 mm)
+    merge_mm: float = 0.35
+    #: the flat field's Gaussian (mm): wide against a defect (0.5 mm), narrow against
+    #: the vignetting and the light's blotches
+    flat_sigma_mm: float = 1.0
+    #: standard uncertainty of a defect's centroid in its re-centred frame (px): the
+    #: outline's own raggedness (half a blur)
+    centroid_u_px: float = 0.5
+    #: ... and a share of its length along it (a scratch's ends fade into the grain)
+    centroid_u_share: float = 0.02
+    #: the grey level the flat-fielded wall is shown at (uint8)
+    picture_level: int = 150
+
+
+@dataclass(frozen=True)
+class CoveragePlan:
+    """Where the coverage frames go: ring centres along the bore and angles round it."""
+
+    axials_mm: tuple[float, ...]
+    angles_deg: tuple[float, ...]
+    step_axial_mm: float
+    step_wall_mm: float
+    band_mm: tuple[float, float]
+
+    @property
+    def frames(self) -> int:
+        return len(self.axials_mm) * len(self.angles_deg)
+
+
+def coverage_plan(band_mm: tuple[float, float], geo: CameraGeometry, overlap_mm: float) -> CoveragePlan:
+    """The fewest rings and columns whose frames, overlapping by ``overlap_mm``, cover
+    the band all round."""
+    lo, hi = band_mm
+    fw, fh = geo.width_px * geo.mm_per_px, geo.height_px * geo.mm_per_px
+    if overlap_mm >= min(fw, fh) / 2:
+        raise ValueError(f"an overlap of {overlap_mm} mm leaves nothing of a {fw:.2f} x {fh:.2f} mm frame")
+    extent = hi - lo
+    if extent <= fh:
+        axials = [(lo + hi) / 2.0]
+        step_v = extent
+    else:
+        rows = math.ceil((extent - overlap_mm) / (fh - overlap_mm))
+        step_v = (extent - fh) / (rows - 1) if rows > 1 else 0.0
+        axials = [lo + fh / 2.0 + i * step_v for i in range(rows)]
+    circ = 2.0 * math.pi * geo.bore_radius_mm
+    cols = max(1, math.ceil(circ / (fw - overlap_mm)))
+    angles = [j * 360.0 / cols for j in range(cols)]
+    return CoveragePlan(tuple(axials), tuple(angles), step_v, circ / cols, band_mm)
+
+
+@dataclass
+class _Sighting:
+    """A defect seen in one frame, placed on the part."""
+
+    defect: object  # station.vision.defects.Defect
+    axial_mm: float
+    angle_deg: float
+    r_px: float
+    frame: int
+
+
+@dataclass
+class _Look:
+    """A frame taken re-centred: where it was centred on the part (grating included)."""
+
+    axial_mm: float
+    angle_deg: float
+    defects: list
+
+
+class _Picture:
+    """The unrolled picture, filled frame by frame (the cell nearest each frame's centre)."""
+
+    def __init__(self, plan: CoveragePlan, geo: CameraGeometry, cfg: SurfaceSettings):
+        self.geo, self.cfg, self.plan = geo, cfg, plan
+        ppx = cfg.picture_mm_per_px
+        self.lo, self.hi = plan.band_mm
+        h = max(1, int(round((self.hi - self.lo) / ppx)))
+        circ = 2.0 * math.pi * geo.bore_radius_mm
+        w = max(1, int(round(circ / ppx)))
+        self.image = np.zeros((h, w), np.uint8)
+        self.filled = np.zeros((h, w), bool)
+        # columns start half a cell before the first frame's angle: each cell is whole
+        self.angle_from_deg = (plan.angles_deg[0] - math.degrees(plan.step_wall_mm / 2.0 / geo.bore_radius_mm)) % 360.0
+        self.picture = SurfacePicture(self.image, ppx, self.lo, self.angle_from_deg, geo.bore_radius_mm)
+
+    def add(self, image: np.ndarray, axial_mm: float, angle_deg: float, ring: int) -> None:
+        geo, cfg, plan = self.geo, self.cfg, self.plan
+        ppx = cfg.picture_mm_per_px
+        factor = geo.mm_per_px / ppx
+        grey = image if image.ndim == 2 else cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
+        small = cv2.resize(grey.astype(np.float32), None, fx=factor, fy=factor, interpolation=cv2.INTER_AREA)
+        level = cv2.GaussianBlur(small, (0, 0), cfg.flat_sigma_mm / ppx)
+        flat = np.clip(small / np.maximum(level, 1.0) * cfg.picture_level, 0, 255).astype(np.uint8)
+        flat = flat[::-1, :]  # image rows run against the axis; the picture's with it
+        th, tw = flat.shape
+        # the tile's centre pixel lies at the frame's centre on the part
+        cx_pic, cy_pic = self.picture.px_of(axial_mm, angle_deg)
+        # the cell: half a step each side (the band's ends for the first and last ring)
+        a_lo = self.lo if ring == 0 else axial_mm - plan.step_axial_mm / 2.0
+        a_hi = self.hi if ring == len(plan.axials_mm) - 1 else axial_mm + plan.step_axial_mm / 2.0
+        y0 = max(0, int(math.floor((a_lo - self.lo) / ppx)))
+        y1 = min(self.image.shape[0], int(math.ceil((a_hi - self.lo) / ppx)))
+        half_w = plan.step_wall_mm / 2.0 / ppx
+        x0, x1 = int(math.floor(cx_pic - half_w)), int(math.ceil(cx_pic + half_w)) + 1
+        ty0 = int(round(y0 - cy_pic + (th - 1) / 2.0))
+        tx0 = int(round(x0 - cx_pic + (tw - 1) / 2.0))
+        rows = np.arange(y0, y1)
+        cols = np.arange(x0, x1)
+        trows, tcols = rows - y0 + ty0, cols - x0 + tx0
+        keep_r = (trows >= 0) & (trows < th)
+        keep_c = (tcols >= 0) & (tcols < tw)
+        rows, trows = rows[keep_r], trows[keep_r]
+        cols, tcols = cols[keep_c] % self.image.shape[1], tcols[keep_c]
+        if rows.size == 0 or cols.size == 0:
+            return
+        self.image[np.ix_(rows, cols)] = flat[np.ix_(trows, tcols)]
+        self.filled[np.ix_(rows, cols)] = True
+
+    @property
+    def coverage(self) -> float:
+        return float(self.filled.mean())
+
+
+class _SurfaceScan:
+    def __init__(self, model: StationModel, part: PartSpec, geo: CameraGeometry, settings: ScanSettings,
+                 cfg: SurfaceSettings, motion: Mapping[str, AxisLimits] | None, holes: list[HoleResult]):
+        self.model, self.part, self.geo, self.settings, self.cfg = model, part, geo, settings, cfg
+        self.motion = dict(motion or {})
+        self.axes_at: dict[str, float] = {}
+        self.c_now = 0.0
+        self.radius = geo.bore_radius_mm
+        self.holes = [h for h in holes if h.found]
+        self.plan = coverage_plan(part.surface_band_mm(), geo, cfg.overlap_mm)
+        self.looks: list[_Look] = []
+        self.notes: list[str] = []
+
+    def wall_mm(self, a: tuple[float, float], b: tuple[float, float]) -> float:
+        return math.hypot(a[0] - b[0], math.radians(wrap_deg(a[1] - b[1])) * self.radius)
+
+    def place(self, centre: tuple[float, float], x_px: float, y_px: float) -> tuple[float, float]:
+        cx, cy = self.geo.centre_px
+        s = self.geo.mm_per_px
+        return centre[0] + (cy - y_px) * s, (centre[1] + math.degrees((x_px - cx) * s / self.radius)) % 360.0
+
+    def move(self, axial: float, angle: float, forward: bool = False):
+        """To (axial, angle) on the part; the table forward (never back) when asked, else
+        the short way. Returns the frame's centre on the part with the grating's
+        correction: (axial + drift, angle)."""
+        turn = (angle - self.c_now) % 360.0 if forward else wrap_deg(angle - self.c_now)
+        z_cmd, c_cmd, carriage = yield from goto(self.model, axial, self.c_now + turn, self.settings, self.motion,
+                                                 self.axes_at)
+        self.c_now = c_cmd
+        reading = yield m.ReadEncoder()
+        drift = 0.0
+        if reading is not None and self.settings.use_grating:
+            drift = float(reading.position_mm) - carriage
+        return axial + drift, angle % 360.0
+
+    def frame(self):
+        frame = yield m.Capture()
+        defects = yield m.MeasureSurface(frame.image)
+        return frame.image, list(defects or [])
+
+    def run(self):
+        plan = self.plan
+        c_now = yield m.ReadAxis("C")
+        if isinstance(c_now, (int, float)) and math.isfinite(c_now):
+            self.c_now = float(c_now)
+        picture = _Picture(plan, self.geo, self.cfg)
+        sightings: list[_Sighting] = []
+        total = plan.frames
+        yield m.Note(f"surface: {len(plan.axials_mm)} rings of {len(plan.angles_deg)} frames over "
+                     f"{plan.band_mm[0]:g}..{plan.band_mm[1]:g} mm")
+        k = 0
+        for ring, axial in enumerate(plan.axials_mm):
+            yield m.Checkpoint(f"surface ring {ring + 1}")
+            for angle in plan.angles_deg:
+                centre = yield from self.move(axial, angle, forward=True)
+                image, defects = yield from self.frame()
+                cx, cy = self.geo.centre_px
+                for d in defects:
+                    ax, an = self.place(centre, d.x_px, d.y_px)
+                    sightings.append(_Sighting(d, ax, an, math.hypot(d.x_px - cx, d.y_px - cy), k))
+                picture.add(image, centre[0], centre[1], ring)
+                k += 1
+                yield m.Progress(k, total, f"surface frame {k} of {total}")
+        groups = self.merge(sightings)
+        yield m.Note(f"surface: {len(sightings)} sightings, {len(groups)} defect(s) to measure re-centred")
+        defects = []
+        for g in self.route(groups):
+            d = yield from self.measure(g)
+            if d is not None and not any(o.kind == d.kind and self.wall_mm((o.axial_mm, o.angle_deg),
+                                                                           (d.axial_mm, d.angle_deg)) < 0.05
+                                         for o in defects):
+                defects.append(d)
+        for i, d in enumerate(sorted(defects, key=lambda d: (d.axial_mm, d.angle_deg))):
+            d.id = f"d{i + 1}"
+        lo, hi = plan.band_mm
+        out = SurfaceResult(sorted(defects, key=lambda d: (d.axial_mm, d.angle_deg)), picture.picture, plan.frames,
+                            len(self.looks), lo, hi, picture.coverage, self.notes)
+        return out
+
+    # -------------------------------------------------------------- merging
+    @staticmethod
+    def family(kind: str) -> str:
+        return "rim" if kind in SURFACE_RIM_KINDS else "wall"
+
+    def merge(self, sightings: list[_Sighting]) -> list[list[_Sighting]]:
+        """Sightings of one defect (within ``merge_mm`` plus half the longer's length of
+        each other, the same family: wall or rim) as one group."""
+        parent = list(range(len(sightings)))
+
+        def root(i: int) -> int:
+            while parent[i] != i:
+                parent[i] = parent[parent[i]]
+                i = parent[i]
+            return i
+
+        for i, a in enumerate(sightings):
+            for j in range(i):
+                b = sightings[j]
+                if self.family(a.defect.kind) != self.family(b.defect.kind):
+                    continue
+                reach = self.cfg.merge_mm + 0.5 * max(a.defect.length_mm or 0.0, b.defect.length_mm or 0.0)
+                if self.wall_mm((a.axial_mm, a.angle_deg), (b.axial_mm, b.angle_deg)) <= reach:
+                    parent[root(i)] = root(j)
+        groups: dict[int, list[_Sighting]] = {}
+        for i, s in enumerate(sightings):
+            groups.setdefault(root(i), []).append(s)
+        return list(groups.values())
+
+    @staticmethod
+    def best(group: list[_Sighting]) -> _Sighting:
+        """The sighting to trust most: whole, then nearest its frame's centre."""
+        return min(group, key=lambda s: (bool(getattr(s.defect, "partial", False)), s.r_px))
+
+    def route(self, groups: list[list[_Sighting]]) -> list[list[_Sighting]]:
+        """The groups in the order of a short path (nearest next, from the scan's end)."""
+        left = list(groups)
+        here = (self.plan.axials_mm[-1], self.c_now % 360.0)
+        out = []
+        while left:
+            g = min(left, key=lambda g: self.wall_mm(here, (self.best(g).axial_mm, self.best(g).angle_deg)))
+            left.remove(g)
+            out.append(g)
+            here = (self.best(g).axial_mm, self.best(g).angle_deg)
+        return out
+
+    # -------------------------------------------------------------- re-centred measurement
+    def measure(self, group: list[_Sighting]):
+        """The group's defect measured in a frame centred on it (one taken for a defect
+        near enough serves), as a :class:`SurfaceDefect`; the best sighting's own
+        figures when the re-centred frame does not show it."""
+        cfg, geo = self.cfg, self.geo
+        best = self.best(group)
+        want = (best.axial_mm, best.angle_deg)
+        reach_mm = cfg.recentre_reach_px * geo.mm_per_px * 0.5
+        look = next((lk for lk in self.looks if self.wall_mm((lk.axial_mm, lk.angle_deg), want) <= reach_mm), None)
+        if look is None:
+            yield m.Checkpoint("surface defect")
+            centre = yield from self.move(*want)
+            _image, found = yield from self.frame()
+            look = _Look(centre[0], centre[1], found)
+            self.looks.append(look)
+        fam = self.family(best.defect.kind)
+        accept = max(0.15, 0.5 * (best.defect.length_mm or 0.0))
+        cx, cy = geo.centre_px
+        near = []
+        for d in look.defects:
+            if self.family(d.kind) != fam or getattr(d, "partial", False):
+                continue
+            p = self.place((look.axial_mm, look.angle_deg), d.x_px, d.y_px)
+            dist = self.wall_mm(p, want)
+            if dist <= accept and math.hypot(d.x_px - cx, d.y_px - cy) <= cfg.recentre_reach_px:
+                near.append((dist, d, p))
+        if near:
+            _dist, d, p = min(near, key=lambda t: t[0])
+            r_px = math.hypot(d.x_px - cx, d.y_px - cy)
+        else:
+            d, p, r_px = best.defect, want, best.r_px
+            self.notes.append(f"a {d.kind} at {want[0]:.3f} mm, {want[1]:.2f} deg was not seen again re-centred: "
+                              f"measured {r_px:.0f} px off a frame's centre (the lens's distortion not corrected)")
+        return self.defect(d, p, r_px, len(group))
+
+    def defect(self, d, place: tuple[float, float], r_px: float, frames: int) -> SurfaceDefect:
+        geo, cfg, st = self.geo, self.cfg, self.settings
+        s = geo.mm_per_px
+        length = float(d.length_mm if d.length_mm is not None else d.length_px * s)
+        width = float(d.width_mm if d.width_mm is not None else d.width_px * s)
+        size_u = float(d.size_u_mm if d.size_u_mm is not None else d.length_u_px * s)
+        # the place: the centroid's own scatter, the model at the detection point, the
+        # scale over the offset; beyond the re-centring reach the lens's distortion
+        # (k1 r^3 / f^2 of the endoscope, up to 2.7 % of the offset) as a rectangular bound
+        u_centroid = cfg.centroid_u_px * s + cfg.centroid_u_share * length
+        u_model = st.model_u_um * 1e-3
+        u_scale = geo.scale_u_rel * r_px * s
+        u_lens = 0.0 if r_px <= cfg.recentre_reach_px else 0.027 * (r_px * s) * (r_px / 820.0) ** 2 / math.sqrt(3)
+        u_pos = 2.0 * math.sqrt(u_centroid ** 2 + u_model ** 2 + u_scale ** 2 + u_lens ** 2) \
+            + st.evidence_bound_um * 1e-3
+        axial = place[0] * (1.0 - st.part_scale_ppm * 1e-6)
+        hole = None
+        if self.family(d.kind) == "rim":
+            near = [(self.wall_mm((h.position_mm, h.angle_deg), place), h) for h in self.holes]
+            near = [(dist, h) for dist, h in near if dist <= h.diameter_mm / 2.0 + 0.3]
+            if near:
+                hole = min(near, key=lambda t: t[0])[1].name
+        zone = self.part.surface_zone(axial)
+        return SurfaceDefect("", d.kind, axial, place[1] % 360.0, length, width, 2.0 * size_u, u_pos,
+                             float(d.confidence), hole=hole, zone=None if zone is None else zone.id, frames=frames)
+
+
+def surface_scan(model: StationModel, part: PartSpec, geo: CameraGeometry, settings: ScanSettings,
+                 holes: list[HoleResult], *, motion: Mapping[str, AxisLimits] | None = None,
+                 cfg: SurfaceSettings | None = None):
+    """The coverage scan of ``part``'s surface band (a plan; returns a
+    :class:`~station.inspection.surface.SurfaceResult`). ``holes``: the bore scan's
+    results, to put burrs and chips at their holes."""
+    if part.surface is None:
+        raise ValueError(f"{part.part_number} has no [surface] table: nothing to scan")
+    if not settings.compensated:
+        model = model.without_errors()
+    return (yield from _SurfaceScan(model, part, geo, settings, cfg or SurfaceSettings(), motion, holes).run())
