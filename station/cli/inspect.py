@@ -129,6 +129,11 @@ def register(app: typer.Typer) -> None:
                 bound = (f", {cyc['ratio']:.2f} x the plan's lower bound of {cyc['lower_bound_s']:.2f} s"
                          if cyc.get("ratio") is not None else "")
                 out_console.print(f"[dim]machine time {cyc['machine_s']:.2f} s ({cyc['basis']}){bound}[/]")
+                sc = cyc.get("surface")
+                if sc is not None:
+                    limit = (f", {sc['ratio']:.2f} x the physical limit of {sc['limit_s']:.2f} s "
+                             f"({sc['limit_frames']} frames)" if sc.get("ratio") is not None else "")
+                    out_console.print(f"[dim]surface scan {sc['machine_s']:.2f} s of it{limit}[/]")
             if outcome.surface is not None:
                 out_console.print(surface_table(outcome.surface, simulated))
             for a in outcome.alarms:

@@ -55,6 +55,15 @@ kind of event a plan asks to be reported (``Active`` true). So:
   expanded, k = 2), each only where present; ``<n>`` is the NotedEvent's
   SequenceNumber. (An event element has nowhere to carry numbers of its own.)
 
+Surface (issue 23): each surface criterion (``surface.<zone>.<kind>``, ``<hole>.burr``:
+the largest defect of a kind, 0 when none) is a ``Length`` characteristic with its
+limits 0 .. the spec's; each defect found is a ``NotedEvent`` of kind
+``surface_defect`` (kind, size with U, place, the hole or zone, the criterion it breaks)
+with its numbers as attributes ``defect.<n>.kind``, ``.hole``, ``.zone``, ``.rejects``
+(AttributeStr) and ``.axial_mm``, ``.angle_deg``, ``.length_mm``, ``.width_mm``,
+``.size_u_mm``, ``.position_u_mm`` (AttributeD1; U expanded, k = 2), ``<n>`` its
+SequenceNumber after the findings'.
+
 Machine time is left out: QIF 3.0 has no element for a cycle or machine time. The
 wall-clock span is in ``InspectionStart``/``InspectionEnd``; the machine time (the
 plan at the axes' real speeds, modelled under a twin) is a different quantity, and a
@@ -112,6 +121,38 @@ def _kind(characteristic_id: str) -> str:
     return characteristic_id.rsplit(".", 1)[-1]
 
 
+#: the surface criteria's kinds (``station.parts.spec``): the largest defect's length
+_SURFACE_KINDS = ("pore", "scratch", "burr", "chip")
+
+
+def _prefix(characteristic_id: str) -> str:
+    """The QIF characteristic type: a hole's diameter is a ``Diameter`` characteristic,
+    its axial position a ``LinearCoordinate`` one, and a surface criterion (the largest
+    pore, scratch, burr or chip, a length between 0 and its limit) a ``Length`` one."""
+    kind = _kind(characteristic_id)
+    if kind == "diameter":
+        return "Diameter"
+    return "Length" if kind in _SURFACE_KINDS else "LinearCoordinate"
+
+
+def _surface_defects(record: Any) -> list[dict]:
+    """The record's surface defects (its ``surface`` document), [] without one."""
+    surface = getattr(record, "surface", None)
+    return list((surface or {}).get("defects") or [])
+
+
+#: a defect's numbers as typed attributes (QIF has no element for a surface defect)
+_DEFECT_NUMBERS = ("axial_mm", "angle_deg", "length_mm", "width_mm", "size_u_mm", "position_u_mm")
+
+
+def _defect_description(d: dict) -> str:
+    where = d.get("hole") or d.get("zone")
+    verdict = f", over the limit of {d['rejects']}" if d.get("rejects") else ""
+    return (f"surface_defect: {d['kind']} {d['length_mm']:.3f} x {d['width_mm']:.3f} mm (U {d['size_u_mm']:.3f} mm) "
+            f"at axial {d['axial_mm']:.3f} mm, angle {d['angle_deg']:.2f} deg"
+            + (f" ({where})" if where else "") + verdict)
+
+
 def _qif_datetime(t: datetime | None) -> str | None:
     return None if t is None else t.isoformat()
 
@@ -123,6 +164,8 @@ _FINDING_MEANING = {
                        "(a feature the inspection plan does not expect)",
     "ambiguous_identity": "two holes in one spec hole's search zone: which one is the spec hole is unknown",
     "datum": "how the part's angular datum on the table was set",
+    "surface_defect": "a defect of the bore's inner surface (pore, scratch, burr or chip) found by the coverage "
+                      "scan; its criteria are the Length characteristics",
 }
 #: a finding's optional numbers: (field, also the attribute's suffix; how the description says it)
 _FINDING_NUMBERS = (("axial_mm", "axial {:.3f} mm"), ("angle_deg", "angle {:.2f} deg"),
@@ -173,10 +216,13 @@ def qif_document(record: Any, *, software_version: str = "") -> ET.Element:
         _sub(sw, "Version", software_version)
 
     findings = list(getattr(record, "findings", ()))
+    defects = _surface_defects(record)
     kind_ids: dict[str, str] = {}  # finding kind -> its NotableEvent's id
-    if findings:
+    if findings or defects:
         pre = _sub(root, "PreInspectionTraceability")
         kinds = list(dict.fromkeys(f.kind for f in findings))  # first-seen order
+        if defects:
+            kinds.append("surface_defect")
         notable = _sub(pre, "NotableEvents", n=len(kinds))
         for kind in kinds:
             kind_ids[kind] = ids.next()
@@ -209,7 +255,7 @@ def qif_document(record: Any, *, software_version: str = "") -> ET.Element:
         noms = _sub(block, "CharacteristicNominals", n=len(chars))
         its = _sub(block, "CharacteristicItems", n=len(chars))
         for c in chars:
-            prefix = "Diameter" if _kind(c.characteristic_id) == "diameter" else "LinearCoordinate"
+            prefix = _prefix(c.characteristic_id)
             def_id, nom_id, item_id = ids.next(), ids.next(), ids.next()
             d = _sub(defs, f"{prefix}CharacteristicDefinition", id=def_id)
             _sub(d, "Name", c.characteristic_id)
@@ -237,13 +283,15 @@ def qif_document(record: Any, *, software_version: str = "") -> ET.Element:
     if record.order_id:
         _sub(trace, "OrderNumber", record.order_id)
     _sub(trace, "ReportNumber", record.id)
-    if findings:
-        noted = _sub(trace, "NotedEvents", n=len(findings))
-        for seq, f in enumerate(findings, start=1):
+    if findings or defects:
+        noted = _sub(trace, "NotedEvents", n=len(findings) + len(defects))
+        events = [(_finding_description(f), f.kind) for f in findings]
+        events += [(_defect_description(d), "surface_defect") for d in defects]
+        for seq, (text, kind) in enumerate(events, start=1):
             ev = _sub(noted, "NotedEvent", id=ids.next())
-            _sub(ev, "Description", _finding_description(f))
+            _sub(ev, "Description", text)
             _sub(ev, "SequenceNumber", seq)
-            _sub(ev, "NotableEventId", kind_ids[f.kind])
+            _sub(ev, "NotableEventId", kind_ids[kind])
     if record.started_at is not None:
         _sub(trace, "InspectionStart", _qif_datetime(record.started_at))
     if record.finished_at is not None:
@@ -251,7 +299,7 @@ def qif_document(record: Any, *, software_version: str = "") -> ET.Element:
     if software_id is not None:
         used = _sub(_sub(trace, "InspectionSoftwareItems"), "InspectionProgramExecutionSoftware", n=1)
         _sub(used, "Id", software_id)
-    if findings:
+    if findings or defects:
         attrs = []  # (element, name, value)
         for seq, f in enumerate(findings, start=1):
             attrs.append(("AttributeStr", f"finding.{seq}.kind", f.kind))
@@ -261,6 +309,15 @@ def qif_document(record: Any, *, software_version: str = "") -> ET.Element:
                 v = getattr(f, name, None)
                 if v is not None:
                     attrs.append(("AttributeD1", f"finding.{seq}.{name}", _decimal(v)))
+        # a defect's attributes are numbered by its NotedEvent's SequenceNumber too
+        for seq, d in enumerate(defects, start=len(findings) + 1):
+            attrs.append(("AttributeStr", f"defect.{seq}.kind", d["kind"]))
+            for name in ("hole", "zone", "rejects"):
+                if d.get(name):
+                    attrs.append(("AttributeStr", f"defect.{seq}.{name}", d[name]))
+            for name in _DEFECT_NUMBERS:
+                if d.get(name) is not None:
+                    attrs.append(("AttributeD1", f"defect.{seq}.{name}", _decimal(d[name])))
         block = _sub(trace, "Attributes", n=len(attrs))
         for tag, name, value in attrs:
             _sub(block, tag, name=name, value=value)
@@ -271,7 +328,7 @@ def qif_document(record: Any, *, software_version: str = "") -> ET.Element:
     if items:
         measurements = _sub(_sub(mrs, "MeasuredCharacteristics"), "CharacteristicMeasurements", n=len(items))
         for c, item_id in items:
-            prefix = "Diameter" if _kind(c.characteristic_id) == "diameter" else "LinearCoordinate"
+            prefix = _prefix(c.characteristic_id)
             m = _sub(measurements, f"{prefix}CharacteristicMeasurement", id=ids.next())
             _sub(_sub(m, "Status"), "CharacteristicStatusEnum", "PASS" if c.passed else "FAIL")
             _sub(m, "CharacteristicItemId", item_id)

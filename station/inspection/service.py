@@ -28,7 +28,7 @@ from station.inspection.documents import (CheckDocument, DocumentStream, FrameDo
 from station.inspection.scan import (CameraGeometry, HoleResult, HoleTarget, ScanFinding, ScanResult, ScanSettings,
                                      bore_scan)
 from station.inspection.surface import SurfaceResult
-from station.inspection.surface_scan import surface_scan
+from station.inspection.surface_scan import SurfaceSettings, physical_limit, surface_scan
 from station.inspection.writers import ResultNotStored
 from station.kinematics.model import StationModel
 from station.motion import AxisLimits
@@ -224,6 +224,8 @@ class InspectionService:
         self.time_scale = time_scale
         #: "production" or "master" (the start document's purpose)
         self.purpose = purpose
+        #: where in the engine's ledger the running inspection's surface scan began
+        self._surface_from: int | None = None
 
     async def ensure_ready(self) -> None:
         await ensure_ready(self.engine)
@@ -233,6 +235,7 @@ class InspectionService:
         """Inspect one part. ``surface``: scan the whole surface too (None: as the part
         spec says, ``[surface] every_part``)."""
         with_surface = wants_surface(part, surface)
+        self._surface_from: int | None = None
         trace = {
             "software_version": __version__,
             "python": platform.python_version(),
@@ -279,7 +282,7 @@ class InspectionService:
             await self.documents.publish(SurfaceDocument(iid, scan.surface))
         outcome = self._judge(iid, part, serial, scan.holes, scan.surface)
         outcome.findings = scan.findings
-        outcome.cycle = self._cycle()
+        outcome.cycle = self._cycle(part)
         for c in outcome.characteristics:
             await self.documents.publish(CheckDocument(iid, c))
         return await self._stop(outcome, scan.holes)
@@ -298,22 +301,48 @@ class InspectionService:
 
     def _frame_command(self, iid: str):
         """The engine's command for the plan's ``Emit`` messages during this
-        inspection: a frame's observation becomes a frame document."""
+        inspection: a frame's observation becomes a frame document; the surface scan's
+        start marks where its part of the cycle begins."""
         async def emit(engine, msg: m.Emit) -> None:
-            if msg.name == "frame":
+            if msg.name == "surface":
+                self._surface_from = len(engine.ledger.steps)
+            elif msg.name == "frame":
                 hole, index, frame = msg.body
                 await self.documents.publish(FrameDocument(iid, hole, index, frame))
 
         return emit
 
-    def _cycle(self) -> dict | None:
-        """The last run's machine time (and lower bound); None when it cannot be told
-        (a bug there must not cost the result: the record is the product)."""
+    def _cycle(self, part: PartSpec | None = None) -> dict | None:
+        """The last run's machine time (and lower bound); with a surface scan, its part
+        of the time against the physical limit of covering the band (``surface``).
+        None when it cannot be told (a bug there must not cost the result: the record
+        is the product)."""
         try:
-            return run_cycle(self.engine.ledger.steps, self.engine.devices, self.settings, self.time_scale)
+            out = run_cycle(self.engine.ledger.steps, self.engine.devices, self.settings, self.time_scale)
+            if part is not None and self._surface_from is not None:
+                out["surface"] = self._surface_cycle(part)
+            return out
         except Exception as exc:  # noqa: BLE001
             self.engine.note(f"cycle time not computed: {type(exc).__name__}: {exc}")
             return None
+
+    def _surface_cycle(self, part: PartSpec) -> dict:
+        """The coverage scan's machine time (from its start to the end of the plan) and
+        the physical limit of covering the band (``surface_scan.physical_limit``)."""
+        devices = self.engine.devices
+        steps = list(self.engine.ledger.steps)[self._surface_from:]
+        camera = getattr(devices.camera, "timing", None) if devices.camera is not None else None
+        poll = {n: float(getattr(devices.axis(n), "poll_s", 0.0) or 0.0) for n in ("Z", "C")}
+        machine = machine_time(steps, time_scale=self.time_scale, camera=camera, poll_s=poll)
+        out = {"machine_s": machine.total_s,
+               "breakdown": {k: machine.breakdown.get(k, 0.0) for k in machine.breakdown}}
+        limits = motion_limits(devices)
+        if camera is not None and "C" in limits:
+            lim = physical_limit(part.surface_band_mm(), self.geometry, SurfaceSettings().overlap_mm, camera,
+                                 limits["C"], self.settings.settle_s)
+            out.update(limit_frames=lim["frames"], limit_s=lim["limit_s"],
+                       ratio=machine.total_s / lim["limit_s"] if lim["limit_s"] > 0 else None)
+        return out
 
     def _judge(self, iid: str, part: PartSpec, serial: str, results: list[HoleResult],
                surface: SurfaceResult | None = None) -> InspectionOutcome:

@@ -229,19 +229,31 @@ class _SurfaceScan:
         total = plan.frames
         yield m.Note(f"surface: {len(plan.axials_mm)} rings of {len(plan.angles_deg)} frames over "
                      f"{plan.band_mm[0]:g}..{plan.band_mm[1]:g} mm")
+        yield m.Emit("surface", "start")  # the service times the surface's part of the cycle from here
+        cx, cy = self.geo.centre_px
         k = 0
+        pending = None  # the last frame, analysed while the axes move to the next
+
+        def analysed(frame_k: int, centre: tuple[float, float], defects) -> None:
+            for d in defects:
+                ax, an = self.place(centre, d.x_px, d.y_px)
+                sightings.append(_Sighting(d, ax, an, math.hypot(d.x_px - cx, d.y_px - cy), frame_k))
+
         for ring, axial in enumerate(plan.axials_mm):
             yield m.Checkpoint(f"surface ring {ring + 1}")
             for angle in plan.angles_deg:
-                centre = yield from self.move(axial, angle, forward=True)
-                image, defects = yield from self.frame()
-                cx, cy = self.geo.centre_px
-                for d in defects:
-                    ax, an = self.place(centre, d.x_px, d.y_px)
-                    sightings.append(_Sighting(d, ax, an, math.hypot(d.x_px - cx, d.y_px - cy), k))
-                picture.add(image, centre[0], centre[1], ring)
+                done: list = []
+                centre = yield from _measuring_on_the_way(self.move(axial, angle, forward=True), pending, done)
+                if done:
+                    analysed(*done[0])
+                frame = yield m.Capture()
+                picture.add(frame.image, centre[0], centre[1], ring)
+                pending = (k, centre, frame.image)
                 k += 1
                 yield m.Progress(k, total, f"surface frame {k} of {total}")
+        if pending is not None:
+            defects = yield m.MeasureSurface(pending[2])
+            analysed(pending[0], pending[1], list(defects or []))
         groups = self.merge(sightings)
         yield m.Note(f"surface: {len(sightings)} sightings, {len(groups)} defect(s) to measure re-centred")
         defects = []
@@ -312,6 +324,8 @@ class _SurfaceScan:
         cfg, geo = self.cfg, self.geo
         best = self.best(group)
         want = (best.axial_mm, best.angle_deg)
+        if best.r_px <= cfg.recentre_reach_px and not getattr(best.defect, "partial", False):
+            return self.defect(best.defect, want, best.r_px, len(group))  # a coverage frame saw it centred
         reach_mm = cfg.recentre_reach_px * geo.mm_per_px * 0.5
         look = next((lk for lk in self.looks if self.wall_mm((lk.axial_mm, lk.angle_deg), want) <= reach_mm), None)
         if look is None:
@@ -365,6 +379,43 @@ class _SurfaceScan:
         zone = self.part.surface_zone(axial)
         return SurfaceDefect("", d.kind, axial, place[1] % 360.0, length, width, 2.0 * size_u, u_pos,
                              float(d.confidence), hole=hole, zone=None if zone is None else zone.id, frames=frames)
+
+
+def _measuring_on_the_way(move, pending, done: list):
+    """Run the ``move`` plan, and while its axes travel (after its moves are sent, before
+    its first wait) analyse the ``pending`` frame (k, centre, image); its defects go to
+    ``done`` as (k, centre, defects). The vision stage then costs no machine time of its
+    own while there is a move to hide it in."""
+    try:
+        msg = next(move)
+        while True:
+            if pending is not None and isinstance(msg, m.Wait):
+                defects = yield m.MeasureSurface(pending[2])
+                done.append((pending[0], pending[1], list(defects or [])))
+                pending = None
+            reply = yield msg
+            msg = move.send(reply)
+    except StopIteration as stop:
+        if pending is not None:  # nothing moved: analyse it now
+            defects = yield m.MeasureSurface(pending[2])
+            done.append((pending[0], pending[1], list(defects or [])))
+        return stop.value
+
+
+def physical_limit(band_mm: tuple[float, float], geo: CameraGeometry, overlap_mm: float, camera,
+                   c_limits: AxisLimits, settle_s: float) -> dict:
+    """The least machine time any stop-and-shoot coverage of the band could take with
+    this camera and table: the fewest frames that cover it (:func:`coverage_plan`: rings
+    of the frame's height, columns of its width, overlapping by what the largest pore
+    needs), each exposed still; between frames the table turns one column at its limits
+    (Z's step between rings rides along that move) and the slide settles; the readout
+    and the vision stage overlap the moves. ``{"frames", "limit_s"}``."""
+    from station.motion import move_time_s
+
+    plan = coverage_plan(band_mm, geo, overlap_mm)
+    n, cols = plan.frames, len(plan.angles_deg)
+    t_move = move_time_s(360.0 / cols, c_limits) if cols > 1 else 0.0
+    return {"frames": n, "limit_s": n * camera.exposure_s + (n - 1) * (t_move + settle_s)}
 
 
 def surface_scan(model: StationModel, part: PartSpec, geo: CameraGeometry, settings: ScanSettings,

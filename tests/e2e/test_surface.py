@@ -1,0 +1,129 @@
+"""The whole-surface inspection on the simulated station (issue 23, part B): seeded
+defects in the twin's world are found by the coverage scan at their true places
+(within 0.05 mm), judged against the part spec's surface criteria, shown in the
+unrolled picture where they are, and kept with the record."""
+
+from __future__ import annotations
+
+import asyncio
+from types import SimpleNamespace
+
+import cv2
+import numpy as np
+
+from sim.world import STANDARD_SAMPLE, PartTruth, SurfaceDefect, defect_truth_place
+from station.parts.loader import parse_part
+from station.runtime import open_session
+from station.store import Store
+
+TIME_SCALE = 50.0
+
+SPEC = """
+part_number = "ZDZG-22.2-12.3851"
+[bore]
+diameter_mm = 22.2
+depth_mm = 120.0
+[placement]
+axial_mm = 0.5
+angular_datum = "hole_1"
+[[holes]]
+id = "hole_1"
+angle_deg = 0.0
+diameter = { nominal = 0.7, tol = 0.125 }
+position = { nominal = 71.03, tol = 0.1 }
+[[holes]]
+id = "hole_2"
+angle_deg = 0.0
+diameter = { nominal = 0.7, tol = 0.125 }
+position = { nominal = 85.19, tol = 0.1 }
+[surface]
+axial_from_mm = 62.0
+axial_to_mm = 92.0
+max_pore_mm = 0.4
+max_scratch_mm = 2.0
+max_burr_mm = 0.05
+max_chip_mm = 0.1
+[[surface.zones]]
+id = "seal"
+axial_from_mm = 63.0
+axial_to_mm = 70.0
+max_pore_mm = 0.2
+"""
+
+#: a pore over the seal's limit, pores elsewhere (one where four frames' cells meet, one
+#: small), a scratch across a seam between rings, and a burr and a chip at the holes (the
+#: band's 4 rings are centred at 67.12, 73.71, 80.29 and 86.88 mm, its 6 columns at 0,
+#: 60, ... deg: cells meet at 70.41, 77.0 and 83.59 mm and at 30, 90, ... deg)
+DEFECTS = (
+    SurfaceDefect("seal_pore", "pore", 0.28, 0.21, axial_mm=66.4, angle_deg=40.0, seed=3),
+    SurfaceDefect("corner_pore", "pore", 0.25, 0.2, axial_mm=70.45, angle_deg=30.3, seed=7),
+    SurfaceDefect("small_pore", "pore", 0.15, 0.12, axial_mm=78.2, angle_deg=200.0, seed=4),
+    SurfaceDefect("seam_scratch", "scratch", 1.2, 0.035, axial_mm=83.6, angle_deg=300.0, orientation_deg=75.0,
+                  seed=5),
+    SurfaceDefect("burr", "burr", 0.15, 0.05, hole="hole_1", at_deg=90.0, seed=6),
+    SurfaceDefect("chip", "chip", 0.08, 0.04, hole="hole_2", at_deg=200.0, seed=8),
+)
+
+
+def test_a_part_with_seeded_defects_is_scanned_whole_and_every_defect_is_at_its_place(tmp_path):
+    spec = parse_part(SPEC, "surface-test.toml")
+    truth = PartTruth(STANDARD_SAMPLE.part_number, STANDARD_SAMPLE.bore_diameter_mm, STANDARD_SAMPLE.holes, DEFECTS)
+
+    async def go():
+        async with open_session(time_scale=TIME_SCALE, data_dir=tmp_path, world=SimpleNamespace(part=truth)) as s:
+            return await s.inspect(spec, "SN-SURFACE")
+
+    out = asyncio.run(asyncio.wait_for(go(), timeout=400))
+    assert out.state == "complete", out.reason
+    sf = out.surface
+    assert sf is not None and sf.coverage == 1.0 and sf.frames == 4 * 6
+    # every seeded defect found once, of its kind, within 0.05 mm of its true place
+    by_truth = {d.truth["name"]: d for d in sf.defects if d.truth}
+    assert sorted(by_truth) == sorted(t.name for t in DEFECTS), [d.to_json(True) for d in sf.defects]
+    assert len(sf.defects) == len(DEFECTS), "a defect reported twice, or a false one"
+    for t in DEFECTS:
+        d = by_truth[t.name]
+        assert d.kind == t.kind
+        assert d.truth["place_error_mm"] <= 0.05, d.to_json(True)
+        assert abs(d.length_mm - t.length_mm) <= max(0.1 * t.length_mm, 0.02), d.to_json(True)
+        assert d.truth["place_error_mm"] <= d.position_u_mm + 0.01
+    assert by_truth["burr"].hole == "hole_1" and by_truth["chip"].hole == "hole_2"
+    assert by_truth["seal_pore"].zone == "seal" and by_truth["small_pore"].zone is None
+    # the criteria: the seal's pore and hole_1's burr break theirs, nothing else
+    chars = {c.id: c for c in out.characteristics}
+    assert not chars["surface.seal.pore"].passed and chars["surface.seal.pore"].measured == by_truth["seal_pore"].length_mm
+    assert not chars["hole_1.burr"].passed
+    assert chars["surface.pore"].passed and chars["hole_2.chip"].passed and chars["surface.scratch"].passed
+    assert out.result == "fail" and "surface.seal.pore" in out.reason and "hole_1.burr" in out.reason
+    assert sorted(d.rejects for d in sf.defects if d.rejects) == ["hole_1.burr", "surface.seal.pore"]
+    # the pore under 0.55 mm was never taken for a hole
+    assert not [f for f in out.findings if f.kind == "unexpected_hole"], out.findings
+    # the picture shows each wall defect where it really is: the darkest spot of the
+    # picture near the true place lies within 0.05 mm of it (holes and rims aside)
+    pic = sf.picture
+    img = cv2.GaussianBlur(pic.image.astype(np.float32), (0, 0), 1.0)
+    for t in DEFECTS:
+        if t.hole is not None:
+            continue
+        ax, an = defect_truth_place(truth, t)
+        x, y = pic.px_of(ax, an)
+        r = int(round(max(t.length_mm, 0.3) / pic.mm_per_px))
+        x0, y0 = int(round(x)) - r, int(round(y)) - r
+        win = img[y0:y0 + 2 * r + 1, x0:x0 + 2 * r + 1]
+        iy, ix = np.unravel_index(np.argmin(win), win.shape)
+        off_mm = np.hypot(x0 + ix - x, y0 + iy - y) * pic.mm_per_px
+        assert off_mm <= max(0.05, t.length_mm / 2), (t.name, off_mm)
+        if t.kind == "pore":  # dark: the pore is in the picture (a scratch is thinner than its pixel)
+            assert win.min() < np.median(img) - 25, t.name
+    # the cycle: the coverage scan's machine time against its physical limit
+    sc = out.cycle["surface"]
+    assert sc["limit_frames"] == sf.frames and 1.0 < sc["ratio"] < 3.0
+    # kept with the record
+    store = Store.open(None, data_dir=tmp_path)
+    try:
+        rec = store.get(out.id)
+        assert rec.surface is not None and len(rec.surface["defects"]) == len(DEFECTS)
+        assert {d["id"] for d in rec.surface["defects"]} == {d.id for d in sf.defects}
+        assert [i.subject for i in rec.images].count("surface") == 1
+    finally:
+        store.close()

@@ -1,0 +1,211 @@
+"""The surface inspection's pieces (issue 23, part B): the part spec's [surface], the
+coverage plan, the plan's messages, the stitched picture's geometry, the judging."""
+
+from __future__ import annotations
+
+import math
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from station.inspection.scan import CameraGeometry, HoleResult, ScanSettings
+from station.inspection.service import judge_surface, wants_surface
+from station.inspection.surface import SurfaceDefect, SurfaceResult
+from station.inspection.surface_scan import (SurfaceSettings, _Picture, coverage_plan, physical_limit,
+                                             surface_scan)
+from station.motion import AxisLimits
+from station.parts import load_part
+from station.parts.loader import PartSpecError, parse_part
+from station.sequencer import messages as m
+
+GEO = CameraGeometry(mm_per_px=0.01, width_px=1280, height_px=1024, bore_radius_mm=11.1)
+
+SPEC = """
+part_number = "T-SURF"
+[bore]
+diameter_mm = 22.2
+depth_mm = 120.0
+[[holes]]
+id = "hole_1"
+angle_deg = 0.0
+diameter = { nominal = 0.7, tol = 0.125 }
+position = { nominal = 71.03, tol = 0.1 }
+[surface]
+axial_from_mm = 60.0
+axial_to_mm = 95.0
+max_pore_mm = 0.4
+max_burr_mm = 0.05
+[[surface.zones]]
+id = "seal"
+axial_from_mm = 62.0
+axial_to_mm = 70.0
+max_pore_mm = 0.2
+max_scratch_mm = 0.2
+"""
+
+
+def spec(text: str = SPEC):
+    return parse_part(text, "t-surf.toml")
+
+
+def covered(plan, geo: CameraGeometry, place: tuple[float, float], margin_mm: float) -> bool:
+    """Whether some frame of the plan shows ``place`` at least ``margin_mm`` inside its edges."""
+    fw, fh = geo.width_px * geo.mm_per_px, geo.height_px * geo.mm_per_px
+    for a in plan.axials_mm:
+        for g in plan.angles_deg:
+            du = math.radians((place[1] - g + 180.0) % 360.0 - 180.0) * geo.bore_radius_mm
+            if abs(place[0] - a) <= fh / 2 - margin_mm and abs(du) <= fw / 2 - margin_mm:
+                return True
+    return False
+
+
+@pytest.mark.parametrize("band", [(0.0, 120.0), (60.0, 95.0), (10.0, 14.0), (0.0, 10.24)])
+def test_the_coverage_plan_shows_every_place_of_the_band_with_the_overlap_and_uses_no_frame_too_many(band):
+    o = SurfaceSettings().overlap_mm
+    plan = coverage_plan(band, GEO, o)
+    rng = np.random.default_rng(1)
+    # the band's ends are the frames' edges (beyond is not asked for: the bore's end, or
+    # another band); inside, every place lies half the overlap inside some frame: a pore
+    # up to the overlap is whole in one
+    pts = np.column_stack([rng.uniform(band[0] + o / 2, band[1] - o / 2, 4000), rng.uniform(0, 360, 4000)])
+    assert all(covered(plan, GEO, tuple(p), o / 2 - 1e-9) for p in pts)
+    # one ring or one column fewer cannot cover it with that overlap
+    fw, fh = GEO.width_px * GEO.mm_per_px, GEO.height_px * GEO.mm_per_px
+    cols = len(plan.angles_deg)
+    assert (cols - 1) * (fw - o) < 2 * math.pi * GEO.bore_radius_mm
+    rows = len(plan.axials_mm)
+    assert rows == 1 or (rows - 1) * (fh - o) + o < band[1] - band[0]
+
+
+def test_the_physical_limit_is_the_fewest_frames_with_one_column_turn_each():
+    cam = SimpleNamespace(exposure_s=0.01, readout_s=0.03)
+    lim = physical_limit((0.0, 120.0), GEO, 0.6, cam, AxisLimits(90.0, 720.0), 0.05)
+    plan = coverage_plan((0.0, 120.0), GEO, 0.6)
+    assert lim["frames"] == plan.frames == 13 * 6
+    step = 360.0 / 6  # 60 deg at 90 deg/s, 720 deg/s^2: 60/90 + 90/720 s
+    assert lim["limit_s"] == pytest.approx(78 * 0.01 + 77 * (60 / 90 + 90 / 720 + 0.05))
+    assert step == 60.0
+
+
+def test_a_surface_table_is_validated_and_names_the_field():
+    bad = SPEC.replace("axial_to_mm = 70.0", "axial_to_mm = 99.0")
+    with pytest.raises(PartSpecError, match=r"surface\.zones\[0\]|surface.zones.0"):
+        spec(bad)
+    with pytest.raises(PartSpecError, match="max_pore_mm"):
+        spec(SPEC.replace("max_pore_mm = 0.4", "max_pore_mm = 0.0"))
+    with pytest.raises(PartSpecError, match="overlaps"):
+        spec(SPEC + '[[surface.zones]]\nid = "seal_b"\naxial_from_mm = 69.0\naxial_to_mm = 75.0\n')
+    with pytest.raises(PartSpecError, match="id of a hole"):
+        spec(SPEC.replace('id = "seal"', 'id = "hole_1"'))
+    with pytest.raises(PartSpecError, match="unknown|Extra|extra"):
+        spec(SPEC.replace("max_burr_mm = 0.05", "max_bur_mm = 0.05"))
+
+
+def test_surface_characteristics_and_who_asks_for_the_scan():
+    p = spec()
+    assert [c.id for c in p.surface_characteristics()] == [
+        "surface.pore", "surface.seal.pore", "surface.seal.scratch", "hole_1.burr"]
+    assert wants_surface(p, None) is True  # every_part by default
+    assert wants_surface(p, False) is False
+    shipped = load_part("ZDZG-22.2-12.3851")
+    assert wants_surface(shipped, None) is False and wants_surface(shipped, True) is True
+    no_surface = spec(SPEC.split("[surface]")[0])
+    assert wants_surface(no_surface, None) is False
+    with pytest.raises(ValueError, match="no \\[surface\\]"):
+        wants_surface(no_surface, True)
+
+
+def _d(kind, axial, length, hole=None, zone=None):
+    return SurfaceDefect("", kind, axial, 10.0, length, length / 2, 0.02, 0.01, 0.9, hole=hole, zone=zone)
+
+
+def test_the_criteria_take_the_largest_defect_where_each_applies_and_name_what_breaks():
+    p = spec()
+    defects = [_d("pore", 65.0, 0.25, zone="seal"),  # over the zone's 0.2
+               _d("pore", 80.0, 0.35),  # under the 0.4 elsewhere
+               _d("scratch", 90.0, 3.0),  # no scratch limit outside the zone
+               _d("burr", 71.3, 0.04, hole="hole_1")]
+    out = {c.id: c for c in judge_surface(p, SurfaceResult(defects))}
+    assert out["surface.seal.pore"].measured == 0.25 and not out["surface.seal.pore"].passed
+    assert out["surface.pore"].measured == 0.35 and out["surface.pore"].passed
+    assert out["surface.seal.scratch"].measured == 0.0 and out["surface.seal.scratch"].uncertainty_k2 is None
+    assert out["hole_1.burr"].measured == 0.04 and out["hole_1.burr"].passed
+    assert [d.rejects for d in defects] == ["surface.seal.pore", None, None, None]
+
+
+def test_the_plan_turns_the_table_forward_and_analyses_each_frame_while_the_axes_move():
+    """The coverage plan driven message by message: one capture per frame of the plan,
+    the table commanded ever forward, and each frame's analysis sent between the next
+    move and its wait (hidden in the motion), the last one after."""
+    p = spec()
+    plan = coverage_plan(p.surface_band_mm(), GEO, SurfaceSettings().overlap_mm)
+    gen = surface_scan(load_ideal_model(), p, GEO,
+                       ScanSettings(), [HoleResult("hole_1", True, 71.03, 0.001, 0.7, 0.001, 0.0)])
+    log = []
+    reply = None
+    image = np.full((GEO.height_px, GEO.width_px), 120, np.uint8)
+    try:
+        while True:
+            msg = gen.send(reply)
+            log.append(msg)
+            reply = None
+            if isinstance(msg, m.ReadAxis):
+                reply = 0.0
+            elif isinstance(msg, m.Capture):
+                reply = SimpleNamespace(image=image)
+            elif isinstance(msg, m.MeasureSurface):
+                reply = []
+    except StopIteration as stop:
+        result = stop.value
+    captures = [i for i, x in enumerate(log) if isinstance(x, m.Capture)]
+    assert len(captures) == plan.frames == result.frames
+    c_targets = [x.position for x in log if isinstance(x, m.Move) and x.axis == "C"]
+    assert all(b >= a for a, b in zip(c_targets, c_targets[1:]))
+    assert c_targets[-1] - c_targets[0] >= 360.0 * (len(plan.axials_mm) - 1)
+    analyses = [i for i, x in enumerate(log) if isinstance(x, m.MeasureSurface)]
+    assert len(analyses) == plan.frames
+    for cap, ana in zip(captures[:-1], analyses[:-1]):
+        between = log[cap:ana]
+        assert any(isinstance(x, m.Move) for x in between), "analysed before the next move was sent"
+        assert not any(isinstance(x, m.Capture) for x in log[cap + 1:ana])
+    assert analyses[-1] > captures[-1]
+    assert result.coverage == 1.0 and result.defects == []
+
+
+def load_ideal_model():
+    from station.kinematics.model import load_model
+
+    return load_model(None).without_errors()
+
+
+def test_the_picture_puts_a_mark_of_a_frame_at_its_place_on_the_part():
+    """A frame with a dark dot at a known pixel, stitched: the picture's darkest spot is
+    where px_of puts the dot's place on the part (within a picture pixel)."""
+    p = spec()
+    cfg = SurfaceSettings()
+    plan = coverage_plan(p.surface_band_mm(), GEO, cfg.overlap_mm)
+    pic = _Picture(plan, GEO, cfg)
+    cx, cy = GEO.centre_px
+    rng = np.random.default_rng(3)
+    ring = 1
+    centre = (plan.axials_mm[ring] + 0.003, plan.angles_deg[2] + 0.01)
+    dot = (cx + 173.0, cy - 121.0)  # px in the frame: +x is +angle, -y is +axial
+    img = np.clip(rng.normal(150, 3, (GEO.height_px, GEO.width_px)), 0, 255).astype(np.uint8)
+    yy, xx = np.mgrid[0:GEO.height_px, 0:GEO.width_px]
+    img[(xx - dot[0]) ** 2 + (yy - dot[1]) ** 2 <= 10 ** 2] = 20
+    pic.add(img, centre[0], centre[1], ring)
+    s = GEO.mm_per_px
+    place = (centre[0] + (cy - dot[1]) * s, centre[1] + math.degrees((dot[0] - cx) * s / GEO.bore_radius_mm))
+    x, y = pic.picture.px_of(*place)
+    shown = pic.image.astype(float)
+    shown[~pic.filled] = 255
+    iy, ix = np.unravel_index(np.argmin(cv_blur(shown)), shown.shape)
+    assert abs(ix - x) <= 1.0 and abs(iy - y) <= 1.0, (ix, iy, x, y)
+    assert 0 < pic.coverage < 1
+
+
+def cv_blur(a):
+    import cv2
+
+    return cv2.GaussianBlur(a, (0, 0), 1.5)
