@@ -136,12 +136,18 @@ def wants_surface(part: PartSpec, asked: bool | None) -> bool:
     return part.surface.every_part if asked is None else bool(asked)
 
 
-def judge_surface(part: PartSpec, surface: SurfaceResult) -> list[CharacteristicOutcome]:
+def judge_surface(part: PartSpec, surface: SurfaceResult,
+                  holes: list[HoleResult] | None = None) -> list[CharacteristicOutcome]:
     """The spec's surface criteria against the defects found: per criterion the largest
     defect of its kind where it applies (0 when none), with that defect's size
-    uncertainty; each defect over a limit names the criterion it breaks."""
+    uncertainty; each defect over a limit names the criterion it breaks. A rim
+    criterion of a hole the scan did not find (``holes``) has no value (fails)."""
     out = []
+    missing = {h.name for h in holes or [] if not h.found}
     for c in part.surface_characteristics():
+        if c.kind in SURFACE_RIM_KINDS and c.hole_id in missing:
+            out.append(CharacteristicOutcome(c.id, c.nominal, c.lower_limit, c.upper_limit, None, None, False))
+            continue
         if c.hole_id == "surface":
             zone_ids = {z.id for z in part.surface.zones if getattr(z, f"max_{c.kind}_mm") is not None}
             mine = [d for d in surface.defects if d.kind == c.kind and d.hole is None and d.zone not in zone_ids]
@@ -361,7 +367,7 @@ class InspectionService:
             ok = value is not None and math.isfinite(value) and c.conforms(value)
             chars.append(CharacteristicOutcome(c.id, c.nominal, c.lower_limit, c.upper_limit, value, u, ok))
         if surface is not None:
-            surface_chars = judge_surface(part, surface)
+            surface_chars = judge_surface(part, surface, results)
             chars.extend(surface_chars)
             broken = [d for d in surface.defects if d.rejects]
             if broken:

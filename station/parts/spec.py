@@ -318,6 +318,14 @@ class PartSpec(_SpecModel):
             problems.append((("surface", "axial_to_mm" if hi > self.bore.depth_mm or hi <= lo else "axial_from_mm"),
                              f"the band {lo:g}..{hi:g} mm must lie in the bore (0..{self.bore.depth_mm:g} mm) "
                              f"and not be empty"))
+        if sf.max_burr_mm is not None or sf.max_chip_mm is not None:
+            for i, h in enumerate(self.holes):
+                r = h.diameter.upper_limit / 2.0
+                if h.position.lower_limit - r < lo or h.position.upper_limit + r > hi:
+                    problems.append((("surface", "axial_from_mm" if h.position.lower_limit - r < lo else "axial_to_mm"),
+                                     f"the burr and chip limits apply at every hole's rim, but {h.id} "
+                                     f"({h.position.lower_limit:g}..{h.position.upper_limit:g} mm) lies outside the "
+                                     f"band scanned ({lo:g}..{hi:g} mm)"))
         ids: dict[str, int] = {}
         for i, z in enumerate(sf.zones):
             if z.id in ids:

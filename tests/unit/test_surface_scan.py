@@ -98,6 +98,8 @@ def test_a_surface_table_is_validated_and_names_the_field():
         spec(SPEC + '[[surface.zones]]\nid = "seal_b"\naxial_from_mm = 69.0\naxial_to_mm = 75.0\n')
     with pytest.raises(PartSpecError, match="id of a hole"):
         spec(SPEC.replace('id = "seal"', 'id = "hole_1"'))
+    with pytest.raises(PartSpecError, match="hole_1 .* outside the band"):
+        spec(SPEC.replace("axial_to_mm = 95.0", "axial_to_mm = 70.5").replace("axial_to_mm = 70.0", "axial_to_mm = 70.4"))
     with pytest.raises(PartSpecError, match="unknown|Extra|extra"):
         spec(SPEC.replace("max_burr_mm = 0.05", "max_bur_mm = 0.05"))
 
@@ -132,6 +134,10 @@ def test_the_criteria_take_the_largest_defect_where_each_applies_and_name_what_b
     assert out["surface.seal.scratch"].measured == 0.0 and out["surface.seal.scratch"].uncertainty_k2 is None
     assert out["hole_1.burr"].measured == 0.04 and out["hole_1.burr"].passed
     assert [d.rejects for d in defects] == ["surface.seal.pore", None, None, None]
+    # a hole the scan did not find: its rim was never seen, its criterion has no value
+    lost = {c.id: c for c in judge_surface(p, SurfaceResult([]), [HoleResult("hole_1", False)])}
+    assert lost["hole_1.burr"].measured is None and not lost["hole_1.burr"].passed
+    assert lost["surface.pore"].measured == 0.0 and lost["surface.pore"].passed
 
 
 def test_the_plan_turns_the_table_forward_and_analyses_each_frame_while_the_axes_move():
