@@ -374,8 +374,9 @@ class StationRuntime:
 
     # ------------------------------------------------------------------ jobs
     async def start_inspection(self, part: PartSpec, serial: str, order_id: str | None,
-                               idempotency_key: str | None) -> tuple[str, bool]:
+                               idempotency_key: str | None, surface: bool | None = None) -> tuple[str, bool]:
         """Start an inspection in the background; returns (inspection id, created).
+        ``surface``: scan the whole surface too (None: as the part spec says).
 
         A known idempotency key returns the inspection that has it (created False) and
         starts nothing: a MES that retries a POST after a lost reply gets the same job.
@@ -391,7 +392,7 @@ class StationRuntime:
         if self.busy:
             raise Busy(self.busy_text())
         started = asyncio.get_running_loop().create_future()
-        self.start_job("inspection", self._run_inspection(part, serial, order_id, idempotency_key, started),
+        self.start_job("inspection", self._run_inspection(part, serial, order_id, idempotency_key, started, surface),
                         self._inspection_ended, key=idempotency_key, started=started)
         try:
             iid = await asyncio.wait_for(asyncio.shield(started), timeout=30.0)
@@ -401,14 +402,15 @@ class StationRuntime:
                          serial=serial)
         return iid, True
 
-    async def _run_inspection(self, part, serial, order_id, key, started: asyncio.Future) -> _Ended:
+    async def _run_inspection(self, part, serial, order_id, key, started: asyncio.Future,
+                              surface: bool | None = None) -> _Ended:
         """On the station loop. Store writes go to this loop's own worker threads."""
         t0 = time.monotonic()
         watcher = _StartWatcher(started, self.api_loop)
         unsubscribe = self.session.documents.subscribe(watcher)
         try:
             service = self.session.service_for(part)
-            outcome = await service.inspect(part, serial, order_id=order_id, idempotency_key=key)
+            outcome = await service.inspect(part, serial, order_id=order_id, idempotency_key=key, surface=surface)
             return _Ended(outcome=outcome, seconds=time.monotonic() - t0, iid=outcome.id,
                           monitor=self.session.watch.state())
         except asyncio.CancelledError:

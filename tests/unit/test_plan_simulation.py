@@ -109,6 +109,7 @@ def test_check_limits_refuses_a_part_whose_hole_lies_beyond_the_z_travel():
     data["part_number"] = "TOO-DEEP"
     data["bore"]["depth_mm"] = 180.0
     data["holes"][1]["position"]["nominal"] = 160.0  # the Z travel ends at 150 mm
+    data.pop("surface", None)  # its band (0..120 mm) would not hold that hole's rim
     deep = PartSpec.model_validate(data)
     with pytest.raises(PlanOutOfLimits) as info:
         check_limits(scan_plan(IDEAL, deep, GEO, SETTINGS), {"Z": Z_TRAVEL}, standard_world())
