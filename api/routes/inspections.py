@@ -6,17 +6,20 @@ is then (state ``running``); with an ``Idempotency-Key`` header a retried POST a
 response: state, verdict and every characteristic with its limits and uncertainty;
 ``/qif`` the same as a QIF 3.0 results document. Both, and every item of the list,
 carry the machine time (``machine_s``, how it divides in ``cycle``); one inspection
-also its ``findings`` (docs/api.md).
+also its ``findings`` and its ``surface`` inspection, whose unrolled picture of the
+bore wall is ``/surface.png`` (docs/api.md).
 """
 
 from __future__ import annotations
 
 import contextlib
+import copy
+import hashlib
 from datetime import datetime
 from typing import Annotated, Literal
 
 from fastapi import APIRouter, Header, HTTPException, Query, Response, status
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, StrictBool
 
 from api.deps import JobOrdersDep, ReaderDep, RuntimeDep
 from api.routes.common import blocking
@@ -44,6 +47,10 @@ class JobOrder(BaseModel):
     serial: str = Field(min_length=1, max_length=64, pattern=r"\S", description="the part's serial number")
     order_id: str | None = Field(default=None, min_length=1, max_length=64, pattern=r"\S",
                                  description="the production order (ISA-95 job order id)")
+    surface: StrictBool | None = Field(
+        default=None, description="scan the whole inner surface too (true) or not (false), judged by the part "
+                                  "spec's [surface] criteria; absent or null: as the spec's `every_part` says. "
+                                  "true for a part spec without [surface] is refused (422)")
 
 
 def characteristic_json(c) -> dict:
@@ -55,6 +62,27 @@ def characteristic_json(c) -> dict:
 def finding_json(f) -> dict:
     return {"kind": f.kind, "message": f.message, "subject": f.subject, "axial_mm": f.axial_mm,
             "angle_deg": f.angle_deg, "diameter_mm": f.diameter_mm, "u_mm": f.u_mm}
+
+
+#: the unrolled picture of an inspection's bore wall (the record's image, subject "surface")
+SURFACE_PNG = "surface.png"
+
+
+def surface_url(inspection_id: str) -> str:
+    return f"/api/v1/inspections/{inspection_id}/{SURFACE_PNG}"
+
+
+def surface_json(rec) -> dict | None:
+    """The record's surface document as the API shows it: the picture's meta with its
+    URL (null when the record holds no picture), the defects without the twin's truth."""
+    if rec.surface is None:
+        return None
+    doc = finite_json(copy.deepcopy(dict(rec.surface)))
+    doc["defects"] = [{k: v for k, v in d.items() if k != "truth"} for d in doc.get("defects") or []]
+    picture = doc.get("picture")
+    doc["picture"] = ({**picture, "url": surface_url(rec.id)}
+                      if picture is not None and rec.surface_image() is not None else None)
+    return doc
 
 
 def job_response(rec) -> dict:
@@ -74,6 +102,7 @@ def job_response(rec) -> dict:
         out["characteristics"] = [characteristic_json(c) for c in rec.characteristics]
         out["images"] = [{"subject": i.subject, "sha256": i.sha256} for i in rec.images]
         out["findings"] = [finding_json(f) for f in rec.findings]
+        out["surface"] = surface_json(rec)
     return out
 
 
@@ -99,8 +128,12 @@ async def create_job_order(
         spec = await blocking(load_by_number, order.part_number, rt.settings.parts_dir)
     except PartSpecError as exc:
         raise HTTPException(status.HTTP_422_UNPROCESSABLE_CONTENT, f"part {order.part_number}: {exc}") from None
+    if order.surface and spec.surface is None:
+        raise HTTPException(status.HTTP_422_UNPROCESSABLE_CONTENT,
+                            f"part {order.part_number} has no [surface] table: its surface has no criteria to judge")
     try:
-        iid, created = await rt.start_inspection(spec, order.serial, order.order_id, idempotency_key)
+        iid, created = await rt.start_inspection(spec, order.serial, order.order_id, idempotency_key,
+                                                 surface=order.surface)
     except Busy as exc:
         raise HTTPException(status.HTTP_409_CONFLICT, str(exc)) from None
     if created:  # who ordered it (the record names the order, not the caller); the job runs either way
@@ -132,6 +165,45 @@ async def get_inspection_qif(inspection_id: str, rt: RuntimeDep, who: ReaderDep)
         raise HTTPException(status.HTTP_409_CONFLICT, str(exc)) from None
     return Response(body, media_type="application/xml",
                     headers={"Content-Disposition": f'inline; filename="{inspection_id}.qif"'})
+
+
+def _read_surface_picture(store, rec) -> tuple[bytes, str]:
+    image = rec.surface_image()
+    if image is None:
+        why = ("its part spec asks for no surface inspection, or it did not complete" if rec.surface is None
+               else "its surface inspection made no picture")
+        raise HTTPException(status.HTTP_404_NOT_FOUND, f"inspection {rec.id} has no surface picture ({why})")
+    try:
+        data = store.image_path(image).read_bytes()
+    except FileNotFoundError:
+        raise HTTPException(status.HTTP_404_NOT_FOUND, f"inspection {rec.id}: its surface picture is missing "
+                                                       f"from the data folder ({image.path})") from None
+    if hashlib.sha256(data).hexdigest() != image.sha256:  # evidence: served only as the station stored it
+        raise HTTPException(status.HTTP_500_INTERNAL_SERVER_ERROR,
+                            f"inspection {rec.id}: the surface picture on disk ({image.path}) does not match the "
+                            "SHA-256 recorded with it; it was changed after the inspection")
+    return data, image.sha256
+
+
+@router.get("/inspections/{inspection_id}/surface.png", response_class=Response,
+            responses={200: {"content": {"image/png": {}},
+                             "description": "the unrolled picture of the bore wall (PNG, grey)"},
+                       304: {"description": "not modified (the picture's ETag, its SHA-256, in If-None-Match)"},
+                       404: {"description": "no such inspection, or it has no surface picture"}})
+async def get_surface_picture(
+    inspection_id: str, rt: RuntimeDep, who: ReaderDep,
+    if_none_match: Annotated[str | None, Header(max_length=256)] = None,
+) -> Response:
+    """The unrolled picture of the bore wall that the inspection's surface scan stitched
+    (``image/png``): rows are axial position, columns the wall round the bore; where
+    its pixels are on the part is the job response's ``surface.picture``. A stored
+    picture never changes: its ETag is its SHA-256, as recorded with it."""
+    rec = await _get_record(rt, inspection_id)
+    data, digest = await blocking(_read_surface_picture, rt.store, rec)
+    headers = {"Cache-Control": "private, no-cache", "ETag": f'"{digest}"'}
+    if if_none_match is not None and f'"{digest}"' in [t.strip().removeprefix("W/") for t in if_none_match.split(",")]:
+        return Response(status_code=status.HTTP_304_NOT_MODIFIED, headers=headers)
+    return Response(data, media_type="image/png", headers=headers)
 
 
 @router.get("/inspections", response_model=InspectionList, response_model_exclude_unset=True)

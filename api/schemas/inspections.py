@@ -61,6 +61,59 @@ class Finding(ClosedModel):
     u_mm: Number | None = Field(description="expanded uncertainty (k = 2) of the position")
 
 
+class SurfacePicture(OpenModel):
+    """The unrolled picture of the bore wall: where its pixels are on the part, and where
+    to get it. Row 0 is ``axial_from_mm``, column 0 ``angle_from_deg``; a place (axial
+    mm, angle deg) is at x = ((angle - angle_from_deg) mod 360) / deg_per_px,
+    y = (axial - axial_from_mm) / mm_per_px, in pixels from the picture's top left
+    corner (a pixel's centre at +0.5)."""
+
+    url: str = Field(description="the picture (PNG, grey): `GET /api/v1/inspections/{id}/surface.png`")
+    mm_per_px: Number = Field(description="mm of axial position per row, and of wall (arc length) per column")
+    deg_per_px: Number = Field(description="degrees of angle per column (mm_per_px at the bore's radius)")
+    axial_from_mm: Number = Field(description="axial position of the picture's top edge, from the datum face")
+    axial_to_mm: Number = Field(description="axial position of its bottom edge")
+    angle_from_deg: Number = Field(description="angle on the table of its left edge")
+    angle_to_deg: Number = Field(description="angle of its right edge (may pass 360)")
+    bore_radius_mm: Number
+    width_px: int
+    height_px: int
+
+
+class SurfaceDefect(OpenModel):
+    """One defect the surface inspection found on the part (docs/api.md, Surface)."""
+
+    id: str
+    kind: str = Field(description="pore, scratch, burr or chip")
+    axial_mm: Number | None = Field(description="where: axial position from the datum face (the centroid; "
+                                                "a rim defect's middle on the rim)")
+    angle_deg: Number | None = Field(description="where: angle on the table")
+    length_mm: Number | None = Field(description="the size judged: a pore's greatest Feret diameter, a "
+                                                 "scratch's length, a burr's or chip's length along the rim")
+    width_mm: Number | None
+    size_u_mm: Number | None = Field(description="expanded uncertainty (k = 2) of length_mm")
+    position_u_mm: Number | None = Field(description="expanded uncertainty (k = 2) of the place on the wall")
+    confidence: Number | None = Field(description="the detector's confidence, 0..1")
+    hole: str | None = Field(description="the spec hole whose rim it is on (burrs, chips); null: none")
+    zone: str | None = Field(description="the spec's surface zone it lies in; null: elsewhere")
+    frames: int = Field(description="how many frames saw it")
+    rejects: str | None = Field(description="the part spec's criterion it breaks; null: none")
+
+
+class Surface(OpenModel):
+    """The whole-surface inspection: a coverage scan of the bore wall stitched into one
+    unrolled picture, and the defects found on it (docs/api.md, Surface)."""
+
+    picture: SurfacePicture | None = Field(description="null: no picture was made")
+    defects: list[SurfaceDefect] = Field(description="in the order the station reports them")
+    frames: int = Field(description="coverage frames taken")
+    recentred: int = Field(description="frames taken re-centred on a defect, to measure it again")
+    axial_from_mm: Number | None = Field(description="the band of the bore scanned, from")
+    axial_to_mm: Number | None = Field(description="the band of the bore scanned, to")
+    coverage: Number | None = Field(description="share of that band's wall inside some frame's usable area, 0..1")
+    notes: list[str] = Field(description="for the operator: a frame that could not be analysed, ...")
+
+
 class InspectionSummary(ClosedModel):
     """An inspection as lists show it: no characteristics, images or findings."""
 
@@ -82,11 +135,15 @@ class InspectionSummary(ClosedModel):
 
 
 class Inspection(InspectionSummary):
-    """The job response: an inspection with its characteristics, image digests and findings."""
+    """The job response: an inspection with its characteristics, image digests, findings
+    and surface inspection."""
 
     characteristics: list[Characteristic]
     images: list[ImageDigest]
     findings: list[Finding] = Field(description="in the scan's order")
+    surface: Surface | None = Field(description="the whole-surface inspection: the defects and the unrolled "
+                                                "picture; null when the part spec asks for none, or the "
+                                                "inspection did not complete")
 
 
 class InspectionList(ClosedModel):

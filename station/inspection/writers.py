@@ -1,8 +1,10 @@
 """The subscribers that record an inspection's documents (station.inspection.documents).
 
 * :class:`StoreWriter` (required): the record. The start document begins it; the stop
-  document commits the hole crops, every characteristic, the findings, the machine
-  time and the final state in one go, before the result is reported. When the store
+  document commits the hole crops (each in a transaction of its own, just before),
+  then every characteristic, the findings, the machine time, the surface document
+  with its unrolled picture and the final state in one go, before the result is
+  reported. When the store
   cannot take the result, the record is finished ``faulted`` with an alarm; when it
   takes nothing at all, the writer keeps the reason and closes the record at the next
   inspection it sees (or the next start of the store marks it ``interrupted``).
@@ -21,7 +23,7 @@ import math
 from station.inspection.documents import CheckDocument, Document, InspectionStart, InspectionStop
 from station.inspection.scanlog import write_scan_log
 from station.store.errors import StoreError
-from station.store.records import FindingRecord, Measurement
+from station.store.records import SURFACE_SUBJECT, FindingRecord, Measurement
 
 
 class ResultNotStored(Exception):
@@ -85,8 +87,10 @@ class StoreWriter:
                     await asyncio.to_thread(self.store.add_image, iid, r.name, f"{r.name}", r.crop)
             await asyncio.to_thread(self.store.finish, iid, "complete", out.result, out.reason or None,
                                     measurements=measurements, findings=[FindingRecord.of(f) for f in out.findings],
-                                    **extra)
-        except StoreError as exc:
+                                    **extra, **surface_fields(out.surface))
+        except (StoreError, ValueError, TypeError) as exc:
+            # a store that fails, or a result it refuses (a surface document that is not
+            # JSON, a picture that is not uint8): the record ends faulted, never running
             reason = f"result not stored: {type(exc).__name__}: {exc}"
             _alarm(self.store, iid, reason)
             try:
@@ -104,6 +108,20 @@ class StoreWriter:
             except StoreError:
                 continue
             self.unfinished.pop(iid, None)
+
+
+def surface_fields(surface) -> dict:
+    """The record's ``surface`` document and its picture (an image of the record,
+    subject and name ``surface``) from a ``SurfaceResult``; nothing when the part spec
+    asked for no surface inspection. The twin's truth of each defect is kept when the
+    annotator gave one (simulation only), as a characteristic's ``true_value`` is."""
+    if surface is None:
+        return {}
+    fields: dict = {"surface": surface.to_json(with_truth=True)}
+    picture = surface.picture
+    if picture is not None and picture.image is not None and picture.image.size:
+        fields["images"] = [(SURFACE_SUBJECT, SURFACE_SUBJECT, picture.image)]
+    return fields
 
 
 def cycle_fields(cycle: dict | None) -> dict:

@@ -124,6 +124,11 @@ class Inspection(Base):
     #: how ``machine_s`` divides (moves, settle, frames, vision, other, in s) and its basis
     #: ("measured" on hardware; "modelled" under a twin's time scale)
     cycle: Mapped[dict[str, Any] | None] = mapped_column(JSONDocument)
+    #: the whole-surface inspection (``station.inspection.surface.SurfaceResult.to_json``:
+    #: defects, the unrolled picture's meta, coverage); None when the part spec asks for
+    #: none or the inspection did not complete. Its picture is an image of the record,
+    #: subject ``surface`` (migration 0006)
+    surface: Mapped[dict[str, Any] | None] = mapped_column(JSONDocument, deferred=True)
 
     characteristics: Mapped[list[CharacteristicResult]] = relationship(
         back_populates="inspection", order_by="CharacteristicResult.id")

@@ -7,12 +7,17 @@ cannot change a committed result by setting an attribute.
 
 from __future__ import annotations
 
+import copy
 import math
 from dataclasses import asdict, dataclass, field
 from datetime import datetime
 from typing import Any, Mapping, Protocol
 
 from station import __version__ as _station_version
+
+
+#: the subject (and file name) of an inspection's unrolled picture of the bore wall
+SURFACE_SUBJECT = "surface"
 
 
 def _finite_or_none(name: str, v: float | None) -> float | None:
@@ -210,6 +215,18 @@ class InspectionRecord(InspectionSummary):
     characteristics: tuple[CharacteristicRecord, ...] = ()
     images: tuple[ImageRecord, ...] = ()
     findings: tuple[FindingRecord, ...] = ()
+    #: the whole-surface inspection's document as stored (``SurfaceResult.to_json``:
+    #: defects, the picture's meta, coverage; docs/surface.md); None when there was none
+    surface: Mapping[str, Any] | None = None
+
+    def surface_image(self) -> ImageRecord | None:
+        """The unrolled picture of the bore wall, when the record has one."""
+        if self.surface is None or self.surface.get("picture") is None:
+            return None
+        for i in self.images:
+            if i.subject == SURFACE_SUBJECT and i.path.endswith(f"/{SURFACE_SUBJECT}.png"):
+                return i
+        return None
 
     def characteristic(self, characteristic_id: str) -> CharacteristicRecord:
         for c in self.characteristics:
@@ -221,7 +238,8 @@ class InspectionRecord(InspectionSummary):
         return {**super().to_json(),
                 "characteristics": [c.to_json() for c in self.characteristics],
                 "images": [i.to_json() for i in self.images],
-                "findings": [f.to_json() for f in self.findings]}
+                "findings": [f.to_json() for f in self.findings],
+                "surface": None if self.surface is None else copy.deepcopy(dict(self.surface))}
 
 
 @dataclass(frozen=True)

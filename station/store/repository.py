@@ -32,7 +32,7 @@ import threading
 import uuid
 import zlib
 from contextlib import contextmanager
-from dataclasses import asdict
+from dataclasses import asdict, dataclass
 from datetime import datetime
 from pathlib import Path
 from typing import Any, Iterable, Iterator, Mapping
@@ -42,7 +42,7 @@ from sqlalchemy import Connection, false, func, or_, select
 from sqlalchemy.engine import make_url
 from alembic.util.exc import CommandError
 from sqlalchemy.exc import DBAPIError, IntegrityError, OperationalError, SQLAlchemyError
-from sqlalchemy.orm import Session, selectinload, sessionmaker
+from sqlalchemy.orm import Session, selectinload, sessionmaker, undefer
 
 from station.store import images as img
 from station.store.engine import (
@@ -138,6 +138,42 @@ def finite_json(value: Any) -> Any:
     if isinstance(value, (list, tuple)):
         return [finite_json(v) for v in value]
     return value
+
+
+def _json_document(name: str, value: Mapping[str, Any]) -> dict[str, Any]:
+    """A document for a JSON column: a mapping of plain JSON (non-finite numbers as
+    null, see :func:`finite_json`); ValueError for anything else, before any write."""
+    if not isinstance(value, Mapping):
+        raise ValueError(f"{name} must be a JSON object (a mapping), not {type(value).__name__}")
+    doc = finite_json(_plain(dict(value)))
+    try:
+        json.dumps(doc, allow_nan=False)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{name} must be plain JSON (str, numbers, lists, dicts): {exc}") from None
+    return doc
+
+
+def _plain(value: Any) -> Any:
+    """NumPy's scalars (a count or a size computed with numpy) as Python's numbers."""
+    if isinstance(value, Mapping):
+        return {k: _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    item = getattr(value, "item", None)
+    if item is not None and type(value).__module__ == "numpy" and getattr(value, "ndim", None) == 0:
+        return item()
+    return value
+
+
+@dataclass(frozen=True)
+class _StagedImage:
+    """An image checked, encoded and written under a temporary name, to be recorded."""
+
+    subject: str
+    rel: str  # relative to the data folder, forward slashes
+    digest: str
+    final: Path
+    tmp: Path
 
 
 def _aware(name: str, t: datetime | None) -> None:
@@ -418,6 +454,22 @@ class Store:
         never overwritten, and a failed call leaves no file behind (a kill between the
         rename and the commit can leave an unrecorded file, never a record without one).
         """
+        staged = self._stage_image(inspection_id, subject, name, image)
+        try:
+            with self.transaction("record an image crop") as s:
+                self._running(s, inspection_id, "add an image")
+                record = self._record_image(s, inspection_id, staged)
+                s.flush()
+                self._publish_image(staged)
+        finally:
+            staged.tmp.unlink(missing_ok=True)  # still there only when the record was not made
+        self._bump_records()
+        return record
+
+    def _stage_image(self, inspection_id: str, subject: str, name: str, image) -> _StagedImage:
+        """Check, encode and write an image under a temporary name beside its place (the
+        first half of :meth:`add_image`); the caller records it, publishes it inside the
+        same transaction and unlinks the temporary file in any case."""
         _check_text("subject", subject, NAME_LEN, required=True)
         rel = img.crop_relpath(inspection_id, name)
         data = img.encode_png(image)
@@ -430,35 +482,45 @@ class Store:
             tmp = img.write_temp(final, data)
         except OSError as exc:
             raise StoreUnavailable(f"results store: cannot write image {final}: {exc.strerror or exc}") from exc
+        return _StagedImage(subject, str(rel), digest, final, tmp)
+
+    @staticmethod
+    def _record_image(s: Session, inspection_id: str, staged: _StagedImage) -> ImageRecord:
+        if s.scalar(select(ImageCrop.id).where(ImageCrop.path == staged.rel)) is not None:
+            raise StoreIntegrityError(f"inspection {inspection_id} already has an image {staged.final.name}")
+        created = utcnow()
+        s.add(ImageCrop(inspection_id=inspection_id, subject=staged.subject, path=staged.rel,
+                        sha256=staged.digest, created_at=created))
+        return ImageRecord(staged.subject, staged.rel, staged.digest, created)
+
+    @staticmethod
+    def _publish_image(staged: _StagedImage) -> None:
+        """Rename a staged image into place: inside its transaction, after every
+        statement of it has run (only the COMMIT left)."""
         try:
-            with self.transaction("record an image crop") as s:
-                self._running(s, inspection_id, "add an image")
-                if s.scalar(select(ImageCrop.id).where(ImageCrop.path == str(rel))) is not None:
-                    raise StoreIntegrityError(f"inspection {inspection_id} already has an image {rel.name}")
-                created = utcnow()
-                s.add(ImageCrop(inspection_id=inspection_id, subject=subject, path=str(rel),
-                                sha256=digest, created_at=created))
-                s.flush()
-                try:
-                    img.publish(tmp, final)
-                except OSError as exc:
-                    raise StoreUnavailable(f"results store: cannot write image {final}: "
-                                           f"{exc.strerror or exc}") from exc
-        finally:
-            tmp.unlink(missing_ok=True)  # still there only when the record was not made
-        self._bump_records()
-        return ImageRecord(subject, str(rel), digest, created)
+            img.publish(staged.tmp, staged.final)
+        except OSError as exc:
+            raise StoreUnavailable(f"results store: cannot write image {staged.final}: "
+                                   f"{exc.strerror or exc}") from exc
 
     def finish(self, inspection_id: str, state: str, result: str | None = None, reason: str | None = None, *,
                measurements: Iterable[Measurement] = (), findings: Iterable[FindingRecord] = (),
-               machine_s: float | None = None, cycle: Mapping[str, Any] | None = None) -> InspectionRecord:
+               machine_s: float | None = None, cycle: Mapping[str, Any] | None = None,
+               surface: Mapping[str, Any] | None = None,
+               images: Iterable[tuple[str, str, Any]] = ()) -> InspectionRecord:
         """End a running inspection: the given characteristics and findings, the final
-        state, the verdict, the machine time and a state event, committed together.
+        state, the verdict, the machine time, the surface document, the images and a
+        state event, committed together.
 
         ``state`` is ``complete`` (``result`` then ``pass`` or ``fail``), ``aborted`` or
         ``faulted`` (no result). A ``pass`` needs at least one characteristic and no
         failed one: a contradiction there is a bug upstream, refused with ValueError
-        and nothing written. Returns the inspection as stored.
+        and nothing written. ``surface``: the whole-surface inspection's document
+        (plain JSON; a non-finite number is kept as null). ``images``: ``(subject, name,
+        uint8 array)`` each, saved as :meth:`add_image` saves one (the surface's picture:
+        subject and name ``surface``), their files renamed into place after every
+        statement of the transaction has run, just before its commit. Returns the
+        inspection as stored.
         """
         if state not in FINISH_STATES:
             raise ValueError(f"finish state must be one of {', '.join(FINISH_STATES)}, not {state!r}")
@@ -474,25 +536,47 @@ class Store:
         if machine_s is not None and (isinstance(machine_s, bool) or not isinstance(machine_s, (int, float))
                                       or not math.isfinite(machine_s) or machine_s < 0):
             raise ValueError(f"machine_s must be a finite number >= 0 or None, not {machine_s!r}")
-        with self.transaction("finish the inspection") as s:
-            insp = self._running(s, inspection_id, "finish")
-            self._add_measurements(s, inspection_id, items)
-            for f in found:
-                s.add(Finding(inspection_id=inspection_id, **asdict(f)))
-            if machine_s is not None:
-                insp.machine_s = float(machine_s)
-                insp.cycle = None if cycle is None else finite_json(dict(cycle))
-            s.flush()
-            if result == "pass":
-                verdicts = s.scalars(select(CharacteristicResult.passed)
-                                     .where(CharacteristicResult.inspection_id == inspection_id)).all()
-                n_all, n_failed = len(verdicts), verdicts.count(False)
-                if n_all == 0 or n_failed:
-                    raise ValueError(f"inspection {inspection_id}: a pass needs characteristics that all passed "
-                                     f"({n_all} recorded, {n_failed} failed)")
-            insp.state, insp.result, insp.reason, insp.finished_at = state, result, reason, utcnow()
-            s.add(Event(inspection_id=inspection_id, station_id=self.station_id, at=utcnow(), kind="state",
-                        message=f"{state}" + (f": {result}" if result else "") + (f" ({reason})" if reason else "")))
+        surface_doc = None if surface is None else _json_document("surface", surface)
+        pictures = list(images)
+        for p in pictures:
+            if not (isinstance(p, tuple) and len(p) == 3):
+                raise TypeError(f"an image to store is (subject, name, uint8 array), not {type(p).__name__}")
+        staged: list[_StagedImage] = []
+        try:
+            for subject, name, image in pictures:  # checked and written aside before the transaction
+                staged.append(self._stage_image(inspection_id, subject, name, image))
+            with self.transaction("finish the inspection") as s:
+                insp = self._running(s, inspection_id, "finish")
+                self._add_measurements(s, inspection_id, items)
+                for f in found:
+                    s.add(Finding(inspection_id=inspection_id, **asdict(f)))
+                if machine_s is not None:
+                    insp.machine_s = float(machine_s)
+                    insp.cycle = None if cycle is None else finite_json(dict(cycle))
+                if surface_doc is not None:
+                    insp.surface = surface_doc
+                for st in staged:
+                    self._record_image(s, inspection_id, st)
+                s.flush()
+                if result == "pass":
+                    verdicts = s.scalars(select(CharacteristicResult.passed)
+                                         .where(CharacteristicResult.inspection_id == inspection_id)).all()
+                    n_all, n_failed = len(verdicts), verdicts.count(False)
+                    if n_all == 0 or n_failed:
+                        raise ValueError(f"inspection {inspection_id}: a pass needs characteristics that all "
+                                         f"passed ({n_all} recorded, {n_failed} failed)")
+                insp.state, insp.result, insp.reason, insp.finished_at = state, result, reason, utcnow()
+                s.add(Event(inspection_id=inspection_id, station_id=self.station_id, at=utcnow(), kind="state",
+                            message=f"{state}" + (f": {result}" if result else "")
+                            + (f" ({reason})" if reason else "")))
+                # every statement has run (a full disk, a broken constraint: raised here,
+                # no file published); then the pictures go into place, and the commit
+                s.flush()
+                for st in staged:
+                    self._publish_image(st)
+        finally:
+            for st in staged:
+                st.tmp.unlink(missing_ok=True)  # still there only when the record was not made
         self._bump_records()
         return self.get(inspection_id)
 
@@ -540,7 +624,8 @@ class Store:
             raise InspectionNotFound(f"no inspection {inspection_id!r}")
         with self.transaction("read an inspection", write=False) as s:
             insp = s.scalar(select(Inspection).where(Inspection.id == inspection_id)
-                            .options(selectinload(Inspection.characteristics), selectinload(Inspection.images),
+                            .options(undefer(Inspection.surface),
+                                     selectinload(Inspection.characteristics), selectinload(Inspection.images),
                                      selectinload(Inspection.findings)))
             if insp is None:
                 raise InspectionNotFound(f"no inspection {inspection_id!r}")
@@ -552,6 +637,7 @@ class Store:
                 images=tuple(ImageRecord(i.subject, i.path, i.sha256, i.created_at) for i in insp.images),
                 findings=tuple(FindingRecord(f.kind, f.message, f.subject, f.axial_mm, f.angle_deg, f.diameter_mm,
                                              f.u_mm) for f in insp.findings),
+                surface=None if insp.surface is None else dict(insp.surface),
             )
 
     def find_by_idempotency_key(self, key: str) -> str | None:

@@ -62,6 +62,7 @@ POLICY: dict[tuple[str, str], frozenset[str] | str] = {
     ("GET", "/api/v1/stations"): ANY,
     ("GET", "/api/v1/inspections/{inspection_id}"): ANY,
     ("GET", "/api/v1/inspections/{inspection_id}/qif"): ANY,
+    ("GET", "/api/v1/inspections/{inspection_id}/surface.png"): ANY,
     ("GET", "/api/v1/station"): ANY,
     ("GET", "/api/v1/axes"): ANY,
     ("GET", "/api/v1/alarms"): ANY,
@@ -115,6 +116,7 @@ PROBES: dict[tuple[str, str], list[Probe]] = {
     ("POST", "/api/v1/session"): [Probe("/api/v1/session", {"json": {}})],  # 422: no token in the body
     ("GET", "/api/v1/inspections/{inspection_id}"): [Probe(f"/api/v1/inspections/{uuid.uuid4()}")],
     ("GET", "/api/v1/inspections/{inspection_id}/qif"): [Probe(f"/api/v1/inspections/{uuid.uuid4()}/qif")],
+    ("GET", "/api/v1/inspections/{inspection_id}/surface.png"): [Probe(f"/api/v1/inspections/{uuid.uuid4()}/surface.png")],
     ("GET", "/api/v1/parts/{part_number}"): [Probe("/api/v1/parts/ZDZG-22.2-12.3851")],
     ("GET", "/api/v1/reports/discovery/{report_id}"): [Probe(f"/api/v1/reports/discovery/{uuid.uuid4()}")],
     ("GET", "/api/v1/reports/discovery/{report_id}/plots/{name}"): [

@@ -467,6 +467,7 @@ def _payloads(base: Path) -> list[str]:
 TRAVERSAL_ROUTES = [
     ("GET", "/api/v1/inspections/{inspection_id}"),
     ("GET", "/api/v1/inspections/{inspection_id}/qif"),
+    ("GET", "/api/v1/inspections/{inspection_id}/surface.png"),
     ("GET", "/api/v1/parts/{part_number}"),
     ("PUT", "/api/v1/parts/{part_number}"),
     ("POST", "/api/v1/models/{version}/activate"),

@@ -3,6 +3,7 @@
 
 import { api, ApiError, newIdempotencyKey, setCsrf, toLogin } from "./api.js";
 import { linePlot } from "./plots.js";
+import { surfaceLine, surfaceSection } from "./surface.js";
 
 const $ = (id) => document.getElementById(id);
 const AXES_PERIOD_MS = 500;
@@ -396,6 +397,13 @@ async function showInspection(id) {
     (rec.reason && rec.state !== "complete" ? `  (${rec.reason})` : "")));
   fillChars($("chars").querySelector("tbody"), rec.characteristics || []);
   fillOutcomeExtras($("part-extras"), rec);
+  if (rec.surface) {
+    // the picture itself is on the results page (this card is narrow)
+    const d = document.createElement("div");
+    d.className = "surface-line";
+    d.textContent = `${surfaceLine(rec.surface)} (the picture: Results)`;
+    $("part-extras").appendChild(d);
+  }
 }
 
 function fillChars(tbody, chars) {
@@ -424,6 +432,8 @@ async function startJob() {
   if (!serial) return say("job-message", "Enter the part's serial number.", true);
   const body = { part_number: part, serial };
   if (order) body.order_id = order;
+  const surface = $("surface-scan").value; // "": as the part spec says
+  if (surface) body.surface = surface === "true";
   panel.busyClick = true;
   updateButtons();
   say("job-message", "Starting ...");
@@ -562,6 +572,7 @@ async function showResultDetail(id) {
   extras.className = "outcome-extras";
   fillOutcomeExtras(extras, rec);
   box.appendChild(extras);
+  if (rec.surface) box.appendChild(surfaceSection(rec.surface));
   if (rec.state !== "running") {
     const a = document.createElement("a");
     a.href = rec.links.qif;
