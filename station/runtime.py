@@ -40,6 +40,8 @@ Config file (TOML), every key optional; the embedded default is a simulated stat
     width = 1280
     height = 1024
     mm_per_px = 0.010           # scale at the bore wall, from `station vision calibrate`
+    calibration = "camera.json" # optional: `station vision calibrate`'s file (the lens's
+                                # distortion, for the surface scan's off-centre defects)
     exposure = 100.0            # optional, driver units
     gain = 0.0                  # optional
     exposure_s = 0.008          # optional: the sensor's exposure and readout (s),
@@ -116,6 +118,10 @@ class Station:
     #: this station's id on a shared database (docs/plant.md): the config's
     #: ``[station] id``, else its ``name``
     station_id: str = DEFAULT_STATION_ID
+    #: the camera's calibration (``station.vision.calibration.CameraCalibration``): its
+    #: lens's distortion, for what the station measures off the frame's centre (the
+    #: surface scan's defects and picture); None: not calibrated (everything re-centred)
+    camera_calibration: Any = None
 
     @contextlib.contextmanager
     def master_on_table(self, cert, *, bore_diameter_mm: float, seed: int = 0):
@@ -329,6 +335,11 @@ def _axis_driver(cls, name: str, spec: dict[str, Any], source: str):
     raise ConfigError(f"{source}: [hardware.{name}] transport must be 'tcp' or 'rtu', not {transport!r}")
 
 
+#: the simulated station's calibration of the twin's endoscope (``station sim
+#: camera-calibration --out``; a config's ``[simulation] calibration`` replaces it)
+SIM_CAMERA_CALIBRATION = Path(__file__).parent / "data" / "camera" / "endoscope-twin.json"
+
+
 def build_station(config_path: str | Path | None = None, *, scenario: str | Path | None = None,
                   time_scale: float | None = None, model: str | Path | None = None) -> Station:
     """Build (not yet connect) the station the config describes. A simulated station's
@@ -353,6 +364,23 @@ def build_station(config_path: str | Path | None = None, *, scenario: str | Path
     else:
         model = load_model(resolve(st["model"])) if "model" in st else load_model()
 
+    def camera_calibration(table: dict, where: str, default: Path | None = None):
+        """The camera's calibration file named by ``table["calibration"]`` (else
+        ``default``; ``false``: none), loaded; a clear error naming the file when it is
+        not one."""
+        from station.vision.calibration import CameraCalibration
+
+        given = table.get("calibration")
+        if given is False:  # "not calibrated": what the station measures off-centre is re-centred
+            return None
+        path = resolve(str(given)) if given is not None else default
+        if path is None:
+            return None
+        try:
+            return CameraCalibration.load(path)
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            raise ConfigError(f"{source}: {where} calibration: {path}: {exc}") from None
+
     if mode == "hardware":
         hw = data.get("hardware", {})
         for key in ("Z", "C"):
@@ -365,7 +393,7 @@ def build_station(config_path: str | Path | None = None, *, scenario: str | Path
             e = hw["encoder"]
             enc = SerialGratingEncoder(str(e["serial_port"]), baudrate=int(e.get("baudrate", 115200)),
                                        resolution_um=float(e.get("resolution_um", 0.05)))
-        cam, scale, size = None, 0.010, (1280, 1024)
+        cam, scale, size, cal = None, 0.010, (1280, 1024), None
         if "camera" in hw:
             from drivers.camera import OpenCVCamera
 
@@ -381,8 +409,9 @@ def build_station(config_path: str | Path | None = None, *, scenario: str | Path
                 except (TypeError, ValueError) as exc:
                     raise ConfigError(f"{source}: [hardware.camera] exposure_s / readout_s: {exc}") from None
             scale = float(k["mm_per_px"])
+            cal = camera_calibration(k, "[hardware.camera]")
         return Station(z, c, enc, model, mode, chash, camera=cam, mm_per_px=scale, frame_size_px=size,
-                       station_id=config_station_id(data, source))
+                       station_id=config_station_id(data, source), camera_calibration=cal)
 
     if mode != "simulated":
         raise ConfigError(f"{source}: [station] mode must be 'simulated' or 'hardware', not {mode!r}")
@@ -426,6 +455,10 @@ def build_station(config_path: str | Path | None = None, *, scenario: str | Path
     except BaseException:
         twins.stop()
         raise
+    # the twin's endoscope as the station knows it: a calibration from chessboard views
+    # rendered through its lens (`station sim camera-calibration`), never the lens itself
+    cal = camera_calibration(sim_cfg, "[simulation]", SIM_CAMERA_CALIBRATION)
     return Station(axes["Z"], axes["C"], enc, model, mode, chash, camera=cam, mm_per_px=optics.mm_per_px,
                    frame_size_px=(optics.params.width_px, optics.params.height_px), time_scale=scen.time_scale,
-                   twins=twins, world=world, endpoints=endpoints, station_id=config_station_id(data, source))
+                   twins=twins, world=world, endpoints=endpoints, station_id=config_station_id(data, source),
+                   camera_calibration=cal)

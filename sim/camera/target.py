@@ -141,3 +141,16 @@ def board_views(
         image = render_board(lens, rvec, tvec, pattern_size, square_mm, size_px, seed=int(rng.integers(2**31)))
         views.append(BoardView(image, rvec, tvec))
     return views
+
+
+def calibrate_lens(lens: BrownLens, n_views: int = 12, seed: int = 0, size_px: tuple[int, int] = (1280, 1024),
+                   pattern_size: tuple[int, int] = (9, 7), square_mm: float = 0.5):
+    """The station's calibration of a twin's camera, as a plant makes it of a real one:
+    chessboard views round the frame (:func:`board_views`) through the station's own
+    ``station.vision.calibration.calibrate`` (OpenCV). The station never sees ``lens``
+    itself, only what the calibration makes of these images."""
+    from station.vision.calibration import calibrate
+
+    views = board_views(lens, n_views=n_views, pattern_size=pattern_size, square_mm=square_mm, size_px=size_px,
+                        seed=seed)
+    return calibrate([v.image for v in views], pattern_size, square_mm)

@@ -71,5 +71,26 @@ def up(
     asyncio.run(serve())
 
 
+@sim_app.command("camera-calibration")
+def camera_calibration(
+    out: Path = typer.Option(..., "--out", help="calibration JSON to write (station.vision.calibration)"),
+    views: int = typer.Option(12, "--views", min=4, help="chessboard views round the frame"),
+    seed: int = typer.Option(0, "--seed", help="the views' poses and noise"),
+) -> None:
+    """Calibrate the camera twin's endoscope as a plant calibrates a real one: chessboard
+    views rendered through its lens, solved by the station's own calibration. The
+    simulated station ships the result (station/data/camera/endoscope-twin.json)."""
+    from sim.camera.target import calibrate_lens
+    from sim.camera.twin import ENDOSCOPE_LENS
+    from station.vision.calibration import calibration_warnings
+
+    cal = calibrate_lens(ENDOSCOPE_LENS, n_views=views, seed=seed)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    cal.save(out)
+    err_console.print(f"{out}: {cal.n_views} views, RMS {cal.rms_px:.3f} px, coverage {cal.coverage:.2f}")
+    for w in calibration_warnings(cal):
+        err_console.print(f"[yellow]warning:[/] {w}")
+
+
 def register(app: typer.Typer) -> None:
     app.add_typer(sim_app, name="sim")

@@ -82,6 +82,9 @@ class CameraGeometry:
     bore_radius_mm: float
     #: standard uncertainty of the scale (relative), from the calibration
     scale_u_rel: float = 2e-4
+    #: the camera's calibration (``station.vision.calibration.CameraCalibration``) when
+    #: the station has one: the lens's distortion, for what is measured off the centre
+    calibration: Any = field(default=None, compare=False, repr=False)
 
     @property
     def centre_px(self) -> tuple[float, float]:

@@ -222,7 +222,8 @@ class Session:
         st = self.station
         extra = self.evidence_bound_um([h.position.nominal for h in part.holes]) if evidence else 0.0
         settings = replace(self.settings, evidence_bound_um=extra)
-        geo = CameraGeometry(st.mm_per_px, st.frame_size_px[0], st.frame_size_px[1], part.bore.diameter_mm / 2.0)
+        geo = CameraGeometry(st.mm_per_px, st.frame_size_px[0], st.frame_size_px[1], part.bore.diameter_mm / 2.0,
+                             calibration=getattr(st, "camera_calibration", None))
         return InspectionService(self.engine, self.documents, st.model, geo, settings,
                                  traceability=st.traceability(), time_scale=st.time_scale,
                                  purpose="production" if evidence else "master")

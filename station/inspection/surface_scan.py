@@ -128,8 +128,15 @@ class _Look:
 class _Picture:
     """The unrolled picture, filled frame by frame (the cell nearest each frame's centre)."""
 
-    def __init__(self, plan: CoveragePlan, geo: CameraGeometry, cfg: SurfaceSettings):
+    def __init__(self, plan: CoveragePlan, geo: CameraGeometry, cfg: SurfaceSettings, lens=None):
         self.geo, self.cfg, self.plan = geo, cfg, plan
+        #: the calibration's undistortion maps (ideal pixels of the same camera matrix),
+        #: so the cells meet without the lens's distortion at their seams; None: as taken
+        self.maps = None
+        if lens is not None:
+            k = np.asarray(lens.camera_matrix, np.float64)
+            self.maps = cv2.initUndistortRectifyMap(k, np.asarray(lens.dist_coeffs, np.float64), None, k,
+                                                    (geo.width_px, geo.height_px), cv2.CV_32FC1)
         ppx = cfg.picture_mm_per_px
         self.lo, self.hi = plan.band_mm
         h = max(1, int(round((self.hi - self.lo) / ppx)))
@@ -146,27 +153,39 @@ class _Picture:
         ppx = cfg.picture_mm_per_px
         factor = geo.mm_per_px / ppx
         grey = image if image.ndim == 2 else cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
+        if self.maps is not None:
+            grey = cv2.remap(grey, self.maps[0], self.maps[1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
         small = cv2.resize(grey.astype(np.float32), None, fx=factor, fy=factor, interpolation=cv2.INTER_AREA)
         level = cv2.GaussianBlur(small, (0, 0), cfg.flat_sigma_mm / ppx)
         flat = np.clip(small / np.maximum(level, 1.0) * cfg.picture_level, 0, 255).astype(np.uint8)
         flat = flat[::-1, :]  # image rows run against the axis; the picture's with it
         th, tw = flat.shape
-        # the tile's centre pixel lies at the frame's centre on the part
+        # the tile's centre pixel lies at the frame's centre on the part: the tile is
+        # shifted by the fraction of a picture pixel first, then pasted at whole pixels
+        cx_exact, _cy_exact = self.picture.px_of(axial_mm, angle_deg)
         cx_pic, cy_pic = self.picture.px_of(axial_mm, angle_deg)
+        fx, fy = cx_pic - math.floor(cx_pic), cy_pic - math.floor(cy_pic)
+        if fx or fy:
+            shift = np.float32([[1, 0, fx], [0, 1, fy]])
+            flat = cv2.warpAffine(flat, shift, (tw, th), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        cx_pic, cy_pic = math.floor(cx_pic), math.floor(cy_pic)  # where the shifted tile's centre goes
         # the cell: half a step each side (the band's ends for the first and last ring)
         a_lo = self.lo if ring == 0 else axial_mm - plan.step_axial_mm / 2.0
         a_hi = self.hi if ring == len(plan.axials_mm) - 1 else axial_mm + plan.step_axial_mm / 2.0
         y0 = max(0, int(math.floor((a_lo - self.lo) / ppx)))
         y1 = min(self.image.shape[0], int(math.ceil((a_hi - self.lo) / ppx)))
         half_w = plan.step_wall_mm / 2.0 / ppx
-        x0, x1 = int(math.floor(cx_pic - half_w)), int(math.ceil(cx_pic + half_w)) + 1
+        x0, x1 = int(math.floor(cx_exact - half_w)), int(math.ceil(cx_exact + half_w)) + 1
         ty0 = int(round(y0 - cy_pic + (th - 1) / 2.0))
         tx0 = int(round(x0 - cx_pic + (tw - 1) / 2.0))
         rows = np.arange(y0, y1)
         cols = np.arange(x0, x1)
         trows, tcols = rows - y0 + ty0, cols - x0 + tx0
-        keep_r = (trows >= 0) & (trows < th)
-        keep_c = (tcols >= 0) & (tcols < tw)
+        # a frame's edge on the band's end may fall a rounding short of the last row: the
+        # tile's edge pixel stands in there (one pixel at most)
+        keep_r = (trows >= -1) & (trows <= th)
+        keep_c = (tcols >= -1) & (tcols <= tw)
+        trows, tcols = np.clip(trows, 0, th - 1), np.clip(tcols, 0, tw - 1)
         rows, trows = rows[keep_r], trows[keep_r]
         cols, tcols = cols[keep_c] % self.image.shape[1], tcols[keep_c]
         if rows.size == 0 or cols.size == 0:
@@ -191,13 +210,44 @@ class _SurfaceScan:
         self.plan = coverage_plan(part.surface_band_mm(), geo, cfg.overlap_mm)
         self.looks: list[_Look] = []
         self.notes: list[str] = []
+        #: the camera's calibration when it fits the frames: defects are then measured
+        #: where a coverage frame saw them, undistorted (re-centred only when no frame saw
+        #: them whole); None: every defect re-centred
+        self.lens = geo.calibration
+        if self.lens is not None and tuple(self.lens.image_size) != (geo.width_px, geo.height_px):
+            self.notes.append(f"the camera's calibration is for {self.lens.image_size[0]} x {self.lens.image_size[1]} "
+                              f"px frames, not {geo.width_px} x {geo.height_px}: not used (defects re-centred)")
+            self.lens = None
+
+    def ideal(self, x_px: float, y_px: float) -> tuple[float, float]:
+        """Image px -> ideal px of the same camera (the lens's distortion taken out)."""
+        if self.lens is None:
+            return x_px, y_px
+        p = self.lens.undistort_px(np.array([[x_px, y_px]], np.float64))[0]
+        return float(p[0]), float(p[1])
+
+    def local_scale(self, x_px: float, y_px: float, angle_deg: float | None, half_px: float) -> float:
+        """Ideal px per image px at (x, y) along ``angle_deg`` (image sense; None: the
+        mean of x and y): the distortion shrinks a defect towards the frame's corners."""
+        if self.lens is None:
+            return 1.0
+        h = max(half_px, 2.0)
+        dirs = [angle_deg] if angle_deg is not None else [0.0, 90.0]
+        out = []
+        for a in dirs:
+            c, s_ = math.cos(math.radians(a)), math.sin(math.radians(a))
+            p = self.lens.undistort_px(np.array([[x_px - h * c, y_px - h * s_], [x_px + h * c, y_px + h * s_]]))
+            out.append(float(np.hypot(*(p[1] - p[0]))) / (2 * h))
+        return float(np.mean(out))
 
     def wall_mm(self, a: tuple[float, float], b: tuple[float, float]) -> float:
         return math.hypot(a[0] - b[0], math.radians(wrap_deg(a[1] - b[1])) * self.radius)
 
     def place(self, centre: tuple[float, float], x_px: float, y_px: float) -> tuple[float, float]:
+        """A frame's image px on the part (the lens's distortion taken out when known)."""
         cx, cy = self.geo.centre_px
         s = self.geo.mm_per_px
+        x_px, y_px = self.ideal(x_px, y_px)
         return centre[0] + (cy - y_px) * s, (centre[1] + math.degrees((x_px - cx) * s / self.radius)) % 360.0
 
     def move(self, axial: float, angle: float, forward: bool = False):
@@ -224,7 +274,7 @@ class _SurfaceScan:
         c_now = yield m.ReadAxis("C")
         if isinstance(c_now, (int, float)) and math.isfinite(c_now):
             self.c_now = float(c_now)
-        picture = _Picture(plan, self.geo, self.cfg)
+        picture = _Picture(plan, self.geo, self.cfg, self.lens)
         sightings: list[_Sighting] = []
         total = plan.frames
         yield m.Note(f"surface: {len(plan.axials_mm)} rings of {len(plan.angles_deg)} frames over "
@@ -258,11 +308,11 @@ class _SurfaceScan:
         yield m.Note(f"surface: {len(sightings)} sightings, {len(groups)} defect(s) to measure re-centred")
         defects = []
         for g in self.route(groups):
-            d = yield from self.measure(g)
-            if d is not None and not any(o.kind == d.kind and self.wall_mm((o.axial_mm, o.angle_deg),
-                                                                           (d.axial_mm, d.angle_deg)) < 0.05
-                                         for o in defects):
-                defects.append(d)
+            for d in (yield from self.measure(g)):
+                # a re-centred frame shared by two groups shows a defect to both: once
+                if not any(o.kind == d.kind and self.wall_mm((o.axial_mm, o.angle_deg), (d.axial_mm, d.angle_deg)) < 0.05
+                           for o in defects):
+                    defects.append(d)
         for i, d in enumerate(sorted(defects, key=lambda d: (d.axial_mm, d.angle_deg))):
             d.id = f"d{i + 1}"
         lo, hi = plan.band_mm
@@ -318,14 +368,29 @@ class _SurfaceScan:
 
     # -------------------------------------------------------------- re-centred measurement
     def measure(self, group: list[_Sighting]):
-        """The group's defect measured in a frame centred on it (one taken for a defect
-        near enough serves), as a :class:`SurfaceDefect`; the best sighting's own
-        figures when the re-centred frame does not show it."""
+        """The group's defects measured in a frame centred on them (one taken for a
+        defect near enough serves), as :class:`SurfaceDefect`\ s: every defect of the
+        group's family that frame shows whole near one of the group's sightings (defects
+        closer than the merging distance are told apart there). The best sighting's own
+        figures when the re-centred frame shows none; no re-centring when a coverage
+        frame saw the group's only defect whole near its centre."""
         cfg, geo = self.cfg, self.geo
         best = self.best(group)
         want = (best.axial_mm, best.angle_deg)
-        if best.r_px <= cfg.recentre_reach_px and not getattr(best.defect, "partial", False):
-            return self.defect(best.defect, want, best.r_px, len(group))  # a coverage frame saw it centred
+        frames = len({s.frame for s in group})
+        per_frame = max(sum(1 for s in group if s.frame == f) for f in {s.frame for s in group})
+        if per_frame == 1 and best.r_px <= cfg.recentre_reach_px and not getattr(best.defect, "partial", False):
+            return [self.defect(best.defect, want, best.r_px, frames)]  # a coverage frame saw it centred
+        if self.lens is not None:
+            # calibrated: the coverage frame that saw most of the group whole, nearest its
+            # centre; every whole defect of the group in it (a pair too close to merge apart)
+            whole = [sg for sg in group if not getattr(sg.defect, "partial", False)]
+            if whole:
+                by_frame: dict[int, list[_Sighting]] = {}
+                for sg in whole:
+                    by_frame.setdefault(sg.frame, []).append(sg)
+                chosen = min(by_frame.values(), key=lambda v: (-len(v), min(sg.r_px for sg in v)))
+                return [self.defect(sg.defect, (sg.axial_mm, sg.angle_deg), sg.r_px, frames) for sg in chosen]
         reach_mm = cfg.recentre_reach_px * geo.mm_per_px * 0.5
         look = next((lk for lk in self.looks if self.wall_mm((lk.axial_mm, lk.angle_deg), want) <= reach_mm), None)
         if look is None:
@@ -335,24 +400,24 @@ class _SurfaceScan:
             look = _Look(centre[0], centre[1], found)
             self.looks.append(look)
         fam = self.family(best.defect.kind)
-        accept = max(0.15, 0.5 * (best.defect.length_mm or 0.0))
         cx, cy = geo.centre_px
-        near = []
+        out = []
         for d in look.defects:
             if self.family(d.kind) != fam or getattr(d, "partial", False):
                 continue
-            p = self.place((look.axial_mm, look.angle_deg), d.x_px, d.y_px)
-            dist = self.wall_mm(p, want)
-            if dist <= accept and math.hypot(d.x_px - cx, d.y_px - cy) <= cfg.recentre_reach_px:
-                near.append((dist, d, p))
-        if near:
-            _dist, d, p = min(near, key=lambda t: t[0])
             r_px = math.hypot(d.x_px - cx, d.y_px - cy)
-        else:
-            d, p, r_px = best.defect, want, best.r_px
+            if r_px > cfg.recentre_reach_px:
+                continue
+            p = self.place((look.axial_mm, look.angle_deg), d.x_px, d.y_px)
+            if any(self.wall_mm(p, (sg.axial_mm, sg.angle_deg)) <= max(0.15, 0.5 * (sg.defect.length_mm or 0.0))
+                   for sg in group):
+                out.append(self.defect(d, p, r_px, frames))
+        if not out:
+            d = best.defect
             self.notes.append(f"a {d.kind} at {want[0]:.3f} mm, {want[1]:.2f} deg was not seen again re-centred: "
-                              f"measured {r_px:.0f} px off a frame's centre (the lens's distortion not corrected)")
-        return self.defect(d, p, r_px, len(group))
+                              f"measured {best.r_px:.0f} px off a frame's centre (the lens's distortion not corrected)")
+            out.append(self.defect(d, want, best.r_px, frames))
+        return out
 
     def defect(self, d, place: tuple[float, float], r_px: float, frames: int) -> SurfaceDefect:
         geo, cfg, st = self.geo, self.cfg, self.settings
@@ -360,14 +425,25 @@ class _SurfaceScan:
         length = float(d.length_mm if d.length_mm is not None else d.length_px * s)
         width = float(d.width_mm if d.width_mm is not None else d.width_px * s)
         size_u = float(d.size_u_mm if d.size_u_mm is not None else d.length_u_px * s)
+        u_map = 0.0
+        if self.lens is not None:
+            # the lens's local scale along the length and across it (a rim defect: both
+            # ways; its angle is round its hole), and the calibration's own map error
+            along = None if self.family(d.kind) == "rim" else float(d.angle_deg)
+            k_len = self.local_scale(d.x_px, d.y_px, along, d.length_px / 2.0)
+            k_wid = self.local_scale(d.x_px, d.y_px, None if along is None else along + 90.0, d.width_px / 2.0)
+            length, width, size_u = length * k_len, width * k_wid, size_u * k_len
+            mu = self.lens.undistort_u_px(np.array([[d.x_px, d.y_px]], np.float64))
+            u_map = 0.0 if mu is None else float(np.max(mu)) * s
         # the place: the centroid's own scatter, the model at the detection point, the
         # scale over the offset; beyond the re-centring reach the lens's distortion
         # (k1 r^3 / f^2 of the endoscope, up to 2.7 % of the offset) as a rectangular bound
         u_centroid = cfg.centroid_u_px * s + cfg.centroid_u_share * length
         u_model = st.model_u_um * 1e-3
         u_scale = geo.scale_u_rel * r_px * s
-        u_lens = 0.0 if r_px <= cfg.recentre_reach_px else 0.027 * (r_px * s) * (r_px / 820.0) ** 2 / math.sqrt(3)
-        u_pos = 2.0 * math.sqrt(u_centroid ** 2 + u_model ** 2 + u_scale ** 2 + u_lens ** 2) \
+        u_lens = 0.0 if r_px <= cfg.recentre_reach_px or self.lens is not None \
+            else 0.027 * (r_px * s) * (r_px / 820.0) ** 2 / math.sqrt(3)
+        u_pos = 2.0 * math.sqrt(u_centroid ** 2 + u_model ** 2 + u_scale ** 2 + u_lens ** 2 + u_map ** 2) \
             + st.evidence_bound_um * 1e-3
         axial = place[0] * (1.0 - st.part_scale_ppm * 1e-6)
         hole = None
