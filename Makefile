@@ -80,7 +80,7 @@ postgres:
 # a third of its wall time is CPU), so two streams on two cores take about as long as
 # the longer one. Each has its own temporary folder; the PostgreSQL run's output
 # follows the SQLite run's; make fails when either fails.
-PG_TESTS := tests/unit/test_store.py tests/unit/test_record_cache.py tests/api tests/reliability
+PG_TESTS := tests/unit/test_store.py tests/unit/test_store_surface.py tests/unit/test_record_cache.py tests/api tests/reliability
 PG_SELECT := not test_cell or storing or store_ or vision_error
 TEST_TMP ?= $(or $(TMPDIR),/tmp)/bore-station-tests
 test: $(STAMP) chromium postgres

@@ -9,21 +9,26 @@ The plan (after the holes, so burrs and chips are put at the holes the scan foun
    its backlash is taken up once). Neighbouring frames overlap by ``overlap_mm`` (more
    than the largest pore), so every pore is whole in some frame; a scratch longer than
    that may be cut by the frames' edges and is joined across them.
-2. **Each frame's defects** (``MeasureSurface``: ``station.vision.defects``) are placed
-   on the part as the holes are (``scan.py``): where compensation put the detection
-   point, moved by what the grating saw that the model did not, plus the defect's offset
-   from the frame's centre. Off the centre that offset carries the lens's distortion
-   (up to 2.7 % at a corner: 0.2 mm), which the station's model does not hold.
-3. **Re-centred measurement.** Sightings of one defect (from overlapping frames) are
-   merged, and each is measured again in a frame centred on it (compensated as any
-   move), where the distortion is below a few um (``recentre_reach_px``): its place,
-   length, width and their uncertainties come from there. Defects near each other share
-   a re-centred frame.
+2. **Each frame's defects** (``MeasureSurface``: ``station.vision.defects``), analysed
+   while the axes move to the next frame, are placed on the part as the holes are
+   (``scan.py``): where compensation put the detection point, moved by what the grating
+   saw that the model did not, plus the defect's offset from the frame's centre. Off
+   the centre that offset carries the lens's distortion (the endoscope's: up to 2.7 % at
+   a corner, 0.2 mm): with the camera's calibration (``CameraGeometry.calibration``) it
+   is taken out, and the defect's sizes are corrected by the lens's local scale.
+3. **One measurement per defect.** Sightings of one defect (from overlapping frames) are
+   merged. With the calibration, the defect is measured in the coverage frame that saw it
+   whole nearest its centre; a defect no frame saw whole (cut by every frame's edge) and,
+   without a calibration, every defect, is measured again in a frame centred on it
+   (compensated as any move), where the distortion is below a few um
+   (``recentre_reach_px``). Defects near each other share a re-centred frame, and
+   defects too close to merge apart are told apart in the frame that measures them.
 4. **The picture.** Each frame, flat-fielded (its own smooth level divided out, so the
    vignetting and the light's blotches do not tile) and reduced to ``picture_mm_per_px``,
    fills the cell of the unrolled wall nearest its centre (``station.inspection.surface``
-   for the picture's axes). The picture is for people: a seam may show the lens's
-   distortion at a cell's corner (up to ~0.15 mm); the defects' places do not depend on it.
+   for the picture's axes), undistorted with the calibration and placed to a fraction of
+   its pixel. Without a calibration a seam may show the lens's distortion at a cell's
+   corner (up to ~0.15 mm); the defects' places never come from the picture.
 """
 
 from __future__ import annotations
