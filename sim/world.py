@@ -390,6 +390,27 @@ def defect_truth_place(part: PartTruth, d: SurfaceDefect) -> tuple[float, float]
     return h.axial_mm + dv, (h.angle_deg + math.degrees(du / (part.bore_diameter_mm / 2.0))) % 360.0
 
 
+def rendered_size(part: PartTruth, d: SurfaceDefect, mm_per_px: float = 0.01) -> tuple[float, float]:
+    """A defect's length and width as the camera twin really renders it (its outline's
+    greatest Feret diameter and the extent across, a rim defect's arc and mean height):
+    a pore's given width is only approximate (its ragged outline is scaled to its
+    length), so the truth a measurement is scored against is the outline's own."""
+    from sim.camera.defects import DefectSpec, geometry
+    from sim.camera.render import HoleSpec
+
+    s = mm_per_px
+    if d.hole is None:
+        spec = DefectSpec(d.kind, 0.0, 0.0, d.length_mm / s, d.width_mm / s, -d.orientation_deg, d.reflectance,
+                          None, d.seed)
+        holes = []
+    else:
+        h = next(h for h in part.holes if h.name == d.hole)
+        holes = [HoleSpec(0.0, 0.0, h.diameter_mm / s)]
+        spec = DefectSpec(d.kind, 0.0, 0.0, d.length_mm / s, d.width_mm / s, -d.at_deg, d.reflectance, 0, d.seed)
+    t = geometry(spec, holes).truth().with_scale(s)
+    return float(t.length_mm), float(t.width_mm)
+
+
 def match_defects(world: "World", found) -> list[tuple[Any, dict | None]]:
     """Each defect the station reports (``axial_mm``, ``angle_deg``, ``kind``,
     ``length_mm``) with the world's defect it is (ground truth: an annotation for tests
@@ -415,6 +436,7 @@ def match_defects(world: "World", found) -> list[tuple[Any, dict | None]]:
         taken_i.add(i)
         taken_j.add(j)
         t, (ax, an) = truths[j]
+        length, width = rendered_size(part, t)
         out[i] = {"name": t.name, "kind": t.kind, "axial_mm": round(ax, 5), "angle_deg": round(an, 5),
-                  "length_mm": t.length_mm, "width_mm": t.width_mm, "place_error_mm": round(dist, 5)}
+                  "length_mm": round(length, 5), "width_mm": round(width, 5), "place_error_mm": round(dist, 5)}
     return [(d, out.get(i)) for i, d in enumerate(found)]

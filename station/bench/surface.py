@@ -98,7 +98,7 @@ def _within(err: float, truth: float) -> bool:
 
 def run(parts: int = 3, seed: int = 23000, n_wall: int = 8, n_rim: int = 2, time_scale: float = 20.0,
         progress=None) -> dict:
-    from sim.world import STANDARD_SAMPLE, PartTruth, defect_truth_place
+    from sim.world import STANDARD_SAMPLE, PartTruth, defect_truth_place, rendered_size
     from station.parts import load_part
     from station.runtime import open_session
 
@@ -127,11 +127,12 @@ def run(parts: int = 3, seed: int = 23000, n_wall: int = 8, n_rim: int = 2, time
         for t in truth.defects:
             d = matched.get(t.name)
             ax, an = defect_truth_place(truth, t)
-            rows.append({"part": k, "name": t.name, "kind": t.kind, "length_mm": t.length_mm, "width_mm": t.width_mm,
-                         "above_limit": _above(t.kind, t.length_mm, t.width_mm), "found": d is not None,
+            length, width = rendered_size(truth, t)  # the outline's own (a pore's width is nominal only)
+            rows.append({"part": k, "name": t.name, "kind": t.kind, "length_mm": length, "width_mm": width,
+                         "above_limit": _above(t.kind, length, width), "found": d is not None,
                          "place_error_mm": None if d is None else d.truth["place_error_mm"],
-                         "length_error_mm": None if d is None else d.length_mm - t.length_mm,
-                         "width_error_mm": None if d is None else d.width_mm - t.width_mm,
+                         "length_error_mm": None if d is None else d.length_mm - length,
+                         "width_error_mm": None if d is None else d.width_mm - width,
                          "length_u_mm": None if d is None else d.size_u_mm,
                          "position_u_mm": None if d is None else d.position_u_mm,
                          "axial_mm": ax, "angle_deg": an})
