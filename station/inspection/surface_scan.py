@@ -374,7 +374,7 @@ class _SurfaceScan:
     # -------------------------------------------------------------- re-centred measurement
     def measure(self, group: list[_Sighting]):
         """The group's defects measured in a frame centred on them (one taken for a
-        defect near enough serves), as :class:`SurfaceDefect`\ s: every defect of the
+        defect near enough serves), as :class:`SurfaceDefect` objects: every defect of the
         group's family that frame shows whole near one of the group's sightings (defects
         closer than the merging distance are told apart there). The best sighting's own
         figures when the re-centred frame shows none; no re-centring when a coverage
