@@ -35,10 +35,13 @@ defect (docs/surface.md has the figures behind each choice):
    outline from the darkening's angular density round its centroid, which is c r^2 / 2
    whatever the blur (a Fourier series of the pixels' angles, to the order the blur
    resolves); its greatest Feret diameter and the extent across it from that outline.
-   *Scratch*: its centre line followed (a robust polynomial through the cross profiles'
-   peaks), the darkening integrated across it along its length, its extent (the best
-   box) and each end at half its local height, its width from the mean cross profile as
-   a blurred box with the camera's blur (from the holes' edges, else from its own ends).
+   *Scratch*: its main line (branches of groove residue left out), its centre line
+   followed (a robust straight line, then a polynomial through the cross profiles' peaks
+   near it), its amplitude along it (each cross profile matched-filtered by the mean one,
+   less its flanks), its extent (the best box, split at gaps) and each end at half its
+   local height, its width from the mean cross profile as a blurred box with the
+   camera's blur (from the holes' edges, else from its own cross profile, its ends and a
+   prior, combined). A scratch the patch cuts is examined again in a patch grown along it.
 6. **Burrs and chips at every hole's edge.** The holes are measured first
    (``measure_holes``, and by their rays alone those whose rim defects make the
    photometric fit run away). Along rays from each hole's centre, the share of "hole"
@@ -868,7 +871,7 @@ def _blurred_box(x, centre, width, blur):
     return ndtr((x - centre + width / 2.0) / blur) - ndtr((x - centre - width / 2.0) / blur)
 
 
-def _scratch_extent(m: np.ndarray, step: float) -> tuple[int, int] | None:
+def _scratch_extent(m: np.ndarray, step: float, gap_px: float = 0.0) -> tuple[int, int] | None:
     """The extent of a scratch's darkening ``m`` (integrated across it, sampled every
     ``step`` px along it): the interval [a, b) that a box fits best, i.e. that maximises
     S^2 / n (S the darkening it holds, n its samples; the least-squares box of free
@@ -889,20 +892,57 @@ def _scratch_extent(m: np.ndarray, step: float) -> tuple[int, int] | None:
     best = int(np.argmax(score))
     if score[best] <= 0:
         return None
-    return int(i[best]) * k, int(j[best]) * k
+    a, b = int(i[best]), int(j[best])
+    # ... but not across a gap: where the darkening stays under a quarter of the box's
+    # median over gap_px, the scratch is not there, whatever lies beyond. A box pays for
+    # a gap only what it lacks, and a deep groove crossing 10 px past a scratch's end
+    # (the twin's 10 % grooves, where the wall model's straight grooves meet their fading)
+    # bought the gap and carried the end 28 px on. Of the pieces, the one holding most
+    a, b = _largest_piece(coarse, a, b, gap_px)
+    return a * k, b * k
 
 
-def _ends_blur(s: np.ndarray, m: np.ndarray, s1: float, s2: float) -> float | None:
-    """The blur along a scratch from its two ends: each a blurred step of the darkening
-    integrated across it (a furrow ends in a cut), fitted for its width over +/-6 px;
-    the two combined by their variances, less the strip's bilinear sampling (1/6 px^2).
-    None when neither end fixes it to 0.4 px."""
+def _largest_piece(coarse: np.ndarray, a: int, b: int, gap_px: float) -> tuple[int, int]:
+    """[a, b) of a 1 px profile split at runs of at least ``gap_px`` under a quarter
+    of its median (smoothed over 3 px, so one noisy pixel does not bridge a gap); the
+    piece with the largest sum."""
+    if b - a < 3 or gap_px <= 0:
+        return a, b
+    seg = np.convolve(coarse[a:b], np.ones(3) / 3.0, mode="same")
+    plateau = float(np.median(coarse[a:b]))
+    if plateau <= 0:
+        return a, b
+    low = seg < 0.25 * plateau
+    gaps = [(ga, gb) for ga, gb in _runs(low, False) if gb - ga >= gap_px and ga > 0 and gb < b - a]
+    if not gaps:
+        return a, b
+    bounds = [0] + [v for g in gaps for v in g] + [b - a]
+    pieces = [(bounds[2 * q], bounds[2 * q + 1]) for q in range(len(bounds) // 2)]
+    best = max(pieces, key=lambda pq: float(np.clip(coarse[a + pq[0]:a + pq[1]], 0.0, None).sum()))
+    return a + best[0], a + best[1]
+
+
+#: the camera's blur (Gaussian sigma, px) as a scratch's measurement assumes it before
+#: anything in the frame says more: the middle of the station's envelope (0.8-2 px) and a
+#: standard deviation that spans it. Combined with what the scratch's own cross profile
+#: and ends say (``_scratch_blur``); it decides the blur only when both are vague
+BLUR_PRIOR_PX = (1.4, 0.6)
+
+
+def _ends_blur(s: np.ndarray, a: np.ndarray, s1: float, s2: float) -> tuple[float, float] | None:
+    """The blur along a scratch from its two ends: each a blurred step of its amplitude
+    along it (a furrow ends in a cut), fitted for its width over +/-7 px; the two
+    combined by their variances, less the strip's bilinear sampling (1/6 px^2). Returns
+    (blur, its variance), or None when neither end could be fitted. ``a`` must not be
+    smoothed along the scratch: a first version fitted the profile after a 1 px
+    Gaussian and took only the sampling off, which read a 1.2 px blur as 1.6 px and
+    the twin's thin scratches as a third of their width."""
     est = []
     for end, sign in ((s1, 1.0), (s2, -1.0)):
         sel = np.abs(s - end) <= 7.0
         if sel.sum() < 8:
             continue
-        x, v = s[sel], m[sel]
+        x, v = s[sel], a[sel]
         inner = sign * (x - end) > 2.0
         h0 = max(float(np.median(v[inner])) if inner.any() else float(v.max()), 1e-3)
         # with an offset: the wall's level, smoothed over 16 px, sinks a little under a
@@ -911,40 +951,121 @@ def _ends_blur(s: np.ndarray, m: np.ndarray, s1: float, s2: float) -> float | No
         hi = np.array([4.0 * h0, end + 2.0, 4.0, 0.5 * h0])
         fit = _gauss_newton(lambda q: q[0] * ndtr(sign * (x - q[1]) / q[2]) + q[3], np.array([h0, end, 1.5, 0.0]), v,
                             lo, hi, iterations=15)
-        var = fit.cov[2, 2]
+        # samples 0.5 px apart of a bilinear interpolation are correlated (twice the
+        # variance), and the scratch's width varies along it on the scale of the fit's
+        # window (its plateau is no step's): dev frames' errors were twice the spread
+        # the fit states once more (robust sd of the z-scores 1.9-2.0)
+        var = 8.0 * fit.cov[2, 2]
         if np.isfinite(var) and var > 0 and 0.45 < fit.x[2] < 3.9:
             est.append((float(fit.x[2]), float(var)))
     if not est:
         return None
     w = np.array([1.0 / v for _, v in est])
     value = float(np.sum(w * np.array([b for b, _ in est])) / w.sum())
-    if 1.0 / np.sqrt(w.sum()) >= 0.4:
-        return None
-    return float(np.sqrt(max(value * value - 1.0 / 6.0, 0.25)))
+    blur = float(np.sqrt(max(value * value - 1.0 / 6.0, 0.25)))
+    return blur, float((value / blur) ** 2 / w.sum())
+
+
+def _bend_function(coef: np.ndarray, lo: float, hi: float):
+    """A scratch's centre line across its chord as a function of the position along it:
+    the polynomial over [lo, hi], where the cross profiles' peaks fixed it, continued
+    along its tangent beyond (a cubic extrapolated 30 px ran off into the wall); and
+    its slope."""
+    der = np.polyder(coef)
+
+    def at(s):
+        s = np.asarray(s, float)
+        sc = np.clip(s, lo, hi)
+        return np.polyval(coef, sc) + np.polyval(der, sc) * (s - sc)
+
+    def slope(s):
+        return np.polyval(der, np.clip(np.asarray(s, float), lo, hi))
+
+    return at, slope
+
+
+def _scratch_cross_fit(nv: np.ndarray, pv: np.ndarray, b: float, half_w: float, p0=None) -> _Fit:
+    """The mean cross profile as a blurred box of blur ``b`` (px, the strip's sampling
+    included): contrast, centre, width, offset. The contrast is at most 1: a relative
+    darkness beyond it is no light at all (a thin scratch fitted without that bound
+    traded its width for contrasts of 1.4-1.5)."""
+    c0 = max(float(np.max(pv)), 1e-3)
+    w0 = max(float(np.trapezoid(np.clip(pv, 0, None), nv)) / c0, 0.5)
+    lo = np.array([0.0, -3.0, 0.2, -0.1])
+    hi = np.array([1.0, 3.0, 2 * half_w, 0.1])
+    start = np.array([c0, 0.0, w0, 0.0]) if p0 is None else np.asarray(p0, float)
+    return _gauss_newton(lambda p: p[0] * _blurred_box(nv, p[1], p[2], b) + p[3], np.clip(start, lo, hi), pv,
+                         lo, hi, iterations=20, huber_k=10.0)
+
+
+def _scratch_blur(nv: np.ndarray, pv: np.ndarray, half_w: float):
+    """The camera's blur for a scratch in a frame that gives none (no hole, no
+    calibration): what its mean cross profile says (a blurred box with a free blur: its
+    shoulders fix the blur when the scratch is wide, its kurtosis when thin, to ~0.1 px
+    on a scratch 100 px long) and the prior (``BLUR_PRIOR_PX``), combined by their
+    variances; ``_measure_scratch`` adds what its two ends say (``_ends_blur``: blurred
+    steps, 0.2-0.4 px each). Returns (blur, its variance). The ends alone (the first
+    version) read the twin's 1.2 px blur anywhere from 0.5 to 2 px, and its thin
+    scratches' widths 50-70 % off."""
+    est = [(BLUR_PRIOR_PX[0], BLUR_PRIOR_PX[1] ** 2)]
+    c0 = max(float(np.max(pv)), 1e-3)
+    w0 = max(float(np.trapezoid(np.clip(pv, 0, None), nv)) / c0, 0.5)
+    lo = np.array([0.0, -3.0, 0.2, 0.45, -0.1])
+    hi = np.array([1.0, 3.0, 2 * half_w, 4.0, 0.1])
+    free = _gauss_newton(lambda p: p[0] * _blurred_box(nv, p[1], p[2], p[3]) + p[4],
+                         np.clip(np.array([c0, 0.0, w0, 1.5, 0.0]), lo, hi), pv, lo, hi, iterations=20, huber_k=10.0)
+    bx, var = float(free.x[3]), float(free.cov[3, 3])
+    if np.isfinite(var) and var > 0 and lo[3] + 0.05 < bx < hi[3] - 0.05:
+        b = float(np.sqrt(max(bx * bx - 1.0 / 6.0, 0.25)))
+        # the fit's variance x 5 and a 0.05 px floor: the centre line's wander and the width's
+        # variation along the scratch shape the mean profile too (dev frames, 170 scratches
+        # of the twin and the bench: errors 1.7-2.4 times the fit's standard deviation, and
+        # wide scratches' blur read 0.05 px high)
+        est.append((b, 5.0 * var * (bx / b) ** 2 + 0.05**2))
+    w = np.array([1.0 / v for _, v in est])
+    value = float(np.sum(w * np.array([b for b, _ in est])) / w.sum())
+    return value, float(1.0 / w.sum())
 
 
 def _measure_scratch(patch: _Patch, region: np.ndarray, blur_hint: float | None = None):
     """A scratch: its centre line (a polynomial bend), its extent (``_scratch_extent``)
-    and each end at half its local height (``_fit_end``) on the darkening integrated
-    across it, its mean width (the mean cross profile fitted as a blurred box), with
-    standard uncertainties (px)."""
+    and each end at half its local height (``_fit_end``) on its amplitude along it (the
+    strip matched-filtered across by its own mean cross profile), its mean width (that
+    profile fitted as a blurred box), with standard uncertainties (px)."""
     r = patch.residual
     h, w = r.shape
     yy, xx = np.mgrid[0:h, 0:w].astype(np.float64)
     wts = np.where(region, np.clip(r, 0.0, None), 0.0)
     if wts.sum() <= 0:
         return None
-    cx, cy, ang, cov = _weighted_pca(xx[region], yy[region], wts[region])
+    xr, yr, wr = xx[region], yy[region], wts[region]
+    cx, cy, ang, _ = _weighted_pca(xr, yr, wr)
+    # the main line: a deep groove's residue the scratch ends on joins its region as a
+    # branch, and a 40 px branch at 60 deg dragged the strip's width, its centre line
+    # and its end along it (the twin's frames: a 127 px scratch read 191 px). What lies
+    # within a band round the axis (the scratch's half width and blur, and its bend: a
+    # few per cent of its length) is the scratch; its axis again from that
+    main = np.ones(xr.size, bool)
+    for _ in range(2):
+        along = (xr - cx) * np.cos(ang) + (yr - cy) * np.sin(ang)
+        across = -(xr - cx) * np.sin(ang) + (yr - cy) * np.cos(ang)
+        keep = np.abs(across) <= 8.0 + 0.03 * float(np.ptp(along[main]))
+        if keep.sum() < 8 or wr[keep].sum() <= 0:
+            break
+        main = keep
+        cx, cy, ang, _ = _weighted_pca(xr[main], yr[main], wr[main])
     ca, sa = np.cos(ang), np.sin(ang)
-    along = (xx[region] - cx) * ca + (yy[region] - cy) * sa
-    across = -(xx[region] - cx) * sa + (yy[region] - cy) * ca
+    along = (xr[main] - cx) * ca + (yr[main] - cy) * sa
+    across = -(xr[main] - cx) * sa + (yr[main] - cy) * ca
     half_w = max(float(np.percentile(np.abs(across), 98)) + 6.0, 8.0)
     step = 0.5
     # beyond the region's ends by 30 px: a faint scratch's region, grown at full resolution,
-    # may stop short of its end
+    # may stop short of its end; and 5 px more each side, the flanks of the matched filter
     s = np.arange(along.min() - 30.0, along.max() + 30.0 + step, step)
-    n = np.arange(-half_w, half_w + step, step)
-    strip = _strip(r, cx, cy, ang, s, n)
+    n_all = np.arange(-half_w - 5.0, half_w + 5.0 + step / 2, step)
+    strip_all = _strip(r, cx, cy, ang, s, n_all)
+    inside_w = np.abs(n_all) <= half_w + 1e-9
+    n, strip = n_all[inside_w], strip_all[inside_w]
     # the centre line: column by column, the peak of the cross profile (smoothed over 1 px
     # each way, refined by a parabola), and a polynomial through the peaks with Tukey
     # weights. The darkening's centroid across was pulled by groove residue and noise
@@ -961,9 +1082,28 @@ def _measure_scratch(patch: _Patch, region: np.ndarray, blur_hint: float | None 
         off = np.where(np.isfinite(den) & (den < 0), 0.5 * (y0_ - y2_) / den, 0.0)
     centre_n = n[k] + np.clip(off, -0.5, 0.5) * step
     col_mass = np.clip(top, 0.0, None)
-    good = np.isfinite(top) & (top > 3.0 * patch.noise / 2.0)
+    # the peaks are fitted over the region's length only: beyond its ends they are the
+    # wall's (noise, or the groove a scratch ends on), and the line continues straight
+    good = (np.isfinite(top) & (top > 3.0 * patch.noise / 2.0) & (s >= along.min() - 4.0)
+            & (s <= along.max() + 4.0))
     if good.sum() < 4:
         return None
+    # ... and only where they keep to a straight line, within the bend a scratch has (a few
+    # per cent of its length): a groove's residue a scratch ends on leaves it at a shallow
+    # angle, and the cubic followed it (bench frames: a 171 px scratch, a groove 25 deg off
+    # its end, read 213 px). The line robustly (Tukey weights), then the peaks near it
+    wts = np.sqrt(col_mass[good])
+    sg, cg = s[good], centre_n[good]
+    for _ in range(5):
+        line = np.polyfit(sg, cg, 1, w=wts)
+        res = cg - np.polyval(line, sg)
+        u = res / (4.685 * max(_mad_sigma(res), 0.5))
+        wts = np.sqrt(col_mass[good]) * np.where(np.abs(u) < 1, (1 - u * u) ** 2, 0.0)
+        if (wts > 0).sum() <= 3:
+            break
+    near = np.abs(centre_n - np.polyval(line, s)) <= 3.0 + 0.03 * float(np.ptp(sg))
+    if (good & near).sum() >= 4:
+        good &= near
     # a cubic: a dragged chip's path bends in up to two modes over its length (the
     # renderer's: sin(pi u) and sin(2 pi u), 1.2 % of the length each), which a quadratic
     # leaves as a wander of ~1-2 px on a 150 px scratch, smearing its cross profile
@@ -976,19 +1116,49 @@ def _measure_scratch(patch: _Patch, region: np.ndarray, blur_hint: float | None 
         wts = np.sqrt(col_mass[good]) * np.where(np.abs(u) < 1, (1 - u * u) ** 2, 0.0)
         if (wts > 0).sum() <= deg + 2:
             break
-    bend = np.polyval(coef, s)
-    strip = _strip(r, cx, cy, ang, s, n, bend)
+    bend_at, slope_at = _bend_function(coef, float(s[good].min()), float(s[good].max()))
+    bend = bend_at(s)
+    strip_all = _strip(r, cx, cy, ang, s, n_all, bend)
+    strip = strip_all[inside_w]
     prof_all = _nanmean_rows(strip[:, good])
     if not np.isfinite(prof_all).any():
         return None
     # integrate across over the scratch's core and its blur (where the mean profile is dark)
-    core = np.abs(n) <= max(float(np.sum(prof_all > 0.5 * np.nanmax(prof_all))) * step / 2.0 + 5.0, 4.0)
-    m = np.nansum(strip[core], axis=0) * step
-    valid = np.isfinite(strip[core]).all(axis=0)
+    core_half = max(float(np.sum(prof_all > 0.5 * np.nanmax(prof_all))) * step / 2.0 + 5.0, 4.0)
+    core_all = np.abs(n_all) <= core_half
+    core = core_all[inside_w]
+    # the amplitude along the scratch: each column matched-filtered by the mean cross
+    # profile (its least-squares multiple), less the mean of 5 px flanks each side. Across
+    # the core's 10-15 px the box integral took in as much groove residue and grain as
+    # scratch on a thin one, and a deep groove crossing the strip darkens its whole width
+    # (the twin's grooves, 10 % deep: a 1.6 px scratch ran on 45 px past its end, a 127 px
+    # one on 64 px); the filter weighs each pixel by what the scratch puts there, and
+    # darkening as wide as the flanks cancels. A straight furrow's square end blurred by
+    # a Gaussian is separable, so the amplitude steps at the end as the darkening does
+    flank = (np.abs(n_all) > core_half) & (np.abs(n_all) <= core_half + 5.0)
+    used = core_all | flank
+    valid = np.isfinite(strip_all[used]).all(axis=0)
     if valid.sum() < 8:
         return None
-    sv, mv = s[valid], m[valid]
-    ext = _scratch_extent(mv, step)
+    filt = np.where(core_all, np.nan_to_num(np.clip(_nanmean_rows(strip_all[:, good]), 0.0, None)), 0.0)
+    if filt.sum() <= 0:
+        return None
+    filt_norm = float(np.sum(filt * filt))
+    if flank.any():
+        filt = filt - np.where(flank, filt.sum() / flank.sum(), 0.0)
+    filt = filt[used]
+    sv = s[valid]
+    used_strip = strip_all[used][:, valid]
+    box_rows = core_all[used]
+    grooves = np.nan_to_num(_strip(patch.grooves, cx, cy, ang, s, n_all[used], bend)[:, valid])
+
+    def profiles(factor):
+        st = used_strip if factor is None else used_strip * factor
+        return np.sum(st[box_rows], axis=0) * step, (filt @ st) / filt_norm
+
+    mv, av = profiles(None)
+    gap_px = 8.0
+    ext = _scratch_extent(av, step, gap_px)
     if ext is None:
         return None
     s1, s2 = float(sv[ext[0]]), float(sv[ext[1] - 1])
@@ -1001,69 +1171,84 @@ def _measure_scratch(patch: _Patch, region: np.ndarray, blur_hint: float | None 
     if ok.sum() < 5:
         return None
     nv, pv = n[ok], prof[ok]
-    c0 = max(float(np.max(pv)), 1e-3)
-    w0 = max(float(np.trapezoid(np.clip(pv, 0, None), nv)) / c0, 0.5)
     # across a thin scratch, its width and contrast trade off under the blur (their product
-    # is what the profile fixes); the blur comes from elsewhere when it can: the frame's
-    # holes (``blur_hint``), else the scratch's own two ends, blurred steps along it (dev
-    # frames: a faint 1.9 px scratch fitted with a free blur read 4.9 px wide and 7 % dark)
-    blur_known = blur_hint
-    if blur_known is None:
-        ms0 = gaussian_filter1d(mv, 1.0 / step)
-        blur_known = _ends_blur(sv, ms0, s1, s2)
-    if blur_known is not None:
+    # is what the profile fixes); the blur comes from the frame's holes (``blur_hint``)
+    # when it has any, else from the scratch itself: its cross profile and the prior here,
+    # its ends below (``_scratch_blur``, ``_ends_blur``)
+    if blur_hint is not None:
+        blur_cam, var_blur = float(np.clip(blur_hint, 0.5, 3.5)), 0.0
+    else:
+        blur_cam, var_blur = _scratch_blur(nv, pv, half_w)
+
+    def cross_fit(blur_cam):
         # the strip's bilinear sampling, at phases that vary along the scratch, adds the
         # variance of a tent (1/6 px^2) to the averaged cross profile
-        b = float(np.sqrt(np.clip(blur_known, 0.5, 3.5) ** 2 + 1.0 / 6.0))
-        p0 = np.array([c0, 0.0, w0, 0.0])
-        lo = np.array([0.0, -3.0, 0.2, -0.1])
-        hi = np.array([1.5, 3.0, 2 * half_w, 0.1])
-        cross = _gauss_newton(lambda p: p[0] * _blurred_box(nv, p[1], p[2], b) + p[3], np.clip(p0, lo, hi), pv,
-                              lo, hi, iterations=20, huber_k=10.0)
-        c, n0, width, _ = (float(v) for v in cross.x)
-        blur_x = b
-        u_w_i = 2
-    else:
-        p0 = np.array([c0, 0.0, w0, 1.5, 0.0])
-        lo = np.array([0.0, -3.0, 0.2, 0.4, -0.1])
-        hi = np.array([1.5, 3.0, 2 * half_w, 4.0, 0.1])
-        cross = _gauss_newton(lambda p: p[0] * _blurred_box(nv, p[1], p[2], p[3]) + p[4], np.clip(p0, lo, hi), pv,
-                              lo, hi, iterations=20, huber_k=10.0)
-        c, n0, width, blur_x, _ = (float(v) for v in cross.x)
-        u_w_i = 2
-    blur = float(np.clip(blur_x, 0.7, 2.8))
+        b = float(np.sqrt(float(np.clip(blur_cam, 0.5, 3.5)) ** 2 + 1.0 / 6.0))
+        return b, _scratch_cross_fit(nv, pv, b, half_w)
+
+    b, cross = cross_fit(blur_cam)
+    c = float(cross.x[0])
     # the furrow's floor is smooth: the honing grooves the wall model subtracts are not in
-    # it, so where a groove crosses the scratch the residual understates it by the
-    # groove's darkness over the scratch's width (dev frames: a faint 1.6 px scratch broke
-    # into pieces at deep grooves). Put that back along the centre line, then find the
-    # extent again and each end at half its local height
-    g_line = _strip(patch.grooves, cx, cy, ang, s, np.array([n0]), bend)[0][valid]
-    mv = mv + np.nan_to_num(g_line) * width
-    ms = gaussian_filter1d(mv, 1.0 / step)
-    ext = _scratch_extent(mv, step)
+    # it, so where a groove G crosses the scratch the residual reads cover x (c - G) rather
+    # than cover x c (dev frames: a faint 1.6 px scratch broke into pieces at deep
+    # grooves). Each pixel scaled by c / (c - G), which is 1 off the scratch: the first
+    # version added G x width along the centre line, also past the ends, where a deep
+    # groove then carried the end on (the twin's frames)
+    c_eff = float(np.clip(max(c, float(np.nanmax(prof_all))), 0.05, 1.0))
+    factor = c_eff / np.maximum(c_eff - grooves, c_eff / 2.5)
+    mv, av = profiles(factor)
+    ext = _scratch_extent(av, step, gap_px)
     if ext is not None:
         s1, s2 = float(sv[ext[0]]), float(sv[ext[1] - 1])
+    if blur_hint is None:
+        ends = _ends_blur(sv, av, s1, s2)
+        if ends is not None:
+            wb = 1.0 / var_blur + 1.0 / ends[1]
+            blur_cam = (blur_cam / var_blur + ends[0] / ends[1]) / wb
+            var_blur = 1.0 / wb
+            b, cross = cross_fit(blur_cam)
+    c, n0, width, _ = (float(v) for v in cross.x)
+    var_w = float(cross.cov[2, 2]) if np.isfinite(cross.cov[2, 2]) else width**2
+    if var_blur > 0:
+        # the blur's own uncertainty, carried into the width by the fit's sensitivity to it
+        db = 0.1
+        bb = float(np.sqrt((float(np.clip(blur_cam, 0.5, 3.5)) + db) ** 2 + 1.0 / 6.0))
+        dw = (float(_scratch_cross_fit(nv, pv, bb, half_w, cross.x).x[2]) - width) / db
+        var_w += dw * dw * var_blur
+    blur_x = b
+    blur = float(np.clip(blur_x, 0.7, 2.8))
+    ms = gaussian_filter1d(av, 1.0 / step)
     s1, u_s1 = _fit_end(sv, ms, s1, blur, rising=True)
     s2, u_s2 = _fit_end(sv, ms, s2, blur, rising=False)
     if s2 - s1 < 3.0:
         return None
     ss = np.linspace(s1, s2, 200)
-    length = float(np.trapezoid(np.sqrt(1.0 + np.polyval(np.polyder(coef), ss) ** 2), ss))
+    length = float(np.trapezoid(np.sqrt(1.0 + slope_at(ss) ** 2), ss))
     # the width's spread from the fit's covariance: its product with the contrast is what
-    # the profile fixes best, the two apart only as well as the blur allows
-    u_width = float(np.sqrt(max(cross.cov[u_w_i, u_w_i], 0.0))) if np.isfinite(cross.cov[u_w_i, u_w_i]) else width
+    # the profile fixes best, the two apart only as well as the blur is known
+    u_width = float(np.sqrt(max(var_w, 0.0)))
     mid = (s1 + s2) / 2.0
-    nm = float(np.polyval(coef, mid)) + n0
+    nm = float(bend_at(mid)) + n0
     x = cx + mid * ca - nm * sa
     y = cy + mid * sa + nm * ca
     area = float(np.sum(core)) * step * max(s2 - s1, 1.0)
     mass = float(np.sum(mv[(sv >= s1) & (sv <= s2)]) * step)
     significance = mass / (5.0 * patch.noise_box5 * np.sqrt(area))
-    # the chord's direction (the centre line's mean slope over the scratch)
-    direction = float(np.rad2deg(ang + np.arctan(np.polyval(np.polyder(coef), mid))) % 180.0)
+    # the chord's direction (the centre line's mean slope over the scratch; its slope at
+    # the middle, the first version's, is off the chord by up to 5-10 deg on a scratch bent
+    # in an S, and a 137 deg scratch read 144 deg and was taken for the 150 deg hatch)
+    direction = float(np.rad2deg(ang + np.arctan(float(bend_at(s2) - bend_at(s1)) / (s2 - s1))) % 180.0)
+    # the patch cuts the scratch when its strip runs out of the patch (not out of the
+    # samples asked for) within reach of an end
+    reach = 3.0 * blur + 4.0
+    cut = bool((sv[0] > s[0] + 1e-6 and s1 - sv[0] < reach) or (sv[-1] < s[-1] - 1e-6 and sv[-1] - s2 < reach))
+    sl = np.linspace(s1, s2, max(int((s2 - s1) / 5.0), 2) + 1)
+    nl = bend_at(sl) + n0
+    line = (cx + sl * ca - nl * sa, cy + sl * sa + nl * ca)
     return dict(x=float(x), y=float(y), length=length, width=width, angle=direction,
                 u_length=float(np.hypot(u_s1, u_s2)), u_width=u_width, significance=float(significance),
-                contrast=c, blur=blur_x, mean_darkness=float(np.max(pv)))
+                contrast=c, blur=blur_x, mean_darkness=float(np.max(pv)), cut=cut, line=line,
+                half_band=float(width / 2.0 + 2.5 * blur + 2.0))
 
 
 # ---------------------------------------------------------------- burrs and chips
@@ -1433,9 +1618,10 @@ def detect_defects(image: np.ndarray, mm_per_px: float, *, holes=None, blur_px: 
     measures them (``measure_holes``). Holes smaller than ``cfg.min_hole_diameter_mm``
     are not holes but dark marks, and are judged as such.
     ``blur_px``: the camera's blur (Gaussian sigma, px) if known (a calibration's MTF);
-    otherwise it is read from the holes' edges, else from each scratch's own ends: a
-    thin scratch's width is fixed only as well as the blur is known (its cross profile
-    is the blur's, widened by w^2/12). (A pore's fitted edge blur was tried as a third
+    otherwise it is read from the holes' edges, else from each scratch itself (its mean
+    cross profile, its ends and a prior, ``_scratch_blur``): a thin scratch's width is
+    fixed only as well as the blur is known (its cross profile is the blur's, widened by
+    w^2/12). (A pore's fitted edge blur was tried as a third
     source and dropped: its ragged outline reads as extra blur, up to 3 px on dev frames.)
     Sorted by y then x.
     """
@@ -1461,6 +1647,9 @@ def detect_defects(image: np.ndarray, mm_per_px: float, *, holes=None, blur_px: 
     max_width_px = cfg.max_scratch_width_mm / mm_per_px
     examined: list[_Examined] = []
     claimed = np.zeros(img.shape, bool)
+    # the regions alone, which the rims' analysis leaves out (a scratch's cover reaching a
+    # rim's groove ring changed its chips: bench seed 80053)
+    claimed_regions = np.zeros(img.shape, bool)
     candidates = _candidates(wall, cfg)
     for group in _group_collinear(candidates):
         bx0 = min(candidates[i][2][0] for i in group)
@@ -1478,12 +1667,16 @@ def detect_defects(image: np.ndarray, mm_per_px: float, *, holes=None, blur_px: 
         ex = _examine(img, box, seed, zone, wall.angles_deg, level_full, cfg, blur_hint, max_width_px)
         if ex.defect is None:
             continue
-        claimed[box[1]:box[3], box[0]:box[2]] |= ex.region
+        rb = ex.box or box
+        if ex.cover is not None and claimed[rb[1]:rb[3], rb[0]:rb[2]][ex.cover].mean() > 0.5:
+            continue  # grown along its line into a scratch already measured (groove residue beside it)
+        claimed[rb[1]:rb[3], rb[0]:rb[2]] |= ex.region if ex.cover is None else ex.region | ex.cover
+        claimed_regions[rb[1]:rb[3], rb[0]:rb[2]] |= ex.region
         examined.append(ex)
     found: list[Defect] = [ex.defect for ex in examined if ex.defect is not None]
     others = [_hole_zone(img.shape, [h for j, h in enumerate(holes) if j != i], reach_px) for i in range(len(holes))]
     for i, hole in enumerate(holes):
-        found += _rim_defects(img, hole, i, others[i] | (claimed & ~_hole_zone(img.shape, [hole], reach_px)),
+        found += _rim_defects(img, hole, i, others[i] | (claimed_regions & ~_hole_zone(img.shape, [hole], reach_px)),
                               level_full, wall.angles_deg, cfg, mm_per_px)
     out = []
     model = {k: (a, b) for k, a, b in cfg.model_u_px}
@@ -1509,17 +1702,72 @@ class _Examined:
 
     defect: Defect | None
     region: np.ndarray
+    box: tuple[int, int, int, int] | None = None  # the region's box (None: the candidate's)
+    #: a scratch's cover over the same box: its centre line, half its width plus the blur's
+    #: reach either side (claimed too; None: the region alone)
+    cover: np.ndarray | None = None
 
 
 def _examine(img: np.ndarray, box, seed: np.ndarray, zone: np.ndarray, angles_deg, wall_level: np.ndarray,
              cfg: DefectConfig, blur_hint: float | None, max_width_px: float) -> _Examined:
     """One candidate at full resolution: the local wall model, its region, its kind,
-    its measurement and the tests it must pass."""
-    patch = _local_patch(img, box, seed, zone, angles_deg, wall_level)
+    its measurement and the tests it must pass.
+
+    A scratch whose end the patch cuts (its strip runs out of the patch within reach
+    of the end) is examined again in a patch grown along it: the patch is the box of
+    the candidates that were found, and a long scratch near a groove direction breaks
+    into pieces that are not joined (the twin's frames: a 161 px scratch 10 deg off the
+    hatch measured as three overlapping scratches of 73, 99 and 129 px). What a scratch
+    covers, its centre line and blur, is claimed with its region, so that its other
+    pieces are not measured again."""
+    hh, ww = img.shape
+    excl = seed
+    ex = None
+    box0 = tuple(box)
+    for attempt in range(3):
+        again, m, kind = _examine_once(img, box, seed, excl, zone, angles_deg, wall_level, cfg, blur_hint,
+                                       max_width_px)
+        if ex is not None and again.defect is None and not (box0[0] == 0 or box0[1] == 0 or box0[2] == ww
+                                                             or box0[3] == hh):
+            # the grown patch lost it (bench frames: short scratches of 0.14-0.17 mm, taken for
+            # a mark there): the cut one stands; but at the frame's border, where the first
+            # patch had half a wall model round it, the grown patch's verdict (twin frames:
+            # the hatch's residue at the border, 7 deg off a groove, stood as a 0.32 mm scratch)
+            break
+        ex = again
+        if kind != "scratch" or m is None or not m.get("cut") or attempt == 2:
+            break
+        # the ends (frame px), each moved out by as much again as the scratch is long
+        (xa, ya), (xb, yb) = ((m["line"][0][i] + box[0], m["line"][1][i] + box[1]) for i in (0, -1))
+        reach = max(60.0, m["length"])
+        ux, uy = (xb - xa) / max(np.hypot(xb - xa, yb - ya), 1e-6), (yb - ya) / max(np.hypot(xb - xa, yb - ya), 1e-6)
+        pa, pb = (xa - reach * ux, ya - reach * uy), (xb + reach * ux, yb + reach * uy)
+        pad = 20
+        new = (int(max(min(box[0], min(pa[0], pb[0]) - pad), 0)), int(max(min(box[1], min(pa[1], pb[1]) - pad), 0)),
+               int(min(max(box[2], max(pa[0], pb[0]) + pad), ww)), int(min(max(box[3], max(pa[1], pb[1]) + pad), hh)))
+        # no larger than the frame's quarter each way: a bound on the time, far beyond a scratch
+        if new == tuple(box) or (new[2] - new[0]) * (new[3] - new[1]) > ww * hh / 4:
+            break
+        shape = (new[3] - new[1], new[2] - new[0])
+        grown_seed = np.zeros(shape, bool)
+        grown_seed[box[1] - new[1]:box[3] - new[1], box[0] - new[0]:box[2] - new[0]] = seed | ex.region
+        # the wall model leaves out the scratch's line over the reach it may continue
+        line_mask = np.zeros(shape, np.uint8)
+        cv2.line(line_mask, (int(round(pa[0] - new[0])), int(round(pa[1] - new[1]))),
+                 (int(round(pb[0] - new[0])), int(round(pb[1] - new[1]))), 1, int(2 * m["half_band"] + 1))
+        seed, excl, box = grown_seed, grown_seed | line_mask.astype(bool), new
+    return ex
+
+
+def _examine_once(img: np.ndarray, box, seed: np.ndarray, excl: np.ndarray, zone: np.ndarray, angles_deg,
+                  wall_level: np.ndarray, cfg: DefectConfig, blur_hint: float | None, max_width_px: float):
+    """``_examine`` in one patch: (the examined candidate, its measurement, its kind).
+    ``excl``: what the local wall model leaves out (the seed, or more)."""
+    patch = _local_patch(img, box, excl, zone, angles_deg, wall_level)
     x0, y0, x1, y1 = box
     empty = np.zeros((y1 - y0, x1 - x0), bool)
     if patch is None:
-        return _Examined(None, empty)
+        return _Examined(None, empty, tuple(box)), None, None
     rs = cv2.GaussianBlur(patch.residual, (0, 0), 1.0)
     use = ~patch.excluded
     noise_s = max(_mad_sigma(rs[use]), NOISE_FLOOR)
@@ -1537,7 +1785,7 @@ def _examine(img: np.ndarray, box, seed: np.ndarray, zone: np.ndarray, angles_de
         # threshold at full resolution: the seed's darker half is its region
         region = seed & (rs > 0) & ~zone[y0:y1, x0:x1]
         if region.sum() < 8:
-            return _Examined(None, empty)
+            return _Examined(None, empty, tuple(box)), None, None
     yy, xx = np.nonzero(region)
     wts = np.clip(rs[region], 1e-6, None)
     _, _, ang, cov = _weighted_pca(xx.astype(float), yy.astype(float), wts)
@@ -1547,7 +1795,7 @@ def _examine(img: np.ndarray, box, seed: np.ndarray, zone: np.ndarray, angles_de
     elongated = ext_l >= cfg.scratch_elongation * ext_w and ext_l >= 12.0
     if elongated and any(_circ_diff_deg(float(np.rad2deg(ang) % 180.0), g) < cfg.groove_alignment_deg
                          for g in angles_deg):
-        return _Examined(None, region)  # a piece of groove the wall model left
+        return _Examined(None, region, tuple(box)), None, None  # a piece of groove the wall model left
     touches = region[0, :].any() or region[-1, :].any() or region[:, 0].any() or region[:, -1].any()
     at_border = bool(touches and (x0 == 0 or y0 == 0 or x1 == img.shape[1] or y1 == img.shape[0]))
     m = _measure_scratch(patch, region, blur_hint) if elongated else _measure_pore(patch, region, cfg)
@@ -1558,7 +1806,14 @@ def _examine(img: np.ndarray, box, seed: np.ndarray, zone: np.ndarray, angles_de
     if kind == "scratch" and m is not None and m["length"] < cfg.scratch_elongation * m["width"]:
         kind, m = "pore", _measure_pore(patch, region, cfg, allow_scratch=False)  # short and broad: a mark
     defect = _accept(m, kind, box, at_border, angles_deg, cfg, max_width_px)
-    return _Examined(defect, region)
+    cover = None
+    if defect is not None and kind == "scratch":
+        # what the scratch covers: its centre line, its half width and blur either side
+        lines = np.zeros(region.shape, np.uint8)
+        pts = np.round(np.column_stack(m["line"])).astype(np.int32)
+        cv2.polylines(lines, [pts], False, 1, int(2 * m["half_band"] + 1))
+        cover = lines.astype(bool)
+    return _Examined(defect, region, tuple(box), cover), m, kind
 
 
 def _accept(m: dict | None, kind: str, box, at_border: bool, angles_deg, cfg: DefectConfig,
