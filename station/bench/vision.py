@@ -154,8 +154,11 @@ def run(frames: int = 400, seed: int = 1000, envelope: str = "station", photomet
         "centre_accuracy_ratio_ci95": list(ci_c),
         "diameter_accuracy_ratio_ci95": list(ci_d),
         "accuracy_ratios_by_statistic": by_stat,
-        "goals": {"median_err_px": 0.05, "worst_centre_err_px": 0.1, "worst_diameter_err_px": 0.15,
-                  "ms_per_frame": 10.0, "ratio": 5.0},
+        # issue 23 withdrew the 5x ratio and the worst-case bars: the holes are judged
+        # against the frame-aware Cramer-Rao bound (``station bench vision-bound
+        # --estimator``); the ratios stay here as secondary figures
+        "goals": {"median_err_px": 0.05, "ms_per_frame": 10.0},
+        "withdrawn_goals": {"worst_centre_err_px": 0.1, "worst_diameter_err_px": 0.15, "ratio": 5.0},
     }
 
 
@@ -207,7 +210,7 @@ def register(bench_app: typer.Typer) -> None:
             f"ours vs the better baseline: centre {r['centre_accuracy_ratio_vs_better_baseline']:.1f}x "
             f"(95 % interval {ci_c[0]:.1f}-{ci_c[1]:.1f}x), diameter "
             f"{r['diameter_accuracy_ratio_vs_better_baseline']:.2f}x ({ci_d[0]:.2f}-{ci_d[1]:.2f}x) more accurate "
-            f"(goal 5x; 95 % bootstrap intervals over the frames)"
+            f"(secondary figures since issue 23; 95 % bootstrap intervals over the frames)"
         )
         tails = r["accuracy_ratios_by_statistic"]
         out_console.print(
@@ -215,6 +218,8 @@ def register(bench_app: typer.Typer) -> None:
             f"{tails['rms']['diameter']:.2f}x in RMS; centre {tails['p90']['centre']:.1f}x / "
             f"{tails['rms']['centre']:.1f}x"
         )
+        out_console.print("issue 23's criteria (error over the frame-aware Cramer-Rao bound, coverage of u): "
+                          "station bench vision-bound --estimator")
         o = r["methods"]["ours"]
         if o.get("holes_with_u"):
             out_console.print(

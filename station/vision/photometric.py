@@ -28,12 +28,16 @@ fixed functions of the pixel position and only rho depends on the centre.
 
 Fit: Gauss-Newton with the analytic Jacobian, Huber weights (IRLS) on the residuals
 against a robust (MAD) scale, a handful of iterations from the ray fit's circle.
+Uncertainties: the white-noise standard deviations (``r_sd``, ...) and a kernel estimate
+of the least-squares sandwich from the residuals' own spatial correlation (``r_u``, ...,
+``_hac_sd``): the grain blurred by the camera is correlated noise.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 from numba import njit
 from scipy.special import ndtr
@@ -83,6 +87,12 @@ class PhotometricConfig:
     #: 0.0163 / 0.0183, 18 px 0.0162 / 0.0180, 24 px 0.0162 / 0.0182)
     groove_margin_px: float = 18.0
     groove_bin_px: float = 0.5
+    #: backfitting sweeps between the two families' profiles
+    groove_backfit: int = 3
+    #: 2: a profile per family on each side of the hole (along the grooves); 1: one
+    groove_sides: int = 1
+    #: pseudo-counts that shrink a sparse bin towards 0
+    groove_pseudo_count: float = 2.0
     #: weight of the pixels from the expected texture share (1 - u)^2 of their variance
     texture_weighting: bool = False
     #: model that the grooves are cut by the hole before the blur: the image is
@@ -108,6 +118,21 @@ class PhotometricConfig:
     #: 0.0250 / 0.056; shrink 1: 0.0168 / 0.0233 / 0.052; 0.75: 0.0164 / 0.0230 / 0.052;
     #: 0.5: 0.0162 / 0.0232 / 0.052; 0.4: 0.0164 / 0.0234 / 0.052
     ring_slope_shrink: float = 0.5
+    #: the uncertainties (``r_u``, ``cx_u``, ``cy_u``) from the residuals' own spatial
+    #: correlation (a kernel estimate of the sandwich: each pixel's influence on the
+    #: parameter times its residual, summed over pairs of pixels up to this many
+    #: correlation lengths apart, with Bartlett weights); 0: none
+    hac_lengths: float = 2.5
+    #: sectors of the annulus judged by their residuals' chi-square against the whole
+    #: annulus's robust scale (0: none); a sector whose mean squared residual exceeds
+    #: ``sector_chi2`` times the scale's square gets its weights divided by the excess
+    #: pixels weighted by 1 / (1 + (share x the groove model's own size there / the
+    #: residual scale)^2): the groove model's error taken as this share of what it
+    #: subtracts (its level and its cut term), so that pixels where much is modelled
+    #: count less (0: equal weights)
+    groove_error_share: float = 0.0
+    sectors: int = 0
+    sector_chi2: float = 1.5
 
 
 @dataclass(frozen=True)
@@ -131,6 +156,15 @@ class PhotometricFit:
     #: the same for the centre's x and y (px)
     cx_sd: float = float("nan")
     cy_sd: float = float("nan")
+    #: standard deviations of R0, cx and cy from the residuals' spatial correlation
+    #: (``PhotometricConfig.hac_lengths``: the grain, blurred by the camera, and what is
+    #: left of the grooves are correlated noise, which the white-noise figures miss)
+    r_u: float = float("nan")
+    cx_u: float = float("nan")
+    cy_u: float = float("nan")
+    #: RMS (DN) of the honing-groove field the model subtracts over the annulus' wall
+    #: side: how much texture the fit had to model at the rim
+    groove_rms_dn: float = float("nan")
 
 
 def disc_fraction(rho: np.ndarray, radius: float | np.ndarray, s: float) -> np.ndarray:
@@ -169,11 +203,12 @@ def _groove_field(
     never enter: the profiles there are read from the same lines further out.
     """
     angles = np.deg2rad(np.asarray(cfg.groove_angles_deg, dtype=np.float64))
-    return _groove_kernel(dx[wall], dy[wall], v[wall], dx[targets], dy[targets], angles, float(cfg.groove_bin_px))
+    return _groove_kernel(dx[wall], dy[wall], v[wall], dx[targets], dy[targets], angles, float(cfg.groove_bin_px),
+                          cfg.groove_backfit, cfg.groove_sides, float(cfg.groove_pseudo_count))
 
 
 @njit(cache=True)
-def _groove_kernel(xw, yw, vw, xt, yt, angles, step):
+def _groove_kernel(xw, yw, vw, xt, yt, angles, step, n_backfit=3, sides=1, pseudo=2.0):
     """``_groove_field``'s work on the wall pixels (xw, yw, vw) and the targets (xt, yt).
     (Compiled: about twenty numpy calls on a few thousand pixels each.)"""
     nw, nt, nf = xw.size, xt.size, angles.size
@@ -201,21 +236,26 @@ def _groove_kernel(xw, yw, vw, xt, yt, angles, step):
         x, y = xw[i] / scale, yw[i] / scale
         resid[i] = vw[i] - (coef[0] + coef[1] * x + coef[2] * y + coef[3] * x * x + coef[4] * x * y + coef[5] * y * y)
     # each family's 1-D profile across its direction, by backfitting bin means (two
-    # pseudo-counts shrink sparse bins towards 0)
+    # pseudo-counts shrink sparse bins towards 0); with ``sides`` 2, one profile for
+    # each side of the line through the centre along the grooves (a groove fades along
+    # its length: the rim's two crossings of one groove differ)
     u_max = 1.5 * scale
-    nb = int(2 * u_max / step) + 2
+    nb1 = int(2 * u_max / step) + 2
+    nb = nb1 * sides
     idx = np.empty((nf, nw), dtype=np.int64)
-    counts = np.full((nf, nb), 2.0)
+    counts = np.full((nf, nb), pseudo)
     for f in range(nf):
         sn, cs = np.sin(angles[f]), np.cos(angles[f])
         for i in range(nw):
             j = int((-sn * xw[i] + cs * yw[i] + u_max) / step)  # truncation, as numpy's astype
-            j = min(max(j, 0), nb - 1)
+            j = min(max(j, 0), nb1 - 1)
+            if sides > 1 and cs * xw[i] + sn * yw[i] > 0:
+                j += nb1
             idx[f, i] = j
             counts[f, j] += 1.0
     prof = np.zeros((nf, nb))
     sums = np.empty(nb)
-    for _ in range(3 if nf > 1 else 1):
+    for _ in range(n_backfit if nf > 1 else 1):
         for f in range(nf):
             sums[:] = 0.0
             for i in range(nw):
@@ -227,21 +267,25 @@ def _groove_kernel(xw, yw, vw, xt, yt, angles, step):
             for j in range(nb):
                 prof[f, j] = sums[j] / counts[f, j]
     # read back at the targets: the field and its derivative along the radius
-    centres = np.arange(nb).astype(np.float64)
+    centres = np.arange(nb1).astype(np.float64)
     field = np.zeros(nt)
     d_rho = np.zeros(nt)
     for f in range(nf):
         sn, cs = np.sin(angles[f]), np.cos(angles[f])
-        p = prof[f]
-        slope = gradient_1d(p) / step
         ut = np.empty(nt)
         for i in range(nt):
             ut[i] = (-sn * xt[i] + cs * yt[i] + u_max) / step - 0.5
-        field += np.interp(ut, centres, p)
-        ds = np.interp(ut, centres, slope)
-        for i in range(nt):
-            rho = max(np.sqrt(xt[i] * xt[i] + yt[i] * yt[i]), 1e-9)
-            d_rho[i] += ds[i] * (-sn * xt[i] + cs * yt[i]) / rho
+        for side in range(sides):
+            p = prof[f, side * nb1:(side + 1) * nb1]
+            slope = gradient_1d(p) / step
+            fv = np.interp(ut, centres, p)
+            ds = np.interp(ut, centres, slope)
+            for i in range(nt):
+                if sides > 1 and (cs * xt[i] + sn * yt[i] > 0) != (side == 1):
+                    continue
+                field[i] += fv[i]
+                rho = max(np.sqrt(xt[i] * xt[i] + yt[i] * yt[i]), 1e-9)
+                d_rho[i] += ds[i] * (-sn * xt[i] + cs * yt[i]) / rho
     g_wall = np.zeros(nw)
     for f in range(nf):
         for i in range(nw):
@@ -308,6 +352,7 @@ def refine_hole(
     if illumination_grad is not None:
         va = va / (1.0 + illumination_grad[0] * dxa + illumination_grad[1] * dya)
     sel = (d2 >= r_in * r_in) & (d2 <= r_out * r_out)
+    roi_shape = (y1 - y0, x1 - x0)
     groove = 0.0
     if grooves:
         wall_px = (d2 > r_clear * r_clear) & (d2 <= r_roi * r_roi)
@@ -377,8 +422,21 @@ def refine_hole(
                 scale = 1.0
             else:
                 scale = max(_MAD_TO_SIGMA * median(np.abs(res - median(res))), 0.5)
+        if grooves and cfg.groove_error_share > 0 and it <= 2:
+            gdev = groove - median(groove[t_rad > 0]) if np.any(t_rad > 0) else groove
+            model_sd = cfg.groove_error_share * np.hypot(gdev * (1 - u), cut * phi)
+            prior = 1.0 / (1.0 + (model_sd / scale) ** 2)
         a = np.abs(res) * np.sqrt(prior) / (cfg.huber_k * scale)
         wts = prior * np.where(a <= 1.0, 1.0, 1.0 / np.maximum(a, 1e-12))
+        if cfg.sectors > 0:
+            if it == 1:
+                sector = (np.floor((np.arctan2(s1, c1) + np.pi) / (2 * np.pi) * cfg.sectors).astype(np.int64)
+                          % cfg.sectors)
+                cnt = np.maximum(np.bincount(sector, minlength=cfg.sectors), 1)
+            if it <= 2:
+                chi2 = np.bincount(sector, res * res, minlength=cfg.sectors) / cnt / (scale * scale)
+                sec_w = 1.0 / np.maximum(chi2 / cfg.sector_chi2, 1.0)
+            wts = wts * sec_w[sector]
         dh = (hole - wall - cut * t) * phi  # d model / dt (phi' = -t phi)
         # d model / d parameter
         drho_t = -rho / (q * s)  # dt/drho
@@ -422,5 +480,42 @@ def refine_hole(
         var = np.full(3, np.nan)
     # NaN (not a warning) where the inverse gives no positive variance
     sd = np.sqrt(np.where(var > 0, var, np.nan)) * float(scale)
+    g_rms = float("nan")
+    if grooves:
+        gw = (groove if np.ndim(groove) else np.zeros(n))[t_rad > 0]
+        if gw.size:
+            g_rms = float(np.sqrt(np.mean(np.square(gw - np.mean(gw)))))
+    hac = np.full(3, np.nan)
+    if cfg.hac_lengths > 0:
+        hac = _hac_sd(m, jw, res, sel, roi_shape, s, cfg.hac_lengths)
     return PhotometricFit(cx + ox, cy + oy, r0, s, contrast, float(scale), n, it,
-                          r_sd=float(sd[2]), cx_sd=float(sd[0]), cy_sd=float(sd[1]))
+                          r_sd=float(sd[2]), cx_sd=float(sd[0]), cy_sd=float(sd[1]),
+                          r_u=float(hac[2]), cx_u=float(hac[0]), cy_u=float(hac[1]), groove_rms_dn=g_rms)
+
+
+def _hac_sd(m: np.ndarray, jw: np.ndarray, res: np.ndarray, sel: np.ndarray, shape: tuple[int, int], s: float,
+            lengths: float) -> np.ndarray:
+    """Standard deviations of the first three parameters (cx, cy, R0) by a kernel
+    (Bartlett) estimate of the least-squares sandwich: with G the rows of m^-1 for
+    them, pixel i's influence is e_i = G jw_i res_i and var = sum over pairs (i, j) of
+    w(i - j) e_i e_j, w = (1 - |dx| / (L + 1)) (1 - |dy| / (L + 1)) for |dx|, |dy| <= L.
+    L: ``lengths`` times the correlation length of blurred grain, sqrt(s^2 + 0.7^2) px.
+    The Bartlett kernel is a box's autocorrelation over (L + 1)^2, so the double sum is
+    the sum of squares of the influences' (L + 1) x (L + 1) box sums, over every
+    placement of the box: positive by construction, one box filter per parameter."""
+    try:
+        g = np.linalg.solve(m, np.eye(m.shape[0])[:, :3]).T  # (3, p): m is symmetric
+    except np.linalg.LinAlgError:
+        return np.full(3, np.nan)
+    e = (jw @ g.T) * res[:, None]  # (n, 3)
+    lag = int(np.ceil(lengths * np.sqrt(s * s + 0.49)))
+    iy, ix = np.divmod(np.flatnonzero(sel), shape[1])
+    if iy.size == 0:
+        return np.full(3, np.nan)
+    iy, ix = iy - iy.min() + lag, ix - ix.min() + lag
+    k = lag + 1
+    grid = np.zeros((iy.max() + lag + 1, ix.max() + lag + 1, 3))  # the three parameters as channels
+    grid[iy, ix] = e
+    box = cv2.boxFilter(grid, cv2.CV_64F, (k, k), normalize=False, borderType=cv2.BORDER_CONSTANT)
+    out = np.einsum("ijc,ijc->c", box, box) / (k * k)
+    return np.sqrt(np.where(out > 0, out, np.nan))

@@ -134,3 +134,24 @@ def score_frame(truths: list[tuple], detections: list[tuple], check_partial: boo
             s.centre_z += [float((detections[j][0] - tx) / u[1]), float((detections[j][1] - ty) / u[2])]
     s.phantoms = len(detections) - len(used)
     return s
+
+
+def match_whole_holes(truths: list[tuple], detections: list[tuple]) -> list[int | None]:
+    """The detection matched to each whole true hole (its index, or None for a miss), by
+    ``score_frame``'s rule: greedy nearest within a quarter diameter (at least 3 px), the
+    truths in order, cut ones included (they take their detections too)."""
+    used: set[int] = set()
+    det = np.asarray([d[:2] for d in detections], float).reshape(-1, 2)
+    out: list[int | None] = []
+    for tx, ty, td, tpartial in truths:
+        j = None
+        if det.size:
+            dist = np.hypot(det[:, 0] - tx, det[:, 1] - ty)
+            dist[list(used)] = np.inf
+            k = int(np.argmin(dist))
+            if dist[k] <= max(3.0, 0.25 * td):
+                j = k
+                used.add(k)
+        if not tpartial:
+            out.append(j)
+    return out
