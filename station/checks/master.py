@@ -100,7 +100,9 @@ def compare(cert: MasterCertificate, characteristics) -> list[CharacteristicChec
     of a master inspection against its certificate, standard uncertainties (k = 1)."""
     out = []
     for c in characteristics:
-        hole_id, kind = c.id.split(".", 1)
+        hole_id, _, kind = c.id.rpartition(".")
+        if kind not in ("position", "diameter"):
+            continue  # a surface criterion: the certificate states the holes only
         h = cert.hole(hole_id)
         certified, U_um = (h.position_mm, h.position_U_um) if kind == "position" else (h.diameter_mm, h.diameter_U_um)
         u_station = None if c.uncertainty_k2 is None else c.uncertainty_k2 / 2.0
