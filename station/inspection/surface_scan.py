@@ -310,7 +310,7 @@ class _SurfaceScan:
             defects = yield m.MeasureSurface(pending[2])
             analysed(pending[0], pending[1], list(defects or []))
         groups = self.merge(sightings)
-        yield m.Note(f"surface: {len(sightings)} sightings, {len(groups)} defect(s) to measure re-centred")
+        yield m.Note(f"surface: {len(sightings)} sightings, {len(groups)} defect(s) to measure")
         defects = []
         for g in self.route(groups):
             for d in (yield from self.measure(g)):
