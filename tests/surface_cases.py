@@ -36,6 +36,24 @@ DEFECTS = [
 ]
 
 
+#: a part spec without [surface]: its surface has no criteria to judge (a job order or
+#: the panel's job form asking for a surface scan of it is refused)
+NO_SURFACE_SPEC = """
+part_number = "NOSURF-1"
+[bore]
+diameter_mm = 22.2
+depth_mm = 120.0
+[placement]
+axial_mm = 0.5
+angular_datum = "hole_1"
+[[holes]]
+id = "hole_1"
+angle_deg = 0.0
+diameter = { nominal = 0.7, tol = 0.125 }
+position = { nominal = 71.03, tol = 0.1 }
+"""
+
+
 def synthetic_picture(seed: int = 7) -> SurfacePicture:
     width = round(2 * math.pi * BORE_RADIUS_MM / MM_PER_PX)
     height = round((AXIAL_TO_MM - AXIAL_FROM_MM) / MM_PER_PX)

@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 from api.sessions import SESSION_COOKIE
-from surface_cases import DEFECTS, store_surface_record, synthetic_surface
+from surface_cases import DEFECTS, NO_SURFACE_SPEC, store_surface_record, synthetic_surface
 from tests.api.conftest import ROLES, start_server, stop_server
 
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
@@ -168,23 +168,6 @@ def test_the_schema_declares_the_surface(srv):
     assert "url" in comps["SurfacePicture"]["required"] and "rejects" in comps["SurfaceDefect"]["properties"]
     op = schema["paths"]["/api/v1/inspections/{inspection_id}/surface.png"]["get"]
     assert "image/png" in op["responses"]["200"]["content"] and "404" in op["responses"]
-
-
-#: a part spec without [surface]: its surface has no criteria to judge
-NO_SURFACE_SPEC = """
-part_number = "NOSURF-1"
-[bore]
-diameter_mm = 22.2
-depth_mm = 120.0
-[placement]
-axial_mm = 0.5
-angular_datum = "hole_1"
-[[holes]]
-id = "hole_1"
-angle_deg = 0.0
-diameter = { nominal = 0.7, tol = 0.125 }
-position = { nominal = 71.03, tol = 0.1 }
-"""
 
 
 def test_a_job_order_may_ask_for_the_surface(srv, records, monkeypatch):

@@ -22,7 +22,7 @@ from pathlib import Path
 import pytest
 from playwright.sync_api import expect
 
-from surface_cases import DEFECT_GREY, DEFECTS, store_surface_record, synthetic_surface
+from surface_cases import DEFECT_GREY, DEFECTS, NO_SURFACE_SPEC, store_surface_record, synthetic_surface
 from tests.browser.conftest import INSPECTION_TIMEOUT_MS, login, open_page, screenshot, serve_station
 
 REPO = Path(__file__).resolve().parents[2]
@@ -63,23 +63,6 @@ PIXELS = """(points) => {
     return m;
   });
 }"""
-
-
-#: a part spec without [surface] (the panel's job form asks for a surface scan of it)
-NO_SURFACE_SPEC = """
-part_number = "NOSURF-1"
-[bore]
-diameter_mm = 22.2
-depth_mm = 120.0
-[placement]
-axial_mm = 0.5
-angular_datum = "hole_1"
-[[holes]]
-id = "hole_1"
-angle_deg = 0.0
-diameter = { nominal = 0.7, tol = 0.125 }
-position = { nominal = 71.03, tol = 0.1 }
-"""
 
 
 @pytest.fixture
