@@ -176,14 +176,25 @@ def motion_limits(devices) -> dict[str, AxisLimits]:
     return out
 
 
+def camera_timing(devices):
+    """The camera's sensor timing (``CameraTiming``), None when it has none."""
+    return getattr(devices.camera, "timing", None) if devices.camera is not None else None
+
+
+def devices_machine_time(steps, devices, time_scale: float | None):
+    """The machine time of ledger ``steps`` with these devices' camera timing and axes'
+    status polls (station.sequencer.cycle.machine_time)."""
+    poll = {n: float(getattr(devices.axis(n), "poll_s", 0.0) or 0.0) for n in ("Z", "C")}
+    return machine_time(steps, time_scale=time_scale, camera=camera_timing(devices), poll_s=poll)
+
+
 def run_cycle(ledger_steps, devices, settings: ScanSettings, time_scale: float | None) -> dict:
     """The machine time of a run (with its breakdown) and, when the axes' limits and
     the camera's timing are known, the lower bound of the same plan and the ratio
     (station.sequencer.cycle)."""
     steps = list(ledger_steps)
-    camera = getattr(devices.camera, "timing", None) if devices.camera is not None else None
-    poll = {n: float(getattr(devices.axis(n), "poll_s", 0.0) or 0.0) for n in ("Z", "C")}
-    machine = machine_time(steps, time_scale=time_scale, camera=camera, poll_s=poll)
+    camera = camera_timing(devices)
+    machine = devices_machine_time(steps, devices, time_scale)
     limits = motion_limits(devices)
     bound = None
     if camera is not None and set(limits) >= {"Z", "C"}:
@@ -337,9 +348,8 @@ class InspectionService:
         the physical limit of covering the band (``surface_scan.physical_limit``)."""
         devices = self.engine.devices
         steps = list(self.engine.ledger.steps)[self._surface_from:]
-        camera = getattr(devices.camera, "timing", None) if devices.camera is not None else None
-        poll = {n: float(getattr(devices.axis(n), "poll_s", 0.0) or 0.0) for n in ("Z", "C")}
-        machine = machine_time(steps, time_scale=self.time_scale, camera=camera, poll_s=poll)
+        camera = camera_timing(devices)
+        machine = devices_machine_time(steps, devices, self.time_scale)
         out = {"machine_s": machine.total_s,
                "breakdown": {k: machine.breakdown.get(k, 0.0) for k in machine.breakdown}}
         limits = motion_limits(devices)
