@@ -17,7 +17,7 @@ camera matrix, so that mm follow from one scale.
 from __future__ import annotations
 
 import functools
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 
 import cv2
 import numpy as np
@@ -27,10 +27,11 @@ from station.vision.calibration import CameraCalibration
 from station.vision.detect import Candidate, DetectConfig, detect_candidates
 from station.vision.edges import KERNEL_RADIUS_PX, deblurred_radius, gradient, profile_width2, psf_variance, ray_edges
 from station.vision.edges import SMOOTH_SIGMA_PX
+from station.vision.grooves import frame_grooves
 from station.vision.fit import fit_ellipse_direct, gradient_1d, median, ransac_circle, robust_circle, taubin_circle
 from station.vision.illumination import Illumination, estimate_illumination
 from station.vision.imageio import to_8bit, to_grey
-from station.vision.photometric import PhotometricConfig, refine_hole
+from station.vision.photometric import PhotometricConfig, PhotometricFit, refine_hole
 
 
 @dataclass(frozen=True)
@@ -132,6 +133,16 @@ class MeasureConfig:
     #: included), and a quarter of the station envelope's texture candidates have fewer
     #: than 18 (they were dropped later anyway, by the coverage and inlier tests)
     min_wide_inliers: int = 18
+    #: the frame's whole holes share one blur (one lens, one focus): each hole's
+    #: photometric fit is run again with the blur held at the frame's, the mean of the
+    #: holes' own fitted blurs weighted by their precision, when they agree with it
+    #: (chi-square per degree of freedom below ``share_blur_chi2``; a lens whose blur
+    #: changes across the field keeps each hole's own)
+    share_blur: bool = False
+    share_blur_chi2: float = 4.0
+    #: the honing grooves' profiles from the whole frame (``grooves.py``), each hole's
+    #: ring giving only their depth there; else each hole reads them from its ring
+    frame_grooves: bool = False
 
 
 @dataclass(frozen=True)
@@ -253,6 +264,23 @@ def measure_candidate(
 
     ``illumination``: the frame's illumination field; the photometric fit flat-fields the
     hole by its local gradient (none: as if the illumination were flat)."""
+    return _measure_candidate(image, cand, cfg, calibration, rng, illumination)[0]
+
+
+def _measure_candidate(
+    image: np.ndarray,
+    cand: Candidate,
+    cfg: MeasureConfig,
+    calibration: CameraCalibration | None = None,
+    rng: np.random.Generator | None = None,
+    illumination: Illumination | None = None,
+    frame_blur: float | None = None,
+    frame_grooves=None,
+) -> tuple[HoleMeasurement | None, PhotometricFit | None]:
+    """``measure_candidate``, and its photometric fit (None without one). ``frame_blur``:
+    the blur s the frame's holes share (``MeasureConfig.share_blur``), held fixed in the
+    photometric fit instead of the rays' start and a free blur."""
+    ph = None
     rng = rng if rng is not None else np.random.default_rng(0)
     r0 = cand.radius_px
     # pass 1: wide search (the coarse radius is good to ~1 coarse pixel for whole
@@ -260,10 +288,10 @@ def measure_candidate(
     inner = cfg.wide_inner_border if cand.touches_border else 0.5
     wide = _fine(image, cand.x_px, cand.y_px, inner * r0, 1.6 * r0 + 4, 72, step_px=1.0)
     if len(wide.points) < cfg.min_valid_rays // 2:
-        return None
+        return None, ph
     inl = ransac_circle(wide.points, 1.0, rng)
     if inl.sum() < cfg.min_wide_inliers:
-        return None  # no circle agrees with enough of the rays: texture, not a hole
+        return None, ph  # no circle agrees with enough of the rays: texture, not a hole
     # only a start for the narrow search (which recasts its rays beyond 0.3 px): a few
     # IRLS steps suffice
     first = robust_circle(wide.points[inl], taubin_circle(wide.points[inl]), min_scale_px=0.2, iterations=5)
@@ -271,7 +299,7 @@ def measure_candidate(
     # pass 2 (twice: a cut hole's first centre may be off by a pixel): narrow window
     for attempt in range(2):
         if not (2.0 < r < cfg.detect.max_diameter_px):
-            return None
+            return None, ph
         # about one ray per px of rim; half as many where the photometric fit will give
         # the geometry and the rays only judge the rim (roundness, inliers, edge width)
         density = 1.0
@@ -283,7 +311,7 @@ def measure_candidate(
         n_rays = int(np.clip(round(2 * np.pi * r * density), 64, 360))
         edges = _fine(image, cx, cy, max(r - cfg.fine_window_px, 1.0), r + cfg.fine_window_px, n_rays)
         if len(edges.points) < cfg.min_valid_rays:
-            return None
+            return None, ph
         # ovality only where the whole rim is seen: on a short arc the second harmonic
         # trades off against the radius and the centre
         whole = not edges.cut_by_border
@@ -297,10 +325,10 @@ def measure_candidate(
     coverage = edges.n_valid / edges.n_rays
     inlier_fraction = fit.inliers.sum() / max(edges.n_valid, 1)
     if coverage < cfg.min_coverage or inlier_fraction < cfg.min_inlier_fraction:
-        return None
+        return None, ph
     sigma_px = float(np.sqrt(profile_width2(edges.profiles[fit.inliers], edges.step_px)))
     if relative_contrast(image, cx, cy, r, sigma_px) < cfg.min_relative_contrast:
-        return None  # too faint for a through-hole: crossing grooves
+        return None, ph  # too faint for a through-hole: crossing grooves
     # a Gaussian-blurred step of height c has a derivative peak c / (sqrt(2 pi) sigma)
     contrast_dn = float(median(edges.peak[fit.inliers]) * np.sqrt(2 * np.pi) * sigma_px)
     psf2 = psf_variance(sigma_px**2, r)
@@ -311,9 +339,12 @@ def measure_candidate(
         # the image's own blur: the rays' width less our smoothing and bilinear sampling
         blur = float(np.sqrt(max(psf2 - SMOOTH_SIGMA_PX**2 - 1.0 / 6.0, 0.09)))
         grad = illumination.relative_gradient(cx, cy) if illumination is not None else None
-        ph = refine_hole(image, cx, cy, r_true, blur, cfg.photometric, illumination_grad=grad)
+        pcfg = cfg.photometric
+        if frame_blur is not None:
+            blur, pcfg = frame_blur, replace(pcfg, fit_blur=False)
+        ph = refine_hole(image, cx, cy, r_true, blur, pcfg, illumination_grad=grad, frame_grooves=frame_grooves)
         if ph is not None and not ph.converged and cfg.reject_unfitted_whole:
-            return None  # the pixels around this whole rim are no blurred disc
+            return None, ph  # the pixels around this whole rim are no blurred disc
         if ph is not None and ph.converged:
             # the radius from the intensities (it uses the textureless hole side and
             # the groove model); the centre moved ``photometric_centre_weight`` of the
@@ -343,10 +374,10 @@ def measure_candidate(
     else:
         rms_px = fit.rms_px  # ovality is in the model, so this is roundness
     if rms_px > cfg.max_rms_px:
-        return None
+        return None, ph
     diameter = 2.0 * r_true
     if not (cfg.min_diameter_px <= diameter <= cfg.detect.max_diameter_px):
-        return None
+        return None, ph
     ell = fit_ellipse_direct(pts[fit.inliers]) if not edges.cut_by_border else None
     # heuristic confidence: share of consistent edge points, share of rim seen (full
     # weight from half the rim), and the measurement's quality: the rays' scatter
@@ -357,7 +388,7 @@ def measure_candidate(
         quality = max(quality, 1.0 / (1.0 + (diameter_u / cfg.confidence_u_ref_px) ** 2))
     confidence = float(inlier_fraction * min(1.0, 2.0 * coverage) * quality)
     if confidence < cfg.min_confidence:
-        return None
+        return None, ph
     return HoleMeasurement(
         x_px=float(cx),
         y_px=float(cy),
@@ -376,7 +407,7 @@ def measure_candidate(
         x_u_px=x_u,
         y_u_px=y_u,
         map_u_px=map_u,
-    )
+    ), ph
 
 
 def relative_contrast(image: np.ndarray, cx: float, cy: float, r: float, blur_px: float) -> float:
@@ -420,18 +451,48 @@ def measure_holes(
     candidates = detect_candidates(image, cfg.detect)
     illumination = (estimate_illumination(image)
                     if candidates and cfg.flat_field and cfg.photometric is not None else None)
+    kept: list[tuple[Candidate, PhotometricFit | None]] = []
+    fg = None
+    if cfg.frame_grooves and candidates and cfg.photometric is not None and cfg.photometric.groove_angles_deg:
+        fg = frame_grooves(image, [(c.x_px, c.y_px, 1.3 * c.radius_px + 4.0) for c in candidates],
+                           cfg.photometric.groove_angles_deg)
     for cand in candidates:
-        m = measure_candidate(image, cand, cfg, calibration, rng, illumination)
+        m, ph = _measure_candidate(image, cand, cfg, calibration, rng, illumination, frame_grooves=fg)
         if m is None:
             continue
         # two candidates (a hole split by a deep groove) may converge on one hole
         if any(np.hypot(m.x_px - o.x_px, m.y_px - o.y_px) < 0.5 * o.diameter_px / 2 for o in found):
             continue
+        found.append(m)
+        kept.append((cand, ph))
+    shared = _frame_blur([ph for _, ph in kept]) if cfg.share_blur else None
+    if shared is not None and shared[1] <= cfg.share_blur_chi2:
+        for i, (cand, ph) in enumerate(kept):
+            if ph is not None and ph.converged:
+                m2, _ = _measure_candidate(image, cand, cfg, calibration, np.random.default_rng(0), illumination,
+                                           frame_blur=shared[0], frame_grooves=fg)
+                if m2 is not None:
+                    found[i] = m2
+    out: list[HoleMeasurement] = []
+    for m in found:
         if mm_per_px is not None:
             m = HoleMeasurement(**{**asdict(m), "diameter_mm": m.diameter_px * mm_per_px,
                                    "diameter_u_mm": None if m.diameter_u_px is None else m.diameter_u_px * mm_per_px})
-        found.append(m)
-    return sorted(found, key=lambda m: (m.y_px, m.x_px))
+        out.append(m)
+    return sorted(out, key=lambda m: (m.y_px, m.x_px))
+
+
+def _frame_blur(fits: list[PhotometricFit | None]) -> tuple[float, float] | None:
+    """The blur the frame's converged photometric fits share: their precision-weighted
+    mean, and the chi-square per degree of freedom of their blurs about it; None with
+    fewer than two such fits."""
+    s = np.array([f.blur_px for f in fits if f is not None and f.converged and np.isfinite(f.blur_sd)])
+    sd = np.array([f.blur_sd for f in fits if f is not None and f.converged and np.isfinite(f.blur_sd)])
+    if s.size < 2 or np.any(sd <= 0):
+        return None
+    w = 1.0 / (sd * sd)
+    mean = float(np.sum(w * s) / np.sum(w))
+    return mean, float(np.sum(w * (s - mean) ** 2) / (s.size - 1))
 
 
 @functools.cache

@@ -35,7 +35,7 @@ of the least-squares sandwich from the residuals' own spatial correlation (``r_u
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
@@ -131,6 +131,15 @@ class PhotometricConfig:
     #: subtracts (its level and its cut term), so that pixels where much is modelled
     #: count less (0: equal weights)
     groove_error_share: float = 0.0
+    #: with the frame's groove profiles (``grooves.frame_grooves``) given: the ring gives
+    #: only each family's depth at the hole, an amplitude of this order in x and y (0:
+    #: a constant, 1: linear), not a profile of its own
+    groove_frame_amp_order: int = 1
+    #: ... and then, if > 0, a profile of the ring's own on what the frame's leaves,
+    #: shrunk towards 0 (towards the frame's) by these pseudo-counts per bin (0: none)
+    groove_frame_local_pseudo: float = 0.0
+    #: the hole's inside read down to this share of the radius (1: only the annulus)
+    interior_share: float = 1.0
     sectors: int = 0
     sector_chi2: float = 1.5
 
@@ -165,6 +174,9 @@ class PhotometricFit:
     #: RMS (DN) of the honing-groove field the model subtracts over the annulus' wall
     #: side: how much texture the fit had to model at the rim
     groove_rms_dn: float = float("nan")
+    #: standard deviation of the blur s by white-noise theory (NaN when the blur was
+    #: held fixed or the fit did not converge): what a frame-shared blur weighs it by
+    blur_sd: float = float("nan")
 
 
 def disc_fraction(rho: np.ndarray, radius: float | np.ndarray, s: float) -> np.ndarray:
@@ -188,6 +200,41 @@ def _normal(a: np.ndarray, wa: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, n
         m += wt @ a[i : i + block]
         v += wt @ b[i : i + block]
     return m, v
+
+
+def _frame_groove_field(
+    dx: np.ndarray, dy: np.ndarray, v: np.ndarray, wall: np.ndarray, targets: np.ndarray, cfg: PhotometricConfig,
+    fg, cx: float, cy: float, x0: int, y0: int, roi_w: int,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``_groove_field`` with the families' shapes from the whole frame (``fg``: a
+    ``grooves.FrameGrooves``): the wall ring gives each family's amplitude (a polynomial
+    of ``groove_frame_amp_order`` in x and y) beside a quadratic smooth level, least
+    squares."""
+    n_all = dx.size
+    iy, ix = np.divmod(np.arange(n_all), roi_w)
+    level = fg.level[iy + y0, ix + x0].astype(np.float64)
+    vals, ders = fg.values(dx + cx, dy + cy)
+    sc = max(float(np.max(np.abs(dx))), float(np.max(np.abs(dy))), 1.0)
+    xs, ys = dx / sc, dy / sc
+    amp = [np.ones(n_all)] + ([xs, ys] if cfg.groove_frame_amp_order >= 1 else [])
+    smooth = [np.ones(n_all), xs, ys, xs * xs, xs * ys, ys * ys]
+    gcols = [level * p * a for p in vals for a in amp]
+    a_mat = np.stack(smooth + gcols, axis=1)
+    aw = a_mat[wall]
+    m, rhs = _normal(aw, aw, v[wall])
+    try:
+        coef = np.linalg.solve(m + 1e-9 * np.eye(m.shape[0]), rhs)
+    except np.linalg.LinAlgError:
+        return np.zeros(int(targets.sum())), np.zeros(int(targets.sum())), np.zeros(int(wall.sum()))
+    gc = coef[len(smooth):]
+    field = np.stack(gcols, axis=1) @ gc
+    na = len(amp)
+    rho = np.maximum(np.hypot(dx, dy), 1e-9)
+    d_rho = np.zeros(n_all)
+    for f, a in enumerate(fg.angles_rad):
+        ampl = sum(gc[f * na + k] * amp[k] for k in range(na))
+        d_rho += level * ders[f] * ampl * (-np.sin(a) * dx + np.cos(a) * dy) / rho
+    return field[targets], d_rho[targets], field[wall]
 
 
 def _groove_field(
@@ -325,6 +372,7 @@ def refine_hole(
     blur_px: float,
     cfg: PhotometricConfig = PhotometricConfig(),
     illumination_grad: tuple[float, float] | None = None,
+    frame_grooves=None,
 ) -> PhotometricFit | None:
     """Fit the blurred-disc model around a whole hole's rim; None when it cannot run (too
     few wall pixels, a singular system), ``converged=False`` when the model runs away.
@@ -335,7 +383,7 @@ def refine_hole(
     h, w = image.shape
     s = float(np.clip(blur_px, 0.4, 4.0))
     half = cfg.k_sigma * s + cfg.pad_px
-    r_in, r_out = max(r - half, 0.0), r + half
+    r_in, r_out = max(min(r - half, cfg.interior_share * r), 0.0), r + half
     r_clear = r + 2.5 * s + 1.0  # beyond it the wall is free of the rim's blur
     grooves = bool(cfg.groove_angles_deg)
     r_roi = max(r_out, r_clear + cfg.groove_margin_px) if grooves else r_out
@@ -358,7 +406,17 @@ def refine_hole(
         wall_px = (d2 > r_clear * r_clear) & (d2 <= r_roi * r_roi)
         if wall_px.sum() < 50:
             return None
-        groove, groove_drho, g_wall = _groove_field(dxa, dya, va, wall_px, sel, cfg)
+        if frame_grooves is not None:
+            groove, groove_drho, g_wall = _frame_groove_field(dxa, dya, va, wall_px, sel, cfg, frame_grooves, cx, cy,
+                                                              x0, y0, x1 - x0)
+            if cfg.groove_frame_local_pseudo > 0:
+                va_left = va.copy()
+                va_left[wall_px] -= g_wall
+                g2, d2_, w2 = _groove_field(dxa, dya, va_left, wall_px, sel,
+                                            replace(cfg, groove_pseudo_count=cfg.groove_frame_local_pseudo))
+                groove, groove_drho, g_wall = groove + g2, groove_drho + d2_, g_wall + w2
+        else:
+            groove, groove_drho, g_wall = _groove_field(dxa, dya, va, wall_px, sel, cfg)
     dx, dy, v = dxa[sel], dya[sel], va[sel]
     n = v.size
     rho0 = np.sqrt(d2[sel])
@@ -475,9 +533,11 @@ def refine_hole(
         return PhotometricFit(cx, cy, r, float(blur_px), float("nan"), float(scale), n, it, converged=False)
     contrast = median(bw @ lin[:nw] - bh @ lin[nw:])
     try:
-        var = np.diag(np.linalg.inv(m))[:3]
+        diag = np.diag(np.linalg.inv(m))
+        var = diag[:3]
+        var_s = float(diag[k]) if cfg.fit_blur else float("nan")
     except np.linalg.LinAlgError:
-        var = np.full(3, np.nan)
+        var, var_s = np.full(3, np.nan), float("nan")
     # NaN (not a warning) where the inverse gives no positive variance
     sd = np.sqrt(np.where(var > 0, var, np.nan)) * float(scale)
     g_rms = float("nan")
@@ -490,7 +550,8 @@ def refine_hole(
         hac = _hac_sd(m, jw, res, sel, roi_shape, s, cfg.hac_lengths)
     return PhotometricFit(cx + ox, cy + oy, r0, s, contrast, float(scale), n, it,
                           r_sd=float(sd[2]), cx_sd=float(sd[0]), cy_sd=float(sd[1]),
-                          r_u=float(hac[2]), cx_u=float(hac[0]), cy_u=float(hac[1]), groove_rms_dn=g_rms)
+                          r_u=float(hac[2]), cx_u=float(hac[0]), cy_u=float(hac[1]), groove_rms_dn=g_rms,
+                          blur_sd=float(np.sqrt(var_s)) * float(scale) if var_s > 0 else float("nan"))
 
 
 def _hac_sd(m: np.ndarray, jw: np.ndarray, res: np.ndarray, sel: np.ndarray, shape: tuple[int, int], s: float,
