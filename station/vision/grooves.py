@@ -22,14 +22,17 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
-
-from station.vision.fit import median
+from numba import njit
 
 #: the smooth level the grooves are read against: a Gaussian of this sigma (px), wide
 #: against a groove (0.8-3 px) and narrow against the blotches and the vignetting
-SMOOTH_SIGMA_PX = 10.0
+SMOOTH_SIGMA_PX = 40.0
 #: pixels this many robust standard deviations off their bin are outliers (defects)
 _CLIP = 4.0
+#: every STRIDE-th row is read
+STRIDE = 4
+#: fewer wall pixels read than this: no profiles
+MIN_PIXELS = 2000
 
 
 @dataclass(frozen=True)
@@ -39,8 +42,14 @@ class FrameGrooves:
     angles_rad: tuple[float, ...]
     u0: tuple[float, ...]  # u of each profile's first bin centre
     step_px: float
-    profiles: tuple[np.ndarray, ...]  # relative (1 = the wall's level), one per family
-    level: np.ndarray  # the wall's smooth level (DN), the frame's shape
+    profiles: tuple[np.ndarray, ...]  # relative (0 = the wall's level), one per family
+    level: np.ndarray  # the wall's smooth level (DN) over the window read
+    origin: tuple[int, int] = (0, 0)  # (x, y) of the window's first pixel in the frame
+
+    def level_at(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """The smooth level at integer frame pixels (x, y), clipped to the window."""
+        h, w = self.level.shape
+        return self.level[np.clip(y - self.origin[1], 0, h - 1), np.clip(x - self.origin[0], 0, w - 1)]
 
     def values(self, x: np.ndarray, y: np.ndarray) -> tuple[list[np.ndarray], list[np.ndarray]]:
         """Per family: the relative profile at pixels (x, y), and its derivative in u."""
@@ -54,47 +63,120 @@ class FrameGrooves:
 
 
 def frame_grooves(image: np.ndarray, holes: list[tuple[float, float, float]], angles_deg=(30.0, -30.0),
-                  step_px: float = 0.5, sweeps: int = 3, stride: int = 1) -> FrameGrooves | None:
+                  step_px: float = 0.5, sweeps: int = 3, stride: int = STRIDE,
+                  window: tuple[int, int, int, int] | None = None) -> FrameGrooves | None:
     """The families' profiles from the wall of a grey frame; ``holes``: (x, y, radius)
     of the dark holes to leave out (with a margin for their blur).  None when too little
-    wall is left."""
-    img = image.astype(np.float32)
+    wall is left.  Every ``stride``-th row is read (a 0.5 px bin along a line across the
+    frame still holds ~100 pixels or more).  ``window``: (x0, y0, x1, y1), read only
+    that part of the frame (a lens's distortion bends a straight groove over a frame,
+    not over a hole's neighbourhood)."""
+    x0, y0, x1, y1 = window if window is not None else (0, 0, image.shape[1], image.shape[0])
+    x0, y0 = max(int(x0), 0), max(int(y0), 0)
+    x1, y1 = min(int(x1), image.shape[1]), min(int(y1), image.shape[0])
+    if x1 - x0 < 16 or y1 - y0 < 16:
+        return None
+    img = image[y0:y1, x0:x1].astype(np.float32)
     h, w = img.shape
     mask = np.ones((h, w), np.float32)
     for x, y, r in holes:
-        cv2.circle(mask, (int(round(x)), int(round(y))), int(np.ceil(r + 6.0)), 0.0, -1)
-    num = cv2.GaussianBlur(img * mask, (0, 0), SMOOTH_SIGMA_PX)
-    den = cv2.GaussianBlur(mask, (0, 0), SMOOTH_SIGMA_PX)
-    level = num / np.maximum(den, 1e-3)
-    ok = (mask > 0) & (den > 0.5) & (level > 5.0)
-    if stride > 1:
-        sub = np.zeros_like(ok)
-        sub[::stride] = True
-        ok &= sub
-    ys, xs = np.nonzero(ok)
-    if xs.size < 10_000:
+        cv2.circle(mask, (int(round(x - x0)), int(round(y - y0))), int(np.ceil(r + 6.0)), 0.0, -1)
+    level = _smooth_level(img, mask)
+    rows = np.arange(0, h, stride)
+    ok = (mask[rows] > 0) & (level[rows] > 5.0)
+    if ok.sum() < MIN_PIXELS:
         return None
-    rel = (img[ys, xs] / level[ys, xs] - 1.0).astype(np.float64)
-    xs, ys = xs.astype(np.float64), ys.astype(np.float64)
-    angles = tuple(float(np.deg2rad(a)) for a in angles_deg)
-    idx, u0s, nbs = [], [], []
-    for a in angles:
-        u = -np.sin(a) * xs + np.cos(a) * ys
-        lo = float(u.min()) - step_px
-        j = np.floor((u - lo) / step_px).astype(np.int64)
-        idx.append(j)
-        u0s.append(lo + 0.5 * step_px)
-        nbs.append(int(j.max()) + 1)
-    weights = np.ones_like(rel)
-    prof = [np.zeros(n) for n in nbs]
+    rel = (img[rows] / np.maximum(level[rows], 1e-3) - 1.0).astype(np.float64)
+    angles = np.array([np.deg2rad(a) for a in angles_deg], dtype=np.float64)
+    prof, u0 = _profiles(rel, ok, np.arange(x0, x1, dtype=np.float64), (rows + y0).astype(np.float64), angles,
+                         float(step_px), int(sweeps))
+    return FrameGrooves(tuple(float(a) for a in angles), tuple(float(v) for v in u0), step_px,
+                        tuple(np.ascontiguousarray(p) for p in prof), level, (x0, y0))
+
+
+def _smooth_level(img: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """The wall's level: a Gaussian of ``SMOOTH_SIGMA_PX`` normalised by the mask (the
+    holes left out), computed at 1/8 scale and brought back bilinearly."""
+    h, w = img.shape
+    f = 8
+    sw, sh = max(w // f, 1), max(h // f, 1)
+    num = cv2.resize(img * mask, (sw, sh), interpolation=cv2.INTER_AREA)
+    den = cv2.resize(mask, (sw, sh), interpolation=cv2.INTER_AREA)
+    sig = SMOOTH_SIGMA_PX / f
+    num = cv2.GaussianBlur(num, (0, 0), sig, borderType=cv2.BORDER_REFLECT)
+    den = cv2.GaussianBlur(den, (0, 0), sig, borderType=cv2.BORDER_REFLECT)
+    small = num / np.maximum(den, 1e-3)
+    return cv2.resize(small, (w, h), interpolation=cv2.INTER_LINEAR)
+
+
+@njit(cache=True)
+def _profiles(rel, ok, xs, ys, angles, step, sweeps):
+    """Backfitted bin means of ``rel`` (rows at ``ys``, pixels where ``ok``) across each
+    family's direction; after the first pass, pixels beyond ``_CLIP`` robust standard
+    deviations of their fit drop out.  Returns the profiles and each one's first bin's u."""
+    nr, w = rel.shape
+    nf = angles.size
+    u0 = np.empty(nf)
+    nbs = np.empty(nf, dtype=np.int64)
+    for f in range(nf):
+        sn, cs = np.sin(angles[f]), np.cos(angles[f])
+        lo, hi = 1e300, -1e300
+        for yy in (ys[0], ys[nr - 1]):
+            for xx in (xs[0], xs[w - 1]):
+                u = -sn * xx + cs * yy
+                lo, hi = min(lo, u), max(hi, u)
+        u0[f] = lo - step
+        nbs[f] = int((hi - u0[f]) / step) + 2
+    nmax = nbs.max()
+    idx = np.empty((nf, nr, w), dtype=np.int32)
+    for f in range(nf):
+        sn, cs = np.sin(angles[f]), np.cos(angles[f])
+        for i in range(nr):
+            for j in range(w):
+                idx[f, i, j] = int((-sn * xs[j] + cs * ys[i] - u0[f]) / step)
+    prof = np.zeros((nf, nmax))
+    sums = np.zeros(nmax)
+    cnts = np.zeros(nmax)
+    weight = ok.astype(np.float64)
     for it in range(sweeps + 1):
-        for f in range(len(angles)):
-            other = sum(prof[g][idx[g]] for g in range(len(angles)) if g != f)
-            target = (rel - other) * weights
-            cnt = np.bincount(idx[f], weights, minlength=nbs[f])
-            prof[f] = np.bincount(idx[f], target, minlength=nbs[f]) / np.maximum(cnt, 1.0)
-        if it == 0:  # after a first pass, drop the outliers (pores, scratches, glints)
-            res = rel - sum(prof[g][idx[g]] for g in range(len(angles)))
-            scale = max(1.4826 * median(np.abs(res)), 1e-4)
-            weights = (np.abs(res) <= _CLIP * scale).astype(np.float64)
-    return FrameGrooves(angles, tuple(u0s), step_px, tuple(p.astype(np.float64) for p in prof), level)
+        for f in range(nf):
+            sums[:] = 0.0
+            cnts[:] = 0.0
+            for i in range(nr):
+                for j in range(w):
+                    if weight[i, j] == 0.0:
+                        continue
+                    other = 0.0
+                    for g in range(nf):
+                        if g != f:
+                            other += prof[g, idx[g, i, j]]
+                    k = idx[f, i, j]
+                    sums[k] += rel[i, j] - other
+                    cnts[k] += 1.0
+            for k in range(nmax):
+                prof[f, k] = sums[k] / cnts[k] if cnts[k] > 0 else 0.0
+        if it == 0:
+            # the robust scale of the residuals (a histogram's median of |residual|)
+            res = np.empty(nr * w)
+            n = 0
+            for i in range(0, nr, 3):  # a third of the rows: enough for a median
+                for j in range(w):
+                    if weight[i, j] > 0:
+                        v = rel[i, j]
+                        for g in range(nf):
+                            v -= prof[g, idx[g, i, j]]
+                        res[n] = abs(v)
+                        n += 1
+            scale = max(1.4826 * np.median(res[:n]), 1e-4)
+            for i in range(nr):
+                for j in range(w):
+                    if weight[i, j] > 0:
+                        v = rel[i, j]
+                        for g in range(nf):
+                            v -= prof[g, idx[g, i, j]]
+                        if abs(v) > _CLIP * scale:
+                            weight[i, j] = 0.0
+    # the profiles as bin centres: u of bin k's centre is u0 + (k + 0.5) step
+    for f in range(nf):
+        u0[f] += 0.5 * step
+    return prof, u0

@@ -102,31 +102,25 @@ class MeasureConfig:
     #: wide 1000 190 -> 194 of 202; whole holes unchanged
     wide_inner_border: float = 0.15
     #: a whole hole's diameter and centre uncertainties (``HoleMeasurement.diameter_u_px``,
-    #: ``x_u_px``, ``y_u_px``) are the photometric fit's white-noise standard deviations
-    #: times this factor: the texture is correlated noise the theory does not see.
-    #: Chosen so that +/- 2 u holds 95 % of the errors on dev frames (diameter: seeds
-    #: 3000-3199 + 9000-9199: 1.58; 5000-5199 + 11000-11199: 1.42; centre, x and y
-    #: pooled: 1.50 on both); on fresh frames +/- 2 u then holds 95.2 % of the diameters
-    #: (station seeds 20000-20399, 608 holes) and 98.2 % (wide envelope, seeds
-    #: 1000-1399); the centres' figures are in docs/vision.md
-    uncertainty_factor: float = 1.5
-    #: where the uncertainties come from: "white" (the fit's white-noise standard
-    #: deviations times ``uncertainty_factor``, rounds 7-11) or "correlated" (the fit's
-    #: kernel estimate of its sandwich from the residuals' own spatial correlation,
-    #: ``PhotometricFit.r_u``, times ``correlated_uncertainty_factor``; round 12).  On the
-    #: dev frames (station seeds 3000-3299 + 5000-5299, 918 whole holes), at the factor
-    #: that makes +/- 2 u hold 95 %, the median u over the frame-aware Cramer-Rao bound
-    #: is 1.42 (diameter) and 1.28 (centre) for "correlated", 1.45 and 1.29 for "white",
-    #: and u tracks |error| a little better (rank correlation 0.39 / 0.37 against 0.39 /
-    #: 0.35; spread of log(u / bound) 0.16 against 0.21 for the diameter). "white" stays
-    #: the default until the inspection's GUM budget and benches are run with the other
-    #: (docs/vision.md, Each hole's uncertainty)
-    uncertainty_model: str = "white"
-    #: the factor that makes +/- 2 u hold 95 % on those dev frames: 1.24 (diameter),
-    #: 1.23 (centre, x and y pooled); one factor serves both.  It is above 1 because
-    #: what the residuals do not show (the groove model's own error, absorbed by the
-    #: radius and the centre) is not in the sandwich
-    correlated_uncertainty_factor: float = 1.23
+    #: ``x_u_px``, ``y_u_px``) come from the photometric fit: "correlated" (the default
+    #: since round 13) takes its kernel estimate of the least-squares sandwich from the
+    #: residuals' own spatial correlation (``PhotometricFit.r_u``, ``cx_u``, ``cy_u``:
+    #: the grain blurred by the camera is correlated noise) times a factor per quantity;
+    #: "white" its white-noise standard deviations times ``uncertainty_factor`` (rounds
+    #: 7-12).  On the dev frames (station seeds 3000-3149 + 5000-5149, 429 whole holes)
+    #: with round 13's fit, at the factor that makes +/- 2 u hold 95 %, +/- 3 u holds
+    #: 99.30 % (diameter) and 99.53 % (centre) for "correlated", 99.07 % and 99.42 % for
+    #: "white", whose u tracks the errors less well (docs/vision.md, Each hole's
+    #: uncertainty)
+    uncertainty_factor: float = 1.6
+    uncertainty_model: str = "correlated"
+    #: the diameter's factor on the correlated u: 1.35 (dev frames above: +/- 2 u holds
+    #: 96.3 %, +/- 3 u 99.77 %, median u over the frame-aware Cramer-Rao bound 1.22; at
+    #: 1.25, 95.1 % / 99.30 % / 1.13).  Above 1 because what the residuals do not show,
+    #: the groove model's own error absorbed by the radius, is not in the sandwich
+    correlated_uncertainty_factor: float = 1.35
+    #: the centre's (x and y pooled): 1.25 (96.3 %, 99.65 %, 1.20)
+    correlated_centre_uncertainty_factor: float = 1.25
     #: a candidate whose wide ray search (72 rays) has fewer rays on one RANSAC circle is
     #: dropped before the narrow search: no true hole had fewer than 24 (dev frames,
     #: station seeds 3000-3199 + 5000-5199, 801 holes; wide 3000-3199, 396 holes, cut holes
@@ -138,11 +132,14 @@ class MeasureConfig:
     #: holes' own fitted blurs weighted by their precision, when they agree with it
     #: (chi-square per degree of freedom below ``share_blur_chi2``; a lens whose blur
     #: changes across the field keeps each hole's own)
-    share_blur: bool = False
+    share_blur: bool = True
     share_blur_chi2: float = 4.0
     #: the honing grooves' profiles from the whole frame (``grooves.py``), each hole's
     #: ring giving only their depth there; else each hole reads them from its ring
-    frame_grooves: bool = False
+    frame_grooves: bool = True
+    #: ... read over a window this far (px) beyond 1.3 x each candidate's radius, not the
+    #: whole frame (None): a lens's distortion bends a straight groove across a frame
+    groove_window_px: float | None = 150.0
 
 
 @dataclass(frozen=True)
@@ -351,14 +348,16 @@ def _measure_candidate(
             # way to the fit's (all of it since the hole is flat-fielded: see the setting)
             r_true = ph.r
             if cfg.uncertainty_model == "correlated":
-                k, (r_sd, cx_sd, cy_sd) = cfg.correlated_uncertainty_factor, (ph.r_u, ph.cx_u, ph.cy_u)
+                k, kc = cfg.correlated_uncertainty_factor, cfg.correlated_centre_uncertainty_factor
+                r_sd, cx_sd, cy_sd = ph.r_u, ph.cx_u, ph.cy_u
             else:
-                k, (r_sd, cx_sd, cy_sd) = cfg.uncertainty_factor, (ph.r_sd, ph.cx_sd, ph.cy_sd)
+                k = kc = cfg.uncertainty_factor
+                r_sd, cx_sd, cy_sd = ph.r_sd, ph.cx_sd, ph.cy_sd
             if np.isfinite(r_sd):
                 diameter_u = k * 2.0 * r_sd
             if np.isfinite(cx_sd) and np.isfinite(cy_sd) and cfg.photometric_centre_weight == 1.0:
                 # the centre is the fit's own (a blend with the rays' has no such figure)
-                x_u, y_u = k * cx_sd, k * cy_sd
+                x_u, y_u = kc * cx_sd, kc * cy_sd
             shift = cfg.photometric_centre_weight * np.array([ph.cx - cx, ph.cy - cy])
             cx, cy = cx + shift[0], cy + shift[1]
     pts = edges.points + shift + (r_true - r) * edges.directions
@@ -451,12 +450,18 @@ def measure_holes(
     candidates = detect_candidates(image, cfg.detect)
     illumination = (estimate_illumination(image)
                     if candidates and cfg.flat_field and cfg.photometric is not None else None)
-    kept: list[tuple[Candidate, PhotometricFit | None]] = []
-    fg = None
-    if cfg.frame_grooves and candidates and cfg.photometric is not None and cfg.photometric.groove_angles_deg:
-        fg = frame_grooves(image, [(c.x_px, c.y_px, 1.3 * c.radius_px + 4.0) for c in candidates],
-                           cfg.photometric.groove_angles_deg)
+    kept: list[tuple[Candidate, PhotometricFit | None, object]] = []
+    grooves_on = bool(cfg.frame_grooves and cfg.photometric is not None and cfg.photometric.groove_angles_deg)
+    masks = [(c.x_px, c.y_px, 1.3 * c.radius_px + 4.0) for c in candidates]
+    whole_frame = (frame_grooves(image, masks, cfg.photometric.groove_angles_deg)
+                   if grooves_on and candidates and cfg.groove_window_px is None else None)
     for cand in candidates:
+        fg = whole_frame
+        if grooves_on and cfg.groove_window_px is not None:
+            half = cand.radius_px * 1.3 + cfg.groove_window_px
+            fg = frame_grooves(image, masks, cfg.photometric.groove_angles_deg,
+                               window=(int(cand.x_px - half), int(cand.y_px - half),
+                                       int(cand.x_px + half) + 1, int(cand.y_px + half) + 1))
         m, ph = _measure_candidate(image, cand, cfg, calibration, rng, illumination, frame_grooves=fg)
         if m is None:
             continue
@@ -464,10 +469,10 @@ def measure_holes(
         if any(np.hypot(m.x_px - o.x_px, m.y_px - o.y_px) < 0.5 * o.diameter_px / 2 for o in found):
             continue
         found.append(m)
-        kept.append((cand, ph))
-    shared = _frame_blur([ph for _, ph in kept]) if cfg.share_blur else None
+        kept.append((cand, ph, fg))
+    shared = _frame_blur([ph for _, ph, _ in kept]) if cfg.share_blur else None
     if shared is not None and shared[1] <= cfg.share_blur_chi2:
-        for i, (cand, ph) in enumerate(kept):
+        for i, (cand, ph, fg) in enumerate(kept):
             if ph is not None and ph.converged:
                 m2, _ = _measure_candidate(image, cand, cfg, calibration, np.random.default_rng(0), illumination,
                                            frame_blur=shared[0], frame_grooves=fg)

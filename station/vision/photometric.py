@@ -94,7 +94,7 @@ class PhotometricConfig:
     #: pseudo-counts that shrink a sparse bin towards 0
     groove_pseudo_count: float = 2.0
     #: weight of the pixels from the expected texture share (1 - u)^2 of their variance
-    texture_weighting: bool = False
+    texture_weighting: bool = True
     #: model that the grooves are cut by the hole before the blur: the image is
     #: B[G (1 - c)], not B[G] (1 - B[c]); to first order in the blur they differ by
     #: s_cam^2 grad B[G] . grad B[1 - c] = s_cam^2 / s phi(t) dG/drho, read from the groove
@@ -137,9 +137,9 @@ class PhotometricConfig:
     groove_frame_amp_order: int = 1
     #: ... and then, if > 0, a profile of the ring's own on what the frame's leaves,
     #: shrunk towards 0 (towards the frame's) by these pseudo-counts per bin (0: none)
-    groove_frame_local_pseudo: float = 0.0
+    groove_frame_local_pseudo: float = 10.0
     #: the hole's inside read down to this share of the radius (1: only the annulus)
-    interior_share: float = 1.0
+    interior_share: float = 0.0
     sectors: int = 0
     sector_chi2: float = 1.5
 
@@ -212,11 +212,13 @@ def _frame_groove_field(
     squares."""
     n_all = dx.size
     iy, ix = np.divmod(np.arange(n_all), roi_w)
-    level = fg.level[iy + y0, ix + x0].astype(np.float64)
+    level = fg.level_at(ix + x0, iy + y0).astype(np.float64)
     vals, ders = fg.values(dx + cx, dy + cy)
     sc = max(float(np.max(np.abs(dx))), float(np.max(np.abs(dy))), 1.0)
     xs, ys = dx / sc, dy / sc
     amp = [np.ones(n_all)] + ([xs, ys] if cfg.groove_frame_amp_order >= 1 else [])
+    if cfg.groove_frame_amp_order >= 2:
+        amp += [xs * xs, xs * ys, ys * ys]
     smooth = [np.ones(n_all), xs, ys, xs * xs, xs * ys, ys * ys]
     gcols = [level * p * a for p in vals for a in amp]
     a_mat = np.stack(smooth + gcols, axis=1)
