@@ -1,0 +1,89 @@
+"""Round 13 of the hole fit: the grooves' profiles read over a hole's wide neighbourhood
+(``station.vision.grooves``) and the blur the frame's holes share (``measure._frame_blur``)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from sim.camera.render import FrameParams, HoleSpec, render_frame
+from station.vision.grooves import frame_grooves
+from station.vision.measure import MeasureConfig, _frame_blur, measure_holes
+from station.vision.photometric import PhotometricFit
+
+
+def _cross_hatch(w: int, h: int, seed: int, depth: float = 0.08, sigma: float = 1.5):
+    """A flat wall of 160 DN with two families of Gaussian grooves at +/-30 deg (known
+    places and depths), and the true relative field."""
+    rng = np.random.default_rng(seed)
+    yy, xx = np.mgrid[0:h, 0:w].astype(np.float64)
+    rel = np.zeros((h, w))
+    for a in np.deg2rad([30.0, -30.0]):
+        u = -np.sin(a) * xx + np.cos(a) * yy
+        for c in rng.uniform(u.min(), u.max(), int((u.max() - u.min()) / 12)):
+            rel -= rng.uniform(0.3, 1.0) * depth * np.exp(-0.5 * ((u - c) / sigma) ** 2)
+    return 160.0 * (1.0 + rel), rel
+
+
+def test_the_profiles_recover_a_known_cross_hatch_around_a_masked_hole():
+    clean, rel = _cross_hatch(640, 480, seed=3)
+    img = clean + np.random.default_rng(4).normal(0.0, 3.0, clean.shape)
+    yy, xx = np.mgrid[0:480, 0:640]
+    hole = np.hypot(xx - 300.0, yy - 250.0) < 40
+    img[hole] = 40.0  # a dark hole: masked, it must not bend the profiles
+    img = np.clip(np.rint(img), 0, 255).astype(np.uint8)
+    fg = frame_grooves(img, [(300.0, 250.0, 40.0)], stride=2)
+    assert fg is not None
+    wall = ~hole & (np.hypot(xx - 300.0, yy - 250.0) < 90)  # the ring a hole's fit would read
+    vals, _ = fg.values(xx[wall].astype(float), yy[wall].astype(float))
+    model = sum(vals)
+    truth = rel[wall] - rel[wall].mean()
+    err = (model - model.mean()) - truth
+    assert np.sqrt(np.mean(err**2)) < 0.15 * np.sqrt(np.mean(truth**2))
+    # the level is the wall's, not the hole's
+    assert fg.level_at(np.array([300]), np.array([250]))[0] == pytest.approx(160.0 * (1 + rel.mean()), rel=0.05)
+
+
+def test_a_window_reads_the_same_lines_in_frame_coordinates():
+    clean, _ = _cross_hatch(640, 480, seed=5)
+    img = np.clip(np.rint(clean + np.random.default_rng(6).normal(0.0, 2.0, clean.shape)), 0, 255).astype(np.uint8)
+    whole = frame_grooves(img, [], stride=2)
+    part = frame_grooves(img, [], stride=2, window=(200, 150, 420, 360))
+    assert part.origin == (200, 150) and part.level.shape == (210, 220)
+    yy, xx = np.mgrid[200:310, 260:360]
+    a = sum(whole.values(xx.ravel().astype(float), yy.ravel().astype(float))[0])
+    b = sum(part.values(xx.ravel().astype(float), yy.ravel().astype(float))[0])
+    assert np.corrcoef(a, b)[0, 1] > 0.95
+    # too small a window, or a frame that is all hole: no profiles
+    assert frame_grooves(img, [], window=(0, 0, 10, 10)) is None
+    assert frame_grooves(img, [(320.0, 240.0, 900.0)]) is None
+
+
+def _fit(blur: float, sd: float) -> PhotometricFit:
+    return PhotometricFit(0.0, 0.0, 20.0, blur, 80.0, 2.0, 1000, 3, blur_sd=sd)
+
+
+def test_the_frame_blur_is_the_precision_weighted_mean_and_says_when_holes_disagree():
+    mean, chi2 = _frame_blur([_fit(1.20, 0.01), _fit(1.23, 0.03), None])
+    assert mean == pytest.approx((1.20 / 0.01**2 + 1.23 / 0.03**2) / (1 / 0.01**2 + 1 / 0.03**2))
+    assert chi2 < MeasureConfig().share_blur_chi2
+    # a lens whose blur changes across the field: the holes keep their own
+    assert _frame_blur([_fit(1.0, 0.01), _fit(1.5, 0.01)])[1] > MeasureConfig().share_blur_chi2
+    assert _frame_blur([_fit(1.2, 0.01)]) is None
+    assert _frame_blur([_fit(1.2, 0.01), _fit(1.2, float("nan"))]) is None
+
+
+def test_sharing_the_blur_changes_nothing_for_a_frame_of_one_hole_and_moves_a_small_hole_of_two():
+    p = FrameParams(width_px=480, height_px=360, groove_depth=0.05, grain=0.03, blotch=0.0, blur_sigma_px=1.6,
+                    gain_e_per_dn=30.0, read_noise_dn=1.0, vignetting=0.0, wall_level_dn=150, hole_level_dn=50)
+    one = render_frame(p, [HoleSpec(240.4, 180.2, 70.0)], seed=2).image
+    a = measure_holes(one, cfg=MeasureConfig(share_blur=True))
+    b = measure_holes(one, cfg=MeasureConfig(share_blur=False))
+    assert [m.diameter_px for m in a] == [m.diameter_px for m in b]
+    two = render_frame(p, [HoleSpec(150.4, 180.2, 90.0), HoleSpec(370.7, 170.3, 24.0)], seed=2).image
+    shared = sorted(measure_holes(two, cfg=MeasureConfig(share_blur=True)), key=lambda m: m.diameter_px)
+    own = sorted(measure_holes(two, cfg=MeasureConfig(share_blur=False)), key=lambda m: m.diameter_px)
+    assert len(shared) == len(own) == 2
+    assert shared[0].diameter_px != own[0].diameter_px  # the small hole took the frame's blur
+    for m, d in zip(shared, (24.0, 90.0)):
+        assert abs(m.diameter_px - d) < 4 * m.diameter_u_px
