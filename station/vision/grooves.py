@@ -31,6 +31,8 @@ SMOOTH_SIGMA_PX = 40.0
 _CLIP = 4.0
 #: every STRIDE-th row is read
 STRIDE = 4
+#: the smooth level is computed at 1/_LEVEL_SCALE of the resolution
+_LEVEL_SCALE = 8
 #: fewer wall pixels read than this: no profiles
 MIN_PIXELS = 2000
 
@@ -43,13 +45,13 @@ class FrameGrooves:
     u0: tuple[float, ...]  # u of each profile's first bin centre
     step_px: float
     profiles: tuple[np.ndarray, ...]  # relative (0 = the wall's level), one per family
-    level: np.ndarray  # the wall's smooth level (DN) over the window read
+    level: "WallLevel"  # the wall's smooth level over the frame
+    shape: tuple[int, int]  # (height, width) of the window read
     origin: tuple[int, int] = (0, 0)  # (x, y) of the window's first pixel in the frame
 
     def level_at(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
-        """The smooth level at integer frame pixels (x, y), clipped to the window."""
-        h, w = self.level.shape
-        return self.level[np.clip(y - self.origin[1], 0, h - 1), np.clip(x - self.origin[0], 0, w - 1)]
+        """The wall's smooth level (DN) at frame pixels (x, y)."""
+        return self.level.at(x, y)
 
     def values(self, x: np.ndarray, y: np.ndarray) -> tuple[list[np.ndarray], list[np.ndarray]]:
         """Per family: the relative profile at pixels (x, y), and its derivative in u."""
@@ -62,51 +64,94 @@ class FrameGrooves:
         return vals, ders
 
 
+@dataclass(frozen=True)
+class WallLevel:
+    """The wall's smooth level over a frame (DN), the holes left out: a Gaussian of
+    ``SMOOTH_SIGMA_PX`` normalised by the mask, kept at 1/``_LEVEL_SCALE`` scale."""
+
+    small: np.ndarray
+    shape: tuple[int, int]  # (height, width) of the frame
+
+    def at(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """The level at frame pixels (x, y) (bilinear, held at the frame's edge)."""
+        return _upsample(self.small, self.shape, np.asarray(x, np.float64), np.asarray(y, np.float64))
+
+
+def _hole_mask(shape: tuple[int, int], holes, x0: int = 0, y0: int = 0) -> np.ndarray:
+    mask = np.ones(shape, np.float32)
+    for x, y, r in holes:
+        cv2.circle(mask, (int(round(x - x0)), int(round(y - y0))), int(np.ceil(r + 6.0)), 0.0, -1)
+    return mask
+
+
+def wall_level(image: np.ndarray, holes: list[tuple[float, float, float]]) -> WallLevel:
+    """The frame's ``WallLevel``; ``holes`` as ``frame_grooves`` takes them."""
+    h, w = image.shape[:2]
+    f = _LEVEL_SCALE
+    sw, sh = max(w // f, 1), max(h // f, 1)
+    # area-averaged first (the level is smooth on 40 px): the holes masked at that scale
+    small = cv2.resize(image, (sw, sh), interpolation=cv2.INTER_AREA).astype(np.float32)
+    mask = np.ones((sh, sw), np.float32)
+    for x, y, r in holes:
+        cv2.circle(mask, (int(round((x + 0.5) * sw / w - 0.5)), int(round((y + 0.5) * sh / h - 0.5))),
+                   int(np.ceil((r + 6.0) * sw / w)) + 1, 0.0, -1)
+    sig = SMOOTH_SIGMA_PX * sw / w
+    num = cv2.GaussianBlur(small * mask, (0, 0), sig, borderType=cv2.BORDER_REFLECT)
+    den = cv2.GaussianBlur(mask, (0, 0), sig, borderType=cv2.BORDER_REFLECT)
+    return WallLevel((num / np.maximum(den, 1e-3)).astype(np.float32), (h, w))
+
+
 def frame_grooves(image: np.ndarray, holes: list[tuple[float, float, float]], angles_deg=(30.0, -30.0),
                   step_px: float = 0.5, sweeps: int = 3, stride: int = STRIDE,
-                  window: tuple[int, int, int, int] | None = None) -> FrameGrooves | None:
+                  window: tuple[int, int, int, int] | None = None,
+                  level: WallLevel | None = None) -> FrameGrooves | None:
     """The families' profiles from the wall of a grey frame; ``holes``: (x, y, radius)
     of the dark holes to leave out (with a margin for their blur).  None when too little
     wall is left.  Every ``stride``-th row is read (a 0.5 px bin along a line across the
     frame still holds ~100 pixels or more).  ``window``: (x0, y0, x1, y1), read only
     that part of the frame (a lens's distortion bends a straight groove over a frame,
-    not over a hole's neighbourhood)."""
+    not over a hole's neighbourhood).  ``level``: the frame's ``wall_level`` (computed
+    here when not given: give it when reading several windows of one frame)."""
     x0, y0, x1, y1 = window if window is not None else (0, 0, image.shape[1], image.shape[0])
     x0, y0 = max(int(x0), 0), max(int(y0), 0)
     x1, y1 = min(int(x1), image.shape[1]), min(int(y1), image.shape[0])
     if x1 - x0 < 16 or y1 - y0 < 16:
         return None
+    if level is None:
+        level = wall_level(image, holes)
     img = image[y0:y1, x0:x1].astype(np.float32)
     h, w = img.shape
-    mask = np.ones((h, w), np.float32)
-    for x, y, r in holes:
-        cv2.circle(mask, (int(round(x - x0)), int(round(y - y0))), int(np.ceil(r + 6.0)), 0.0, -1)
-    level = _smooth_level(img, mask)
+    mask = _hole_mask((h, w), holes, x0, y0)
     rows = np.arange(0, h, stride)
-    ok = (mask[rows] > 0) & (level[rows] > 5.0)
+    lv = level.at(np.arange(x0, x1, dtype=np.float64)[None, :], (rows + y0).astype(np.float64)[:, None])
+    ok = (mask[rows] > 0) & (lv > 5.0)
     if ok.sum() < MIN_PIXELS:
         return None
-    rel = (img[rows] / np.maximum(level[rows], 1e-3) - 1.0).astype(np.float64)
+    rel = (img[rows] / np.maximum(lv, 1e-3) - 1.0).astype(np.float64)
     angles = np.array([np.deg2rad(a) for a in angles_deg], dtype=np.float64)
     prof, u0 = _profiles(rel, ok, np.arange(x0, x1, dtype=np.float64), (rows + y0).astype(np.float64), angles,
                          float(step_px), int(sweeps))
     return FrameGrooves(tuple(float(a) for a in angles), tuple(float(v) for v in u0), step_px,
-                        tuple(np.ascontiguousarray(p) for p in prof), level, (x0, y0))
+                        tuple(np.ascontiguousarray(p) for p in prof), level, (h, w), (x0, y0))
 
 
-def _smooth_level(img: np.ndarray, mask: np.ndarray) -> np.ndarray:
-    """The wall's level: a Gaussian of ``SMOOTH_SIGMA_PX`` normalised by the mask (the
-    holes left out), computed at 1/8 scale and brought back bilinearly."""
-    h, w = img.shape
-    f = 8
-    sw, sh = max(w // f, 1), max(h // f, 1)
-    num = cv2.resize(img * mask, (sw, sh), interpolation=cv2.INTER_AREA)
-    den = cv2.resize(mask, (sw, sh), interpolation=cv2.INTER_AREA)
-    sig = SMOOTH_SIGMA_PX / f
-    num = cv2.GaussianBlur(num, (0, 0), sig, borderType=cv2.BORDER_REFLECT)
-    den = cv2.GaussianBlur(den, (0, 0), sig, borderType=cv2.BORDER_REFLECT)
-    small = num / np.maximum(den, 1e-3)
-    return cv2.resize(small, (w, h), interpolation=cv2.INTER_LINEAR)
+def _upsample(small: np.ndarray, shape: tuple[int, int], x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """``small`` (an area-averaged image of ``shape``) read bilinearly at full-resolution
+    pixels (x, y), as ``cv2.resize(small, shape, INTER_LINEAR)`` would there; x and y
+    broadcast together."""
+    h, w = shape
+    sh, sw = small.shape
+    x, y = np.broadcast_arrays(x, y)
+    mx = ((x + 0.5) * (sw / w) - 0.5).astype(np.float32).ravel()
+    my = ((y + 0.5) * (sh / h) - 0.5).astype(np.float32).ravel()
+    # remap's maps are at most 32767 on a side: the points as rows of 1024
+    n = mx.size
+    cols = 1024
+    pad = (-n) % cols
+    mx, my = np.pad(mx, (0, pad), mode="edge"), np.pad(my, (0, pad), mode="edge")
+    out = cv2.remap(small, mx.reshape(-1, cols), my.reshape(-1, cols), cv2.INTER_LINEAR,
+                    borderMode=cv2.BORDER_REPLICATE)
+    return out.ravel()[:n].reshape(x.shape)
 
 
 @njit(cache=True)

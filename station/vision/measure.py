@@ -27,7 +27,7 @@ from station.vision.calibration import CameraCalibration
 from station.vision.detect import Candidate, DetectConfig, detect_candidates
 from station.vision.edges import KERNEL_RADIUS_PX, deblurred_radius, gradient, profile_width2, psf_variance, ray_edges
 from station.vision.edges import SMOOTH_SIGMA_PX
-from station.vision.grooves import frame_grooves
+from station.vision.grooves import frame_grooves, wall_level
 from station.vision.fit import fit_ellipse_direct, gradient_1d, median, ransac_circle, robust_circle, taubin_circle
 from station.vision.illumination import Illumination, estimate_illumination
 from station.vision.imageio import to_8bit, to_grey
@@ -107,17 +107,18 @@ class MeasureConfig:
     #: residuals' own spatial correlation (``PhotometricFit.r_u``, ``cx_u``, ``cy_u``:
     #: the grain blurred by the camera is correlated noise) times a factor per quantity;
     #: "white" its white-noise standard deviations times ``uncertainty_factor`` (rounds
-    #: 7-12).  On the dev frames (station seeds 3000-3149 + 5000-5149, 429 whole holes)
-    #: with round 13's fit, at the factor that makes +/- 2 u hold 95 %, +/- 3 u holds
-    #: 99.30 % (diameter) and 99.53 % (centre) for "correlated", 99.07 % and 99.42 % for
-    #: "white", whose u tracks the errors less well (docs/vision.md, Each hole's
-    #: uncertainty)
+    #: 7-12).  On the dev frames (station seeds 3000-3149 + 5000-5149, 429 whole holes,
+    #: round 13's fit), at the factor that makes +/- 2 u hold 95 % (white 1.65 / 1.38,
+    #: correlated 1.27 / 1.18 for the diameter / the centre), +/- 3 u holds 99.30 % /
+    #: 99.30 % for "white" and 99.53 % / 99.65 % for "correlated", with a median u over
+    #: the frame-aware Cramer-Rao bound of 1.22 / 1.09 and 1.15 / 1.13 (docs/vision.md,
+    #: Each hole's uncertainty)
     uncertainty_factor: float = 1.6
     uncertainty_model: str = "correlated"
     #: the diameter's factor on the correlated u: 1.35 (dev frames above: +/- 2 u holds
-    #: 96.3 %, +/- 3 u 99.77 %, median u over the frame-aware Cramer-Rao bound 1.22; at
-    #: 1.25, 95.1 % / 99.30 % / 1.13).  Above 1 because what the residuals do not show,
-    #: the groove model's own error absorbed by the radius, is not in the sandwich
+    #: 96.7 %, +/- 3 u 99.53 %, median u / bound 1.22).  Above 1 because what the
+    #: residuals do not show, the groove model's own error absorbed by the radius, is not
+    #: in the sandwich
     correlated_uncertainty_factor: float = 1.35
     #: the centre's (x and y pooled): 1.25 (96.3 %, 99.65 %, 1.20)
     correlated_centre_uncertainty_factor: float = 1.25
@@ -134,6 +135,7 @@ class MeasureConfig:
     #: changes across the field keeps each hole's own)
     share_blur: bool = True
     share_blur_chi2: float = 4.0
+
     #: the honing grooves' profiles from the whole frame (``grooves.py``), each hole's
     #: ring giving only their depth there; else each hole reads them from its ring
     frame_grooves: bool = True
@@ -264,20 +266,28 @@ def measure_candidate(
     return _measure_candidate(image, cand, cfg, calibration, rng, illumination)[0]
 
 
-def _measure_candidate(
-    image: np.ndarray,
-    cand: Candidate,
-    cfg: MeasureConfig,
-    calibration: CameraCalibration | None = None,
-    rng: np.random.Generator | None = None,
-    illumination: Illumination | None = None,
-    frame_blur: float | None = None,
-    frame_grooves=None,
-) -> tuple[HoleMeasurement | None, PhotometricFit | None]:
-    """``measure_candidate``, and its photometric fit (None without one). ``frame_blur``:
-    the blur s the frame's holes share (``MeasureConfig.share_blur``), held fixed in the
-    photometric fit instead of the rays' start and a free blur."""
-    ph = None
+@dataclass(frozen=True)
+class _Rays:
+    """What the rays found of a candidate: the start of the photometric fit and the
+    figures the acceptance judges."""
+
+    edges: object
+    fit: object
+    whole: bool
+    cx: float
+    cy: float
+    r: float
+    coverage: float
+    inlier_fraction: float
+    sigma_px: float
+    contrast_dn: float
+    psf2: float
+    r_true: float
+
+
+def _ray_stage(image: np.ndarray, cand: Candidate, cfg: MeasureConfig, rng: np.random.Generator | None = None
+               ) -> _Rays | None:
+    """The rays' part of ``measure_candidate``: None when the candidate is no hole."""
     rng = rng if rng is not None else np.random.default_rng(0)
     r0 = cand.radius_px
     # pass 1: wide search (the coarse radius is good to ~1 coarse pixel for whole
@@ -285,10 +295,10 @@ def _measure_candidate(
     inner = cfg.wide_inner_border if cand.touches_border else 0.5
     wide = _fine(image, cand.x_px, cand.y_px, inner * r0, 1.6 * r0 + 4, 72, step_px=1.0)
     if len(wide.points) < cfg.min_valid_rays // 2:
-        return None, ph
+        return None
     inl = ransac_circle(wide.points, 1.0, rng)
     if inl.sum() < cfg.min_wide_inliers:
-        return None, ph  # no circle agrees with enough of the rays: texture, not a hole
+        return None  # no circle agrees with enough of the rays: texture, not a hole
     # only a start for the narrow search (which recasts its rays beyond 0.3 px): a few
     # IRLS steps suffice
     first = robust_circle(wide.points[inl], taubin_circle(wide.points[inl]), min_scale_px=0.2, iterations=5)
@@ -296,7 +306,7 @@ def _measure_candidate(
     # pass 2 (twice: a cut hole's first centre may be off by a pixel): narrow window
     for attempt in range(2):
         if not (2.0 < r < cfg.detect.max_diameter_px):
-            return None, ph
+            return None
         # about one ray per px of rim; half as many where the photometric fit will give
         # the geometry and the rays only judge the rim (roundness, inliers, edge width)
         density = 1.0
@@ -308,7 +318,7 @@ def _measure_candidate(
         n_rays = int(np.clip(round(2 * np.pi * r * density), 64, 360))
         edges = _fine(image, cx, cy, max(r - cfg.fine_window_px, 1.0), r + cfg.fine_window_px, n_rays)
         if len(edges.points) < cfg.min_valid_rays:
-            return None, ph
+            return None
         # ovality only where the whole rim is seen: on a short arc the second harmonic
         # trades off against the radius and the centre
         whole = not edges.cut_by_border
@@ -322,14 +332,45 @@ def _measure_candidate(
     coverage = edges.n_valid / edges.n_rays
     inlier_fraction = fit.inliers.sum() / max(edges.n_valid, 1)
     if coverage < cfg.min_coverage or inlier_fraction < cfg.min_inlier_fraction:
-        return None, ph
+        return None
     sigma_px = float(np.sqrt(profile_width2(edges.profiles[fit.inliers], edges.step_px)))
     if relative_contrast(image, cx, cy, r, sigma_px) < cfg.min_relative_contrast:
-        return None, ph  # too faint for a through-hole: crossing grooves
+        return None  # too faint for a through-hole: crossing grooves
     # a Gaussian-blurred step of height c has a derivative peak c / (sqrt(2 pi) sigma)
     contrast_dn = float(median(edges.peak[fit.inliers]) * np.sqrt(2 * np.pi) * sigma_px)
     psf2 = psf_variance(sigma_px**2, r)
     r_true = deblurred_radius(r, float(np.sqrt(psf2)))
+    return _Rays(edges, fit, whole, cx, cy, r, coverage, inlier_fraction, sigma_px, contrast_dn, psf2, r_true)
+
+
+def _measure_candidate(
+    image: np.ndarray,
+    cand: Candidate,
+    cfg: MeasureConfig,
+    calibration: CameraCalibration | None = None,
+    rng: np.random.Generator | None = None,
+    illumination: Illumination | None = None,
+    frame_blur: float | None = None,
+    frame_grooves=None,
+    rays: _Rays | None = None,
+    fit_cache: dict | None = None,
+) -> tuple[HoleMeasurement | None, PhotometricFit | None, _Rays | None]:
+    """``measure_candidate``, its photometric fit (None without one) and its rays' stage
+    (``rays``: one already run, not run again).  ``frame_blur``: the blur s the frame's
+    holes share (``MeasureConfig.share_blur``), held fixed in the photometric fit instead
+    of the rays' start and a free blur.  ``frame_grooves``: the grooves' profiles for the
+    photometric fit (``grooves.FrameGrooves``), or a function that reads them, called
+    only when the fit runs.  ``fit_cache``: kept between a hole's two photometric fits
+    (the first with its own blur, the second with the frame's), which then share their
+    annulus, ring and groove model."""
+    ph = None
+    if rays is None:
+        rays = _ray_stage(image, cand, cfg, rng)
+    if rays is None:
+        return None, ph, None
+    edges, fit, whole, cx, cy, r = rays.edges, rays.fit, rays.whole, rays.cx, rays.cy, rays.r
+    coverage, inlier_fraction, sigma_px = rays.coverage, rays.inlier_fraction, rays.sigma_px
+    contrast_dn, psf2, r_true = rays.contrast_dn, rays.psf2, rays.r_true
     shift = np.zeros(2)
     diameter_u = x_u = y_u = None
     if whole and cfg.photometric is not None and np.isfinite(psf2):
@@ -337,11 +378,15 @@ def _measure_candidate(
         blur = float(np.sqrt(max(psf2 - SMOOTH_SIGMA_PX**2 - 1.0 / 6.0, 0.09)))
         grad = illumination.relative_gradient(cx, cy) if illumination is not None else None
         pcfg = cfg.photometric
+        roi_blur = blur
         if frame_blur is not None:
             blur, pcfg = frame_blur, replace(pcfg, fit_blur=False)
-        ph = refine_hole(image, cx, cy, r_true, blur, pcfg, illumination_grad=grad, frame_grooves=frame_grooves)
+        if callable(frame_grooves):
+            frame_grooves = frame_grooves()
+        ph = refine_hole(image, cx, cy, r_true, blur, pcfg, illumination_grad=grad, frame_grooves=frame_grooves,
+                         roi_blur_px=roi_blur, cache=fit_cache)
         if ph is not None and not ph.converged and cfg.reject_unfitted_whole:
-            return None, ph  # the pixels around this whole rim are no blurred disc
+            return None, ph, rays  # the pixels around this whole rim are no blurred disc
         if ph is not None and ph.converged:
             # the radius from the intensities (it uses the textureless hole side and
             # the groove model); the centre moved ``photometric_centre_weight`` of the
@@ -373,10 +418,10 @@ def _measure_candidate(
     else:
         rms_px = fit.rms_px  # ovality is in the model, so this is roundness
     if rms_px > cfg.max_rms_px:
-        return None, ph
+        return None, ph, rays
     diameter = 2.0 * r_true
     if not (cfg.min_diameter_px <= diameter <= cfg.detect.max_diameter_px):
-        return None, ph
+        return None, ph, rays
     ell = fit_ellipse_direct(pts[fit.inliers]) if not edges.cut_by_border else None
     # heuristic confidence: share of consistent edge points, share of rim seen (full
     # weight from half the rim), and the measurement's quality: the rays' scatter
@@ -387,7 +432,7 @@ def _measure_candidate(
         quality = max(quality, 1.0 / (1.0 + (diameter_u / cfg.confidence_u_ref_px) ** 2))
     confidence = float(inlier_fraction * min(1.0, 2.0 * coverage) * quality)
     if confidence < cfg.min_confidence:
-        return None, ph
+        return None, ph, rays
     return HoleMeasurement(
         x_px=float(cx),
         y_px=float(cy),
@@ -406,7 +451,7 @@ def _measure_candidate(
         x_u_px=x_u,
         y_u_px=y_u,
         map_u_px=map_u,
-    ), ph
+    ), ph, rays
 
 
 def relative_contrast(image: np.ndarray, cx: float, cy: float, r: float, blur_px: float) -> float:
@@ -450,32 +495,37 @@ def measure_holes(
     candidates = detect_candidates(image, cfg.detect)
     illumination = (estimate_illumination(image)
                     if candidates and cfg.flat_field and cfg.photometric is not None else None)
-    kept: list[tuple[Candidate, PhotometricFit | None, object]] = []
+    kept: list[tuple[Candidate, PhotometricFit | None, object, _Rays, dict]] = []
     grooves_on = bool(cfg.frame_grooves and cfg.photometric is not None and cfg.photometric.groove_angles_deg)
     masks = [(c.x_px, c.y_px, 1.3 * c.radius_px + 4.0) for c in candidates]
-    whole_frame = (frame_grooves(image, masks, cfg.photometric.groove_angles_deg)
-                   if grooves_on and candidates and cfg.groove_window_px is None else None)
+    level = _Lazy(lambda: wall_level(image, masks))
+    whole_frame = _Lazy(lambda: frame_grooves(image, masks, cfg.photometric.groove_angles_deg, level=level()))
     for cand in candidates:
-        fg = whole_frame
-        if grooves_on and cfg.groove_window_px is not None:
-            half = cand.radius_px * 1.3 + cfg.groove_window_px
-            fg = frame_grooves(image, masks, cfg.photometric.groove_angles_deg,
-                               window=(int(cand.x_px - half), int(cand.y_px - half),
-                                       int(cand.x_px + half) + 1, int(cand.y_px + half) + 1))
-        m, ph = _measure_candidate(image, cand, cfg, calibration, rng, illumination, frame_grooves=fg)
+        fg = None
+        if grooves_on:
+            fg = whole_frame
+            if cfg.groove_window_px is not None:
+                half = cand.radius_px * 1.3 + cfg.groove_window_px
+                window = (int(cand.x_px - half), int(cand.y_px - half), int(cand.x_px + half) + 1,
+                          int(cand.y_px + half) + 1)
+                fg = _Lazy(lambda window=window: frame_grooves(image, masks, cfg.photometric.groove_angles_deg,
+                                                               window=window, level=level()))
+        fit_cache: dict = {}
+        m, ph, rays = _measure_candidate(image, cand, cfg, calibration, rng, illumination, frame_grooves=fg,
+                                         fit_cache=fit_cache)
         if m is None:
             continue
         # two candidates (a hole split by a deep groove) may converge on one hole
         if any(np.hypot(m.x_px - o.x_px, m.y_px - o.y_px) < 0.5 * o.diameter_px / 2 for o in found):
             continue
         found.append(m)
-        kept.append((cand, ph, fg))
-    shared = _frame_blur([ph for _, ph, _ in kept]) if cfg.share_blur else None
+        kept.append((cand, ph, fg, rays, fit_cache))
+    shared = _frame_blur([k[1] for k in kept]) if cfg.share_blur else None
     if shared is not None and shared[1] <= cfg.share_blur_chi2:
-        for i, (cand, ph, fg) in enumerate(kept):
+        for i, (cand, ph, fg, rays, fit_cache) in enumerate(kept):
             if ph is not None and ph.converged:
-                m2, _ = _measure_candidate(image, cand, cfg, calibration, np.random.default_rng(0), illumination,
-                                           frame_blur=shared[0], frame_grooves=fg)
+                m2, _, _ = _measure_candidate(image, cand, cfg, calibration, None, illumination,
+                                              frame_blur=shared[0], frame_grooves=fg, rays=rays, fit_cache=fit_cache)
                 if m2 is not None:
                     found[i] = m2
     out: list[HoleMeasurement] = []
@@ -487,17 +537,30 @@ def measure_holes(
     return sorted(out, key=lambda m: (m.y_px, m.x_px))
 
 
-def _frame_blur(fits: list[PhotometricFit | None]) -> tuple[float, float] | None:
+class _Lazy:
+    """A value computed on the first call, then kept (a candidate's grooves, read only
+    if its photometric fit runs)."""
+
+    def __init__(self, make):
+        self._make, self._done, self._value = make, False, None
+
+    def __call__(self):
+        if not self._done:
+            self._value, self._done = self._make(), True
+        return self._value
+
+
+def _frame_blur(fits: list[PhotometricFit | None]) -> tuple[float, float, float] | None:
     """The blur the frame's converged photometric fits share: their precision-weighted
-    mean, and the chi-square per degree of freedom of their blurs about it; None with
-    fewer than two such fits."""
+    mean, the chi-square per degree of freedom of their blurs about it, and the mean's
+    standard deviation; None with fewer than two such fits."""
     s = np.array([f.blur_px for f in fits if f is not None and f.converged and np.isfinite(f.blur_sd)])
     sd = np.array([f.blur_sd for f in fits if f is not None and f.converged and np.isfinite(f.blur_sd)])
     if s.size < 2 or np.any(sd <= 0):
         return None
     w = 1.0 / (sd * sd)
     mean = float(np.sum(w * s) / np.sum(w))
-    return mean, float(np.sum(w * (s - mean) ** 2) / (s.size - 1))
+    return mean, float(np.sum(w * (s - mean) ** 2) / (s.size - 1)), float(1.0 / np.sqrt(np.sum(w)))
 
 
 @functools.cache

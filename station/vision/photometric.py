@@ -138,8 +138,9 @@ class PhotometricConfig:
     #: ... and then, if > 0, a profile of the ring's own on what the frame's leaves,
     #: shrunk towards 0 (towards the frame's) by these pseudo-counts per bin (0: none)
     groove_frame_local_pseudo: float = 10.0
-    #: the hole's inside read down to this share of the radius (1: only the annulus)
-    interior_share: float = 0.0
+    #: the hole's inside read this far (px) inside the annulus (0: the annulus only; None:
+    #: down to the centre)
+    interior_px: float | None = None
     sectors: int = 0
     sector_chi2: float = 1.5
 
@@ -206,37 +207,40 @@ def _frame_groove_field(
     dx: np.ndarray, dy: np.ndarray, v: np.ndarray, wall: np.ndarray, targets: np.ndarray, cfg: PhotometricConfig,
     fg, cx: float, cy: float, x0: int, y0: int, roi_w: int,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``_groove_field`` with the families' shapes from the whole frame (``fg``: a
-    ``grooves.FrameGrooves``): the wall ring gives each family's amplitude (a polynomial
-    of ``groove_frame_amp_order`` in x and y) beside a quadratic smooth level, least
-    squares."""
-    n_all = dx.size
-    iy, ix = np.divmod(np.arange(n_all), roi_w)
+    """``_groove_field`` with the families' shapes from the hole's wide neighbourhood
+    (``fg``: a ``grooves.FrameGrooves``): the wall ring gives each family's amplitude (a
+    polynomial of ``groove_frame_amp_order`` in x and y) beside a quadratic smooth level,
+    least squares.  Only the ring's and the targets' pixels are computed."""
+    use = wall | targets
+    idx = np.flatnonzero(use)
+    dxu, dyu = dx[idx], dy[idx]
+    iy, ix = np.divmod(idx, roi_w)
     level = fg.level_at(ix + x0, iy + y0).astype(np.float64)
-    vals, ders = fg.values(dx + cx, dy + cy)
-    sc = max(float(np.max(np.abs(dx))), float(np.max(np.abs(dy))), 1.0)
-    xs, ys = dx / sc, dy / sc
-    amp = [np.ones(n_all)] + ([xs, ys] if cfg.groove_frame_amp_order >= 1 else [])
+    vals, ders = fg.values(dxu + cx, dyu + cy)
+    sc = max(float(np.max(np.abs(dxu))), float(np.max(np.abs(dyu))), 1.0)
+    xs, ys = dxu / sc, dyu / sc
+    one = np.ones(idx.size)
+    amp = [one] + ([xs, ys] if cfg.groove_frame_amp_order >= 1 else [])
     if cfg.groove_frame_amp_order >= 2:
         amp += [xs * xs, xs * ys, ys * ys]
-    smooth = [np.ones(n_all), xs, ys, xs * xs, xs * ys, ys * ys]
-    gcols = [level * p * a for p in vals for a in amp]
-    a_mat = np.stack(smooth + gcols, axis=1)
-    aw = a_mat[wall]
-    m, rhs = _normal(aw, aw, v[wall])
+    gcols = np.stack([level * p * a for p in vals for a in amp], axis=1)
+    on_wall = wall[idx]
+    aw = np.concatenate([np.stack([one, xs, ys, xs * xs, xs * ys, ys * ys], axis=1), gcols], axis=1)[on_wall]
+    m, rhs = _normal(aw, aw, v[idx][on_wall])
     try:
         coef = np.linalg.solve(m + 1e-9 * np.eye(m.shape[0]), rhs)
     except np.linalg.LinAlgError:
         return np.zeros(int(targets.sum())), np.zeros(int(targets.sum())), np.zeros(int(wall.sum()))
-    gc = coef[len(smooth):]
-    field = np.stack(gcols, axis=1) @ gc
+    gc = coef[6:]
+    field = gcols @ gc
     na = len(amp)
-    rho = np.maximum(np.hypot(dx, dy), 1e-9)
-    d_rho = np.zeros(n_all)
+    rho = np.maximum(np.hypot(dxu, dyu), 1e-9)
+    d_rho = np.zeros(idx.size)
     for f, a in enumerate(fg.angles_rad):
         ampl = sum(gc[f * na + k] * amp[k] for k in range(na))
-        d_rho += level * ders[f] * ampl * (-np.sin(a) * dx + np.cos(a) * dy) / rho
-    return field[targets], d_rho[targets], field[wall]
+        d_rho += level * ders[f] * ampl * (-np.sin(a) * dxu + np.cos(a) * dyu) / rho
+    on_target = targets[idx]
+    return field[on_target], d_rho[on_target], field[on_wall]
 
 
 def _groove_field(
@@ -375,18 +379,27 @@ def refine_hole(
     cfg: PhotometricConfig = PhotometricConfig(),
     illumination_grad: tuple[float, float] | None = None,
     frame_grooves=None,
+    roi_blur_px: float | None = None,
+    cache: dict | None = None,
 ) -> PhotometricFit | None:
     """Fit the blurred-disc model around a whole hole's rim; None when it cannot run (too
     few wall pixels, a singular system), ``converged=False`` when the model runs away.
 
     ``illumination_grad``: the frame illumination's relative gradient (per px) at the
     hole (``illumination.Illumination.relative_gradient``); the hole's pixels are divided
-    by 1 + g . (x - (cx, cy)) first, so that the model sees reflectance only."""
+    by 1 + g . (x - (cx, cy)) first, so that the model sees reflectance only.
+    ``frame_grooves``: the grooves' profiles over the hole's wide neighbourhood
+    (``grooves.FrameGrooves``; None: from the ring alone).  ``roi_blur_px``: the blur
+    that sizes the annulus and the ring (default ``blur_px``); ``cache``: a dict that
+    keeps the groove model between two fits of one hole from the same start and
+    ``roi_blur_px`` (the second with the frame's blur held fixed)."""
     h, w = image.shape
     s = float(np.clip(blur_px, 0.4, 4.0))
-    half = cfg.k_sigma * s + cfg.pad_px
-    r_in, r_out = max(min(r - half, cfg.interior_share * r), 0.0), r + half
-    r_clear = r + 2.5 * s + 1.0  # beyond it the wall is free of the rim's blur
+    s_roi = float(np.clip(roi_blur_px, 0.4, 4.0)) if roi_blur_px is not None else s
+    half = cfg.k_sigma * s_roi + cfg.pad_px
+    r_in = 0.0 if cfg.interior_px is None else max(r - half - cfg.interior_px, 0.0)
+    r_out = r + half
+    r_clear = r + 2.5 * s_roi + 1.0  # beyond it the wall is free of the rim's blur
     grooves = bool(cfg.groove_angles_deg)
     r_roi = max(r_out, r_clear + cfg.groove_margin_px) if grooves else r_out
     x0, x1 = max(int(np.floor(cx - r_roi)), 0), min(int(np.ceil(cx + r_roi)) + 1, w)
@@ -408,17 +421,28 @@ def refine_hole(
         wall_px = (d2 > r_clear * r_clear) & (d2 <= r_roi * r_roi)
         if wall_px.sum() < 50:
             return None
-        if frame_grooves is not None:
-            groove, groove_drho, g_wall = _frame_groove_field(dxa, dya, va, wall_px, sel, cfg, frame_grooves, cx, cy,
-                                                              x0, y0, x1 - x0)
-            if cfg.groove_frame_local_pseudo > 0:
-                va_left = va.copy()
-                va_left[wall_px] -= g_wall
-                g2, d2_, w2 = _groove_field(dxa, dya, va_left, wall_px, sel,
-                                            replace(cfg, groove_pseudo_count=cfg.groove_frame_local_pseudo))
-                groove, groove_drho, g_wall = groove + g2, groove_drho + d2_, g_wall + w2
+        if cache is not None and "groove" in cache:
+            groove, groove_drho, g_wall = cache["groove"]
         else:
-            groove, groove_drho, g_wall = _groove_field(dxa, dya, va, wall_px, sel, cfg)
+            # the grooves matter where the wall is: the annulus, not the hole's inside
+            near = sel & (d2 >= max(r - half, 0.0) ** 2)
+            if frame_grooves is not None:
+                gn, dn, g_wall = _frame_groove_field(dxa, dya, va, wall_px, near, cfg, frame_grooves, cx, cy,
+                                                     x0, y0, x1 - x0)
+                if cfg.groove_frame_local_pseudo > 0:
+                    va_left = va.copy()
+                    va_left[wall_px] -= g_wall
+                    g2, d2_, w2 = _groove_field(dxa, dya, va_left, wall_px, near,
+                                                replace(cfg, groove_pseudo_count=cfg.groove_frame_local_pseudo))
+                    gn, dn, g_wall = gn + g2, dn + d2_, g_wall + w2
+            else:
+                gn, dn, g_wall = _groove_field(dxa, dya, va, wall_px, near, cfg)
+            # back on the fit's pixels (0 inside)
+            groove, groove_drho = np.zeros(int(sel.sum())), np.zeros(int(sel.sum()))
+            on = near[sel]
+            groove[on], groove_drho[on] = gn, dn
+            if cache is not None:
+                cache["groove"] = (groove, groove_drho, g_wall)
     dx, dy, v = dxa[sel], dya[sel], va[sel]
     n = v.size
     rho0 = np.sqrt(d2[sel])
@@ -427,8 +451,13 @@ def refine_hole(
     K = cfg.wall_order
     fb = _fourier(c1, s1, max(K, 2, cfg.ring_slope_order))
     if grooves and cfg.ring_slope_order >= 0 and cfg.ring_slope_shrink > 0:
-        g = cfg.ring_slope_shrink * _ring_slope(dxa[wall_px], dya[wall_px], va[wall_px] - g_wall, r,
-                                                fb[: 2 * cfg.ring_slope_order + 1], cfg)
+        if cache is not None and "slope" in cache:
+            g = cache["slope"]
+        else:
+            g = cfg.ring_slope_shrink * _ring_slope(dxa[wall_px], dya[wall_px], va[wall_px] - g_wall, r,
+                                                    fb[: 2 * cfg.ring_slope_order + 1], cfg)
+            if cache is not None:
+                cache["slope"] = g
         groove = groove + g * (rho0 - r)
         groove_drho = groove_drho + g
     cos_k, sin_k = [fb[0]] + fb[1::2], [np.zeros(n)] + fb[2::2]

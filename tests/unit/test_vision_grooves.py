@@ -49,7 +49,7 @@ def test_a_window_reads_the_same_lines_in_frame_coordinates():
     img = np.clip(np.rint(clean + np.random.default_rng(6).normal(0.0, 2.0, clean.shape)), 0, 255).astype(np.uint8)
     whole = frame_grooves(img, [], stride=2)
     part = frame_grooves(img, [], stride=2, window=(200, 150, 420, 360))
-    assert part.origin == (200, 150) and part.level.shape == (210, 220)
+    assert part.origin == (200, 150) and part.shape == (210, 220) and part.level.shape == (480, 640)
     yy, xx = np.mgrid[200:310, 260:360]
     a = sum(whole.values(xx.ravel().astype(float), yy.ravel().astype(float))[0])
     b = sum(part.values(xx.ravel().astype(float), yy.ravel().astype(float))[0])
@@ -64,8 +64,9 @@ def _fit(blur: float, sd: float) -> PhotometricFit:
 
 
 def test_the_frame_blur_is_the_precision_weighted_mean_and_says_when_holes_disagree():
-    mean, chi2 = _frame_blur([_fit(1.20, 0.01), _fit(1.23, 0.03), None])
+    mean, chi2, sd = _frame_blur([_fit(1.20, 0.01), _fit(1.23, 0.03), None])
     assert mean == pytest.approx((1.20 / 0.01**2 + 1.23 / 0.03**2) / (1 / 0.01**2 + 1 / 0.03**2))
+    assert sd == pytest.approx((1 / 0.01**2 + 1 / 0.03**2) ** -0.5)
     assert chi2 < MeasureConfig().share_blur_chi2
     # a lens whose blur changes across the field: the holes keep their own
     assert _frame_blur([_fit(1.0, 0.01), _fit(1.5, 0.01)])[1] > MeasureConfig().share_blur_chi2

@@ -46,7 +46,9 @@ def test_a_hole_merged_with_a_dark_band_is_split_off_by_the_threshold_ladder():
 def test_crossings_of_dark_grooves_that_no_disc_fits_are_not_holes():
     """Wide-envelope frames (13-15 % grooves, 30-40 % holes) where a crossing of dark
     grooves passes the shape, ray and confidence tests: the blurred-disc model runs away
-    from it, and the default drops it; every true hole is still found."""
+    from it, and the default drops it; every true hole is still found.  (On seed 3345
+    round 13's fit converges on the crossing, at a radius of 8.8 px with a u of 1.6 px,
+    and the confidence drops it even with the check off: two phantoms are left for it.)"""
     seeds = (3099, 3117, 3345)  # found by scanning wide seeds 3000-3399 with the check off
     off, on = Score(), Score()
     for seed in seeds:
@@ -55,7 +57,7 @@ def test_crossings_of_dark_grooves_that_no_disc_fits_are_not_holes():
         for cfg, score in ((MeasureConfig(reject_unfitted_whole=False), off), (MeasureConfig(), on)):
             found = measure_holes(f.image, cfg=cfg)
             score.add(score_frame(truth, [(m.x_px, m.y_px, m.diameter_px, m.partial) for m in found]))
-    assert off.phantoms >= 3
+    assert off.phantoms >= 2
     assert on.phantoms == 0
     assert on.misses == off.misses == 0
 
