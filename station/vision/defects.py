@@ -187,8 +187,9 @@ class DefectConfig:
     #: ... over at least this much of the rim (px of arc)
     rim_min_length_px: float = 2.0
     #: standard uncertainties from the fits' and integrals' noise are multiplied by this,
-    #: the hole measurement's factor (``MeasureConfig.uncertainty_factor``): the texture is
-    #: correlated noise the formulas do not see
+    #: the factor the hole measurement's white-noise u took until round 12 of the vision
+    #: stage (docs/vision-history.md): the texture is correlated noise the formulas do not
+    #: see; the defect bench's share within 2 u was judged with it
     uncertainty_factor: float = 1.5
     #: ... and added in quadrature to a model term (px) for what the noise does not
     #: explain: where an edge lies that the blur hides (a ragged end, a pore's outline
