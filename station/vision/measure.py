@@ -27,8 +27,8 @@ from station.vision.calibration import CameraCalibration
 from station.vision.detect import Candidate, DetectConfig, detect_candidates
 from station.vision.edges import KERNEL_RADIUS_PX, deblurred_radius, gradient, profile_width2, psf_variance, ray_edges
 from station.vision.edges import SMOOTH_SIGMA_PX
-from station.vision.grooves import frame_grooves, wall_level
 from station.vision.fit import fit_ellipse_direct, gradient_1d, median, ransac_circle, robust_circle, taubin_circle
+from station.vision.grooves import frame_grooves, wall_level
 from station.vision.illumination import Illumination, estimate_illumination
 from station.vision.imageio import to_8bit, to_grey
 from station.vision.photometric import PhotometricConfig, PhotometricFit, refine_hole
@@ -135,9 +135,9 @@ class MeasureConfig:
     #: changes across the field keeps each hole's own)
     share_blur: bool = True
     share_blur_chi2: float = 4.0
-
-    #: the honing grooves' profiles from the whole frame (``grooves.py``), each hole's
-    #: ring giving only their depth there; else each hole reads them from its ring
+    #: the honing grooves' profiles read over each hole's wide neighbourhood
+    #: (``grooves.py``), the hole's ring giving only their depth there; else each hole
+    #: reads them from its ring alone (docs/vision-history.md, round 13)
     frame_grooves: bool = True
     #: ... read over a window this far (px) beyond 1.3 x each candidate's radius, not the
     #: whole frame (None): a lens's distortion bends a straight groove across a frame

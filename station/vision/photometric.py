@@ -26,8 +26,13 @@ adds s_cam^2 / s phi(t) dW/drho to the model (the blur's product rule).  The ang
 are measured from the starting centre and stay fixed, so the wall and hole bases are
 fixed functions of the pixel position and only rho depends on the centre.
 
-Fit: Gauss-Newton with the analytic Jacobian, Huber weights (IRLS) on the residuals
-against a robust (MAD) scale, a handful of iterations from the ray fit's circle.
+The pixels: the annulus and the hole's whole inside (which pins H); the grooves' profiles
+come from the hole's wide neighbourhood when the caller gives them (``grooves.py``), else
+from the ring alone.
+
+Fit: Gauss-Newton with the analytic Jacobian, each pixel weighted by its expected variance
+and by Huber weights (IRLS) on the residuals against a robust (MAD) scale, a handful of
+iterations from the ray fit's circle.
 Uncertainties: the white-noise standard deviations (``r_sd``, ...) and a kernel estimate
 of the least-squares sandwich from the residuals' own spatial correlation (``r_u``, ...,
 ``_hac_sd``): the grain blurred by the camera is correlated noise.
@@ -93,7 +98,10 @@ class PhotometricConfig:
     groove_sides: int = 1
     #: pseudo-counts that shrink a sparse bin towards 0
     groove_pseudo_count: float = 2.0
-    #: weight of the pixels from the expected texture share (1 - u)^2 of their variance
+    #: weight each pixel by its expected variance: the hole's side carries sensor noise
+    #: only, the wall's the grain as well, mixed by the texture's share (1 - u)^2 (the
+    #: robust scales of the residuals inside and outside); on since round 13, with the
+    #: hole's inside read (``interior_px``) and a blur shared by the frame
     texture_weighting: bool = True
     #: model that the grooves are cut by the hole before the blur: the image is
     #: B[G (1 - c)], not B[G] (1 - B[c]); to first order in the blur they differ by
