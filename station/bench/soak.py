@@ -20,10 +20,17 @@ caches and SQLite pages fill up):
   opens one more connection under load steps up once and stays (+2 half-way through
   12 inspections is a slope of 0.25: seen in a CI run); threads: the range at most
   ``THREAD_SLACK``;
-* memory: the least-squares slope over the rest, in kB per inspection, is below
-  ``RSS_SLOPE_KB``, and the net growth over the rest is below ``RSS_GROWTH_MB``.
-  An inspection saves crops and keeps one frame per hole: a leaked frame would be
-  1.3 MB per inspection, far above the bar; the allocator's own plateauing stays under it.
+* memory: the net growth over the rest is below ``RSS_GROWTH_MB``, and no growth that
+  keeps coming back: a least-squares slope of ``RSS_SLOPE_KB`` or more per inspection
+  counts as a leak only when the memory rose by more than ``RSS_SLOPE_KB`` from one
+  inspection to the next at least ``RSS_RISES`` times.  An inspection saves crops and
+  keeps one frame per hole: a leaked frame would be 1.3 MB at every inspection, far above
+  the bar; the allocator's own plateauing stays under it.  glibc's malloc also grows its
+  heap in one step now and then (its mmap threshold follows the largest block freed): a
+  soak on PostgreSQL saw single steps of 1.3-1.5 MB with the vision stage of round 12 and
+  of ~3.9 MB with round 13's larger temporary arrays, once in a run, and none with the
+  threshold fixed (``MALLOC_MMAP_THRESHOLD_``); one such step late in a 12-inspection rest
+  is a least-squares slope of up to ~500 kB.
 """
 
 from __future__ import annotations
@@ -49,6 +56,7 @@ THREAD_SLACK = 2
 #: mostly bounded caches filling (70-85 kB per inspection over 12 inspections here)
 RSS_SLOPE_KB = 300.0
 RSS_GROWTH_MB = 8.0
+RSS_RISES = 3
 
 
 def _status(pid: int) -> dict[str, int]:
@@ -122,6 +130,8 @@ class SoakResult:
         n = np.arange(len(rest), dtype=float)
         rss = np.array([s["rss_kb"] for s in rest], dtype=float)
         slope = float(np.polyfit(n, rss, 1)[0])
+        rss_rises = int(np.sum(np.diff(rss) > RSS_SLOPE_KB))
+        rss_leak = slope >= RSS_SLOPE_KB and rss_rises >= RSS_RISES
         q = max(1, len(rest) // 4)
         growth_mb = float(np.median(rss[-q:]) - np.median(rss[:q])) / 1024.0
         fds = [s["fds"] for s in rest]
@@ -132,15 +142,16 @@ class SoakResult:
         out = {
             "inspections": len(self.samples), "warmup": self.warmup, "failed": self.failed,
             "rss_mb_first": rest[0]["rss_kb"] / 1024.0, "rss_mb_last": rest[-1]["rss_kb"] / 1024.0,
-            "rss_slope_kb_per_inspection": slope, "rss_growth_mb": growth_mb,
+            "rss_slope_kb_per_inspection": slope, "rss_rises": rss_rises, "rss_growth_mb": growth_mb,
             "fds_min": min(fds), "fds_max": max(fds), "fds_slope_per_inspection": fd_slope, "fds_new_highs": fd_rises, "threads_min": min(threads), "threads_max": max(threads),
-            "bars": {"rss_slope_kb": RSS_SLOPE_KB, "rss_growth_mb": RSS_GROWTH_MB, "fd_slack": FD_SLACK,
+            "bars": {"rss_slope_kb": RSS_SLOPE_KB, "rss_rises": RSS_RISES, "rss_growth_mb": RSS_GROWTH_MB,
+                     "fd_slack": FD_SLACK,
                      "fd_slope": FD_SLOPE, "fd_rises": FD_RISES, "thread_slack": THREAD_SLACK},
         }
         renderer = [s["renderer_rss_kb"] for s in rest if s.get("renderer_rss_kb") is not None]
         if len(renderer) >= 3:
             out["renderer_rss_slope_kb_per_inspection"] = float(np.polyfit(np.arange(len(renderer)), renderer, 1)[0])
-        out["ok"] = (not self.failed and slope < RSS_SLOPE_KB and growth_mb < RSS_GROWTH_MB
+        out["ok"] = (not self.failed and not rss_leak and growth_mb < RSS_GROWTH_MB
                      and max(fds) - min(fds) <= FD_SLACK and not fd_leak and max(threads) - min(threads) <= THREAD_SLACK
                      and out.get("renderer_rss_slope_kb_per_inspection", 0.0) < RSS_SLOPE_KB)
         return out

@@ -26,6 +26,28 @@ def test_the_verdict_sees_a_leaked_frame_or_descriptor_per_inspection():
     assert not short_leak.verdict()["ok"]
 
 
+def test_the_verdict_lets_the_heap_step_up_once_but_not_again_and_again():
+    """One step of ~3.9 MB late in the soak (glibc growing its heap once; seen on
+    PostgreSQL) is no leak, though its least-squares slope is over the bar; a frame
+    leaked at every other inspection is, and so is a steady leak just over the bar."""
+    step = synthetic(n=16, warmup=4)
+    for sample in step.samples[13:]:
+        sample["rss_kb"] += 3900
+    v = step.verdict()
+    assert v["rss_slope_kb_per_inspection"] > RSS_SLOPE_KB and v["rss_rises"] == 1
+    assert v["ok"]
+    every_other = synthetic(n=16, warmup=4)
+    for i, sample in enumerate(every_other.samples):
+        sample["rss_kb"] += 1280 * (i // 2)
+    assert not every_other.verdict()["ok"]
+    assert not synthetic(rss_step_kb=1.2 * RSS_SLOPE_KB).verdict()["ok"]
+    # a step too large for the allocator: the net growth bar
+    big = synthetic(n=16, warmup=4)
+    for sample in big.samples[10:]:
+        sample["rss_kb"] += 9 * 1024
+    assert not big.verdict()["ok"]
+
+
 def test_the_verdict_lets_a_pool_step_up_once():
     """+2 descriptors half-way through a 16-inspection soak and flat after (one more
     pooled connection under load; seen in a CI run): a slope of 0.25, one new high."""
