@@ -36,10 +36,7 @@ DEFECTS = [
 ]
 
 
-#: a part spec without [surface]: its surface has no criteria to judge (a job order or
-#: the panel's job form asking for a surface scan of it is refused)
-NO_SURFACE_SPEC = """
-part_number = "NOSURF-1"
+_BORE = """
 [bore]
 diameter_mm = 22.2
 depth_mm = 120.0
@@ -52,6 +49,34 @@ angle_deg = 0.0
 diameter = { nominal = 0.7, tol = 0.125 }
 position = { nominal = 71.03, tol = 0.1 }
 """
+
+#: a part spec without [surface]: its surface has no criteria to judge (a job order or
+#: the panel's job form asking for a surface scan of it is refused)
+NO_SURFACE_SPEC = 'part_number = "NOSURF-1"' + _BORE
+
+
+def band_spec(part_number: str, every_part: bool = False) -> str:
+    """A part spec with both compensating holes and [surface] criteria over their band
+    (62-92 mm: 4 rings of 6 frames), a seal zone at 63-70 mm with a 0.2 mm pore limit;
+    ``every_part``: every part's surface is scanned (else only when a job order asks)."""
+    return (f'part_number = "{part_number}"' + _BORE + """[[holes]]
+id = "hole_2"
+angle_deg = 0.0
+diameter = { nominal = 0.7, tol = 0.125 }
+position = { nominal = 85.19, tol = 0.1 }
+[surface]
+""" + ("every_part = true\n" if every_part else "") + """axial_from_mm = 62.0
+axial_to_mm = 92.0
+max_pore_mm = 0.4
+max_scratch_mm = 2.0
+max_burr_mm = 0.05
+max_chip_mm = 0.1
+[[surface.zones]]
+id = "seal"
+axial_from_mm = 63.0
+axial_to_mm = 70.0
+max_pore_mm = 0.2
+""")
 
 
 def synthetic_picture(seed: int = 7) -> SurfacePicture:

@@ -550,17 +550,17 @@ class _Lazy:
         return self._value
 
 
-def _frame_blur(fits: list[PhotometricFit | None]) -> tuple[float, float, float] | None:
+def _frame_blur(fits: list[PhotometricFit | None]) -> tuple[float, float] | None:
     """The blur the frame's converged photometric fits share: their precision-weighted
-    mean, the chi-square per degree of freedom of their blurs about it, and the mean's
-    standard deviation; None with fewer than two such fits."""
+    mean, and the chi-square per degree of freedom of their blurs about it; None with
+    fewer than two such fits."""
     s = np.array([f.blur_px for f in fits if f is not None and f.converged and np.isfinite(f.blur_sd)])
     sd = np.array([f.blur_sd for f in fits if f is not None and f.converged and np.isfinite(f.blur_sd)])
     if s.size < 2 or np.any(sd <= 0):
         return None
     w = 1.0 / (sd * sd)
     mean = float(np.sum(w * s) / np.sum(w))
-    return mean, float(np.sum(w * (s - mean) ** 2) / (s.size - 1)), float(1.0 / np.sqrt(np.sum(w)))
+    return mean, float(np.sum(w * (s - mean) ** 2) / (s.size - 1))
 
 
 @functools.cache

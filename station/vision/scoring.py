@@ -103,47 +103,14 @@ def _flatten(per_frame: list[list[float]]) -> tuple[np.ndarray, np.ndarray]:
     return err, frame
 
 
-def score_frame(truths: list[tuple], detections: list[tuple], check_partial: bool = True) -> Score:
-    """Greedy nearest matching within a quarter diameter (at least 3 px) of a true centre.
-
-    A detection is (x, y, diameter, partial), optionally followed by the standard
-    uncertainties (u_diameter, u_x, u_y) of a whole hole (None where there are none)."""
-    s = Score()
-    used: set[int] = set()
-    det = np.asarray([d[:2] for d in detections], float).reshape(-1, 2)
-    for tx, ty, td, tpartial in truths:
-        if det.size:
-            dist = np.hypot(det[:, 0] - tx, det[:, 1] - ty)
-            dist[list(used)] = np.inf
-            j = int(np.argmin(dist))
-        if not det.size or dist[j] > max(3.0, 0.25 * td):
-            s.misses += 0 if tpartial else 1
-            continue
-        used.add(j)
-        dpartial = bool(detections[j][3])
-        if check_partial and dpartial != bool(tpartial):
-            s.partial_flag_errors += 1
-        if tpartial:
-            s.partial_found += 1
-            continue
-        s.centre_err_px.append(float(dist[j]))
-        s.diameter_err_px.append(float(detections[j][2] - td))
-        u = tuple(detections[j][4:7])
-        if len(u) == 3 and all(v is not None and v > 0 for v in u):
-            s.diameter_z.append(float((detections[j][2] - td) / u[0]))
-            s.centre_z += [float((detections[j][0] - tx) / u[1]), float((detections[j][1] - ty) / u[2])]
-    s.phantoms = len(detections) - len(used)
-    return s
-
-
-def match_whole_holes(truths: list[tuple], detections: list[tuple]) -> list[int | None]:
-    """The detection matched to each whole true hole (its index, or None for a miss), by
-    ``score_frame``'s rule: greedy nearest within a quarter diameter (at least 3 px), the
-    truths in order, cut ones included (they take their detections too)."""
+def _match(truths: list[tuple], detections: list[tuple]) -> list[int | None]:
+    """The detection matched to each true hole (its index, or None), in the truths'
+    order: greedy nearest within a quarter diameter (at least 3 px) of a true centre, each
+    detection taken once."""
     used: set[int] = set()
     det = np.asarray([d[:2] for d in detections], float).reshape(-1, 2)
     out: list[int | None] = []
-    for tx, ty, td, tpartial in truths:
+    for tx, ty, td, _ in truths:
         j = None
         if det.size:
             dist = np.hypot(det[:, 0] - tx, det[:, 1] - ty)
@@ -152,6 +119,38 @@ def match_whole_holes(truths: list[tuple], detections: list[tuple]) -> list[int 
             if dist[k] <= max(3.0, 0.25 * td):
                 j = k
                 used.add(k)
-        if not tpartial:
-            out.append(j)
+        out.append(j)
     return out
+
+
+def score_frame(truths: list[tuple], detections: list[tuple], check_partial: bool = True) -> Score:
+    """Greedy nearest matching within a quarter diameter (at least 3 px) of a true centre.
+
+    A detection is (x, y, diameter, partial), optionally followed by the standard
+    uncertainties (u_diameter, u_x, u_y) of a whole hole (None where there are none)."""
+    s = Score()
+    matched = _match(truths, detections)
+    for (tx, ty, td, tpartial), j in zip(truths, matched):
+        if j is None:
+            s.misses += 0 if tpartial else 1
+            continue
+        dpartial = bool(detections[j][3])
+        if check_partial and dpartial != bool(tpartial):
+            s.partial_flag_errors += 1
+        if tpartial:
+            s.partial_found += 1
+            continue
+        s.centre_err_px.append(float(np.hypot(detections[j][0] - tx, detections[j][1] - ty)))
+        s.diameter_err_px.append(float(detections[j][2] - td))
+        u = tuple(detections[j][4:7])
+        if len(u) == 3 and all(v is not None and v > 0 for v in u):
+            s.diameter_z.append(float((detections[j][2] - td) / u[0]))
+            s.centre_z += [float((detections[j][0] - tx) / u[1]), float((detections[j][1] - ty) / u[2])]
+    s.phantoms = len(detections) - sum(j is not None for j in matched)
+    return s
+
+
+def match_whole_holes(truths: list[tuple], detections: list[tuple]) -> list[int | None]:
+    """The detection matched to each whole true hole (its index, or None for a miss), by
+    ``score_frame``'s rule (the cut holes take their detections too)."""
+    return [j for t, j in zip(truths, _match(truths, detections)) if not t[3]]

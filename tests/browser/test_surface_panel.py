@@ -22,7 +22,7 @@ from pathlib import Path
 import pytest
 from playwright.sync_api import expect
 
-from surface_cases import DEFECT_GREY, DEFECTS, NO_SURFACE_SPEC, store_surface_record, synthetic_surface
+from surface_cases import DEFECT_GREY, DEFECTS, NO_SURFACE_SPEC, band_spec, store_surface_record, synthetic_surface
 from tests.browser.conftest import INSPECTION_TIMEOUT_MS, login, open_page, screenshot, serve_station
 
 REPO = Path(__file__).resolve().parents[2]
@@ -270,38 +270,7 @@ def test_the_surface_is_shown_with_every_defect_at_its_place(browser, surface_st
 #: a part spec whose every part has its surface scanned (the band of the compensating
 #: holes; 4 rings of 6 frames), stored in the served station's data folder
 SEEDED_PART = "SURF-PANEL-1"
-SEEDED_SPEC = f"""
-part_number = "{SEEDED_PART}"
-[bore]
-diameter_mm = 22.2
-depth_mm = 120.0
-[placement]
-axial_mm = 0.5
-angular_datum = "hole_1"
-[[holes]]
-id = "hole_1"
-angle_deg = 0.0
-diameter = {{ nominal = 0.7, tol = 0.125 }}
-position = {{ nominal = 71.03, tol = 0.1 }}
-[[holes]]
-id = "hole_2"
-angle_deg = 0.0
-diameter = {{ nominal = 0.7, tol = 0.125 }}
-position = {{ nominal = 85.19, tol = 0.1 }}
-[surface]
-every_part = true
-axial_from_mm = 62.0
-axial_to_mm = 92.0
-max_pore_mm = 0.4
-max_scratch_mm = 2.0
-max_burr_mm = 0.05
-max_chip_mm = 0.1
-[[surface.zones]]
-id = "seal"
-axial_from_mm = 63.0
-axial_to_mm = 70.0
-max_pore_mm = 0.2
-"""
+SEEDED_SPEC = band_spec(SEEDED_PART, every_part=True)
 #: the served world's seeded defects (sim.world.SurfaceDefect's fields), as
 #: tests/e2e/test_surface.py seeds them: a pore over the seal's limit, a small pore,
 #: a scratch across a seam between rings, a burr and a chip at the holes' rims

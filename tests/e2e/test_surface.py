@@ -15,40 +15,11 @@ from sim.world import STANDARD_SAMPLE, PartTruth, SurfaceDefect, defect_truth_pl
 from station.parts.loader import parse_part
 from station.runtime import open_session
 from station.store import Store
+from surface_cases import band_spec
 
 TIME_SCALE = 50.0
 
-SPEC = """
-part_number = "ZDZG-22.2-12.3851"
-[bore]
-diameter_mm = 22.2
-depth_mm = 120.0
-[placement]
-axial_mm = 0.5
-angular_datum = "hole_1"
-[[holes]]
-id = "hole_1"
-angle_deg = 0.0
-diameter = { nominal = 0.7, tol = 0.125 }
-position = { nominal = 71.03, tol = 0.1 }
-[[holes]]
-id = "hole_2"
-angle_deg = 0.0
-diameter = { nominal = 0.7, tol = 0.125 }
-position = { nominal = 85.19, tol = 0.1 }
-[surface]
-axial_from_mm = 62.0
-axial_to_mm = 92.0
-max_pore_mm = 0.4
-max_scratch_mm = 2.0
-max_burr_mm = 0.05
-max_chip_mm = 0.1
-[[surface.zones]]
-id = "seal"
-axial_from_mm = 63.0
-axial_to_mm = 70.0
-max_pore_mm = 0.2
-"""
+SPEC = band_spec("ZDZG-22.2-12.3851")
 
 #: a pore over the seal's limit, pores elsewhere (one where four frames' cells meet, one
 #: small, two close together), a scratch across a seam between rings, and a burr and a
