@@ -151,6 +151,9 @@ class PhotometricConfig:
     interior_px: float | None = None
     sectors: int = 0
     sector_chi2: float = 1.5
+    #: Gauss-Newton steps with the noise's covariance (``gls.py``: the wall's grain as
+    #: correlated noise) after the weighted ones; 0: weighted least squares only
+    gls_steps: int = 0
 
 
 @dataclass(frozen=True)
@@ -486,7 +489,15 @@ def refine_hole(
     scale = None
     prior = np.ones(n)
     it = 0
-    for it in range(1, cfg.iterations + 1):
+    gls_op = None
+    weighted_left, gls_left = cfg.iterations, cfg.gls_steps
+    while weighted_left > 0 or gls_left > 0:
+        it += 1
+        use_gls = weighted_left == 0
+        if use_gls:
+            gls_left -= 1
+        else:
+            weighted_left -= 1
         ex, ey = dx - ox, dy - oy
         rho = np.sqrt(ex * ex + ey * ey)
         radius = r0 + a2 * c2 + b2 * s2 if cfg.oval else r0
@@ -551,7 +562,15 @@ def refine_hole(
         jac = np.concatenate([np.stack(cols, axis=1), lin_cols], axis=1)
         jw = jac * wts[:, None]
         try:
-            m, rhs = _normal(jac, jw, res)
+            if use_gls:
+                if gls_op is None:
+                    gls_op = _gls_operator(res, u, sel, roi_shape, s, r0, ox, oy, dxa, dya,
+                                           va, wall_px if grooves else None, g_wall if grooves else None)
+                if gls_op is None:
+                    break
+                m, rhs = _gls_normal(gls_op, jac, res, sel, roi_shape)
+            else:
+                m, rhs = _normal(jac, jw, res)
             step = np.linalg.solve(m, rhs)
         except np.linalg.LinAlgError:
             return None
@@ -566,8 +585,8 @@ def refine_hole(
         if cfg.fit_blur:
             s = float(np.clip(s + step[k], 0.3, 4.0))
         lin = lin + step[nl:]
-        if max(abs(step[0]), abs(step[1]), abs(step[2])) < 1e-3 and it >= 2:
-            break
+        if max(abs(step[0]), abs(step[1]), abs(step[2])) < 1e-3 and it >= 2 and not use_gls:
+            weighted_left = 0  # converged: on to the covariance-weighted steps, if any
     if not (np.isfinite(ox) and np.isfinite(oy) and np.isfinite(r0)) or abs(r0 - r) > 2.0 or np.hypot(ox, oy) > 2.0:
         return PhotometricFit(cx, cy, r, float(blur_px), float("nan"), float(scale), n, it, converged=False)
     contrast = median(bw @ lin[:nw] - bh @ lin[nw:])
@@ -585,12 +604,60 @@ def refine_hole(
         if gw.size:
             g_rms = float(np.sqrt(np.mean(np.square(gw - np.mean(gw)))))
     hac = np.full(3, np.nan)
-    if cfg.hac_lengths > 0:
+    if gls_op is not None:
+        # the last step weighed by the noise's covariance: its inverse normal matrix is
+        # the covariance of the estimate (no residual scale: C carries the noise's size)
+        sd = np.sqrt(np.where(var > 0, var, np.nan))
+        hac = sd.copy()
+    elif cfg.hac_lengths > 0:
         hac = _hac_sd(m, jw, res, sel, roi_shape, s, cfg.hac_lengths)
     return PhotometricFit(cx + ox, cy + oy, r0, s, contrast, float(scale), n, it,
                           r_sd=float(sd[2]), cx_sd=float(sd[0]), cy_sd=float(sd[1]),
                           r_u=float(hac[2]), cx_u=float(hac[0]), cy_u=float(hac[1]), groove_rms_dn=g_rms,
                           blur_sd=float(np.sqrt(var_s)) * float(scale) if var_s > 0 else float("nan"))
+
+
+def _gls_operator(res, u, sel, shape, s, r0, ox, oy, dxa, dya, va, wall_px, g_wall):
+    """The hole's noise operator (``gls.NoiseOperator``) from the weighted fit's residuals
+    (the hole's side) and the wall ring's, its grooves removed, about a smooth level."""
+    from station.vision.gls import NoiseOperator, estimate_noise
+
+    s_cam = float(np.sqrt(max(s * s - 1.0 / 12.0, 0.01)))
+    if wall_px is None:
+        return None
+    ex, ey = dxa - ox, dya - oy
+    rho_f = np.sqrt(ex * ex + ey * ey)
+    # the ring's residuals about a smooth level (Fourier order 4 in angle, a radial slope)
+    rr = np.maximum(rho_f[wall_px], 1e-9)
+    basis = _fourier(ex[wall_px] / rr, ey[wall_px] / rr, 4)
+    a = np.stack(basis + [b * (rr - r0) for b in basis[:3]], axis=1)
+    vw = va[wall_px] - g_wall
+    mm, rhs = _normal(a, a, vw)
+    grid = np.zeros(shape[0] * shape[1])
+    grid[wall_px] = vw - a @ np.linalg.solve(mm + 1e-9 * np.eye(a.shape[1]), rhs)
+    grid = grid.reshape(shape)
+    sel_g = sel.reshape(shape)
+    rho = rho_f.reshape(shape)
+    # the wall's share of each pixel: the disc cut by the pixel's area only
+    wall_share = 1.0 - ndtr((r0 - np.sqrt(rho * rho + 1.0 / 12.0)) / np.sqrt(1.0 / 12.0))
+    inner = u > 0.9
+    inner_var = (_MAD_TO_SIGMA * median(np.abs(res[inner]))) ** 2 if inner.sum() > 20 else 1.0
+    wall_ok = wall_px.reshape(shape)
+    noise = estimate_noise(grid, wall_ok, max(inner_var, 0.25), s_cam)
+    if noise is None:
+        return None
+    return NoiseOperator(noise, sel_g, wall_share, s_cam)
+
+
+def _gls_normal(op, jac, res, sel, shape):
+    """J^T C^-1 J and J^T C^-1 r with C the hole's ``NoiseOperator``."""
+    k = jac.shape[1]
+    b = np.zeros((k + 1, shape[0] * shape[1]))
+    b[:k, sel] = jac.T
+    b[k, sel] = res
+    y = op.solve(b.reshape(k + 1, *shape)).reshape(k + 1, -1)[:, sel]
+    m = jac.T @ y[:k].T
+    return 0.5 * (m + m.T), jac.T @ y[k]
 
 
 def _hac_sd(m: np.ndarray, jw: np.ndarray, res: np.ndarray, sel: np.ndarray, shape: tuple[int, int], s: float,
