@@ -197,28 +197,12 @@ class _Geometry:
 
 def _block_cg(geo: _Geometry, b: np.ndarray, tol: float = 1e-10, max_iter: int = 400) -> np.ndarray:
     """Solve C x = b for every column of the block b (p, h, w): CG, Jacobi-preconditioned."""
+    from station.vision.gls import block_cg
+
     precond = 1.0 / (geo.sensor_var + (geo.case.grain * geo.case.wall_dn) ** 2 * 0.25)
     if geo.mask is not None:
         precond = precond * geo.mask
-    x = np.zeros_like(b)
-    r = b.copy()
-    z = precond * r
-    p = z.copy()
-    rz = np.einsum("kij,kij->k", r, z)
-    b_norm = np.sqrt(np.einsum("kij,kij->k", b, b))
-    for _ in range(max_iter):
-        q = geo.apply_cov(p)
-        alpha = rz / np.einsum("kij,kij->k", p, q)
-        x += alpha[:, None, None] * p
-        r -= alpha[:, None, None] * q
-        res = np.sqrt(np.einsum("kij,kij->k", r, r))
-        if np.all(res <= tol * b_norm):
-            break
-        z = precond * r
-        rz_new = np.einsum("kij,kij->k", r, z)
-        p = z + (rz_new / rz)[:, None, None] * p
-        rz = rz_new
-    return x
+    return block_cg(geo.apply_cov, precond, b, tol, max_iter)
 
 
 def fisher(case: HoleCase, blur_known: bool = False, with_grain: bool = True,

@@ -120,25 +120,32 @@ class NoiseOperator:
         return out * self.sel
 
     def solve(self, b: np.ndarray, tol: float = 1e-6, max_iter: int = 200) -> np.ndarray:
-        """C^-1 b for a stack b (k, h, w): conjugate gradients, Jacobi-preconditioned."""
-        pre = self.precond * self.sel
-        x = np.zeros_like(b)
-        r = b.copy()
-        z = pre * r
-        p = z.copy()
-        rz = np.einsum("kij,kij->k", r, z)
-        b_norm = np.sqrt(np.einsum("kij,kij->k", b, b)) + 1e-300
-        for _ in range(max_iter):
-            q = self.apply(p)
-            pq = np.einsum("kij,kij->k", p, q)
-            alpha = np.where(pq > 0, rz / np.where(pq > 0, pq, 1.0), 0.0)
-            x += alpha[:, None, None] * p
-            r -= alpha[:, None, None] * q
-            if np.all(np.sqrt(np.einsum("kij,kij->k", r, r)) <= tol * b_norm):
-                break
-            z = pre * r
-            rz_new = np.einsum("kij,kij->k", r, z)
-            beta = np.where(rz > 0, rz_new / np.where(rz > 0, rz, 1.0), 0.0)
-            p = z + beta[:, None, None] * p
-            rz = rz_new
-        return x
+        """C^-1 b for a stack b (k, h, w)."""
+        return block_cg(self.apply, self.precond * self.sel, b, tol, max_iter)
+
+
+def block_cg(apply, precond: np.ndarray, b: np.ndarray, tol: float = 1e-6, max_iter: int = 200) -> np.ndarray:
+    """Solve C x = b for every layer of the stack b (k, h, w) by conjugate gradients,
+    with ``apply(x)`` = C x for a stack and the Jacobi preconditioner ``precond`` (the
+    inverse of C's diagonal, 0 off the pixels C lives on); until every layer's residual
+    is within ``tol`` of its b's norm."""
+    x = np.zeros_like(b)
+    r = b.copy()
+    z = precond * r
+    p = z.copy()
+    rz = np.einsum("kij,kij->k", r, z)
+    b_norm = np.sqrt(np.einsum("kij,kij->k", b, b))
+    for _ in range(max_iter):
+        q = apply(p)
+        pq = np.einsum("kij,kij->k", p, q)
+        alpha = np.where(pq > 0, rz / np.where(pq > 0, pq, 1.0), 0.0)
+        x += alpha[:, None, None] * p
+        r -= alpha[:, None, None] * q
+        if np.all(np.sqrt(np.einsum("kij,kij->k", r, r)) <= tol * b_norm):
+            break
+        z = precond * r
+        rz_new = np.einsum("kij,kij->k", r, z)
+        beta = np.where(rz > 0, rz_new / np.where(rz > 0, rz, 1.0), 0.0)
+        p = z + beta[:, None, None] * p
+        rz = rz_new
+    return x
