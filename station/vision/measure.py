@@ -122,6 +122,9 @@ class MeasureConfig:
     correlated_uncertainty_factor: float = 1.35
     #: the centre's (x and y pooled): 1.25 (96.3 %, 99.65 %, 1.20)
     correlated_centre_uncertainty_factor: float = 1.25
+    #: the factor on a grain-aware fit's uncertainties (``PhotometricConfig.gls_steps``):
+    #: the inverse normal matrix scaled by the chi-square, diameter and centre alike
+    gls_uncertainty_factor: float = 1.0
     #: a candidate whose wide ray search (72 rays) has fewer rays on one RANSAC circle is
     #: dropped before the narrow search: no true hole had fewer than 24 (dev frames,
     #: station seeds 3000-3199 + 5000-5199, 801 holes; wide 3000-3199, 396 holes, cut holes
@@ -392,7 +395,10 @@ def _measure_candidate(
             # the groove model); the centre moved ``photometric_centre_weight`` of the
             # way to the fit's (all of it since the hole is flat-fielded: see the setting)
             r_true = ph.r
-            if cfg.uncertainty_model == "correlated":
+            if ph.gls:
+                k = kc = cfg.gls_uncertainty_factor
+                r_sd, cx_sd, cy_sd = ph.r_u, ph.cx_u, ph.cy_u
+            elif cfg.uncertainty_model == "correlated":
                 k, kc = cfg.correlated_uncertainty_factor, cfg.correlated_centre_uncertainty_factor
                 r_sd, cx_sd, cy_sd = ph.r_u, ph.cx_u, ph.cy_u
             else:
@@ -500,6 +506,10 @@ def measure_holes(
     masks = [(c.x_px, c.y_px, 1.3 * c.radius_px + 4.0) for c in candidates]
     level = _Lazy(lambda: wall_level(image, masks))
     whole_frame = _Lazy(lambda: frame_grooves(image, masks, cfg.photometric.groove_angles_deg, level=level()))
+    # the grain-aware steps (``PhotometricConfig.gls_steps``) run once per hole, in the
+    # last fit: the first fits are weighted only
+    gls = cfg.photometric is not None and cfg.photometric.gls_steps > 0
+    first_cfg = replace(cfg, photometric=replace(cfg.photometric, gls_steps=0)) if gls else cfg
     for cand in candidates:
         fg = None
         if grooves_on:
@@ -511,7 +521,7 @@ def measure_holes(
                 fg = _Lazy(lambda window=window: frame_grooves(image, masks, cfg.photometric.groove_angles_deg,
                                                                window=window, level=level()))
         fit_cache: dict = {}
-        m, ph, rays = _measure_candidate(image, cand, cfg, calibration, rng, illumination, frame_grooves=fg,
+        m, ph, rays = _measure_candidate(image, cand, first_cfg, calibration, rng, illumination, frame_grooves=fg,
                                          fit_cache=fit_cache)
         if m is None:
             continue
@@ -521,11 +531,12 @@ def measure_holes(
         found.append(m)
         kept.append((cand, ph, fg, rays, fit_cache))
     shared = _frame_blur([k[1] for k in kept]) if cfg.share_blur else None
-    if shared is not None and shared[1] <= cfg.share_blur_chi2:
+    frame_blur = shared[0] if shared is not None and shared[1] <= cfg.share_blur_chi2 else None
+    if frame_blur is not None or gls:
         for i, (cand, ph, fg, rays, fit_cache) in enumerate(kept):
             if ph is not None and ph.converged:
                 m2, _, _ = _measure_candidate(image, cand, cfg, calibration, None, illumination,
-                                              frame_blur=shared[0], frame_grooves=fg, rays=rays, fit_cache=fit_cache)
+                                              frame_blur=frame_blur, frame_grooves=fg, rays=rays, fit_cache=fit_cache)
                 if m2 is not None:
                     found[i] = m2
     out: list[HoleMeasurement] = []

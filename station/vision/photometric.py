@@ -189,6 +189,9 @@ class PhotometricFit:
     #: standard deviation of the blur s by white-noise theory (NaN when the blur was
     #: held fixed or the fit did not converge): what a frame-shared blur weighs it by
     blur_sd: float = float("nan")
+    #: the last step was weighed by the noise's covariance (``PhotometricConfig.gls_steps``):
+    #: the uncertainties are its inverse normal matrix, scaled by the chi-square
+    gls: bool = False
 
 
 def disc_fraction(rho: np.ndarray, radius: float | np.ndarray, s: float) -> np.ndarray:
@@ -568,7 +571,7 @@ def refine_hole(
                                            va, wall_px if grooves else None, g_wall if grooves else None)
                 if gls_op is None:
                     break
-                m, rhs = _gls_normal(gls_op, jac, res, sel, roi_shape)
+                m, rhs, gls_chi2 = _gls_normal(gls_op, jac, res, sel, roi_shape)
             else:
                 m, rhs = _normal(jac, jw, res)
             step = np.linalg.solve(m, rhs)
@@ -606,15 +609,19 @@ def refine_hole(
     hac = np.full(3, np.nan)
     if gls_op is not None:
         # the last step weighed by the noise's covariance: its inverse normal matrix is
-        # the covariance of the estimate (no residual scale: C carries the noise's size)
-        sd = np.sqrt(np.where(var > 0, var, np.nan))
+        # the covariance of the estimate, scaled by the residuals' chi-square per degree
+        # of freedom (C's size is read from the ring, whose leftovers of grooves and
+        # blotches it takes for grain; the chi-square corrects its scale, not its shape)
+        dof = max(n - m.shape[0], 1)
+        sd = np.sqrt(np.where(var > 0, var, np.nan) * max(gls_chi2, 0.0) / dof)
         hac = sd.copy()
     elif cfg.hac_lengths > 0:
         hac = _hac_sd(m, jw, res, sel, roi_shape, s, cfg.hac_lengths)
     return PhotometricFit(cx + ox, cy + oy, r0, s, contrast, float(scale), n, it,
                           r_sd=float(sd[2]), cx_sd=float(sd[0]), cy_sd=float(sd[1]),
                           r_u=float(hac[2]), cx_u=float(hac[0]), cy_u=float(hac[1]), groove_rms_dn=g_rms,
-                          blur_sd=float(np.sqrt(var_s)) * float(scale) if var_s > 0 else float("nan"))
+                          blur_sd=float(np.sqrt(var_s)) * float(scale) if var_s > 0 else float("nan"),
+                          gls=gls_op is not None)
 
 
 def _gls_operator(res, u, sel, shape, s, r0, ox, oy, dxa, dya, va, wall_px, g_wall):
@@ -650,14 +657,14 @@ def _gls_operator(res, u, sel, shape, s, r0, ox, oy, dxa, dya, va, wall_px, g_wa
 
 
 def _gls_normal(op, jac, res, sel, shape):
-    """J^T C^-1 J and J^T C^-1 r with C the hole's ``NoiseOperator``."""
+    """J^T C^-1 J, J^T C^-1 r and r^T C^-1 r with C the hole's ``NoiseOperator``."""
     k = jac.shape[1]
     b = np.zeros((k + 1, shape[0] * shape[1]))
     b[:k, sel] = jac.T
     b[k, sel] = res
-    y = op.solve(b.reshape(k + 1, *shape)).reshape(k + 1, -1)[:, sel]
+    y = op.solve(b.reshape(k + 1, *shape)).reshape(k + 1, -1)[:, sel].astype(np.float64)
     m = jac.T @ y[:k].T
-    return 0.5 * (m + m.T), jac.T @ y[k]
+    return 0.5 * (m + m.T), jac.T @ y[k], float(res @ y[k])
 
 
 def _hac_sd(m: np.ndarray, jw: np.ndarray, res: np.ndarray, sel: np.ndarray, shape: tuple[int, int], s: float,
