@@ -58,6 +58,10 @@ from station.store.tokens import TokenRepository
 log = logging.getLogger("api")
 
 
+#: how long a new order waits for an inspection whose record already reads ended (s)
+ENDING_GRACE_S = 10.0
+
+
 class Busy(Exception):
     """The station is running a job already (answered 409)."""
 
@@ -390,6 +394,8 @@ class StationRuntime:
             if existing is not None:
                 return existing, False
         if self.busy:
+            await self._await_ending_inspection()
+        if self.busy:
             raise Busy(self.busy_text())
         started = asyncio.get_running_loop().create_future()
         self.start_job("inspection", self._run_inspection(part, serial, order_id, idempotency_key, started, surface),
@@ -579,6 +585,25 @@ class StationRuntime:
         self.hub.publish("proposal", event=p.state, id=p.id, state=p.state, decided_by=p.decided_by,
                          model_version=version)
         return p, version
+
+    async def _await_ending_inspection(self, grace_s: float = ENDING_GRACE_S) -> None:
+        """Wait for the running job if it is an inspection whose record already reads
+        ended: it is only wrapping up (the station loop returns after the record is
+        written), and a MES that polled the inspection to its end and sends the next order
+        at once must not be refused for that.  Returns at once otherwise, or after
+        ``grace_s`` if the wrap-up takes longer."""
+        job = self.job
+        if job is None or job.kind != "inspection" or job.inspection_id is None or not job.inspection_id.done() \
+                or job.inspection_id.cancelled() or job.inspection_id.exception() is not None:
+            return
+        try:
+            rec = await asyncio.to_thread(self.store.get, job.inspection_id.result())
+        except (StoreError, ValueError):
+            return
+        if rec is None or rec.state == "running":
+            return
+        with contextlib.suppress(asyncio.TimeoutError, concurrent.futures.CancelledError):
+            await asyncio.wait_for(asyncio.shield(asyncio.wrap_future(job.task)), grace_s)
 
     async def _finish_if_running(self, iid: str, reason: str) -> None:
         with contextlib.suppress(StoreError, ValueError):

@@ -159,3 +159,37 @@ def test_filters_and_paging(api):
         assert c.get("/api/v1/inspections", params={"since": "2024-01-01T00:00:00"}).status_code == 422  # no zone
         assert c.get("/api/v1/inspections", params={"result": "maybe"}).status_code == 422
         assert c.get("/api/v1/inspections", params={"limit": 0}).status_code == 422
+
+
+def test_an_order_sent_the_moment_the_last_inspection_reads_ended_is_taken(api, monkeypatch):
+    """A MES polls an inspection until it reads ended and sends the next order at once.
+    The station loop still wraps up for a moment after the record is written (here made
+    3 s long); the order waits for it instead of being refused with 409 (seen in CI on a
+    loaded machine, by ``test_filters_and_paging``)."""
+    import asyncio
+
+    session = api.runtime.session
+    service_for = session.service_for
+
+    class SlowToWrapUp:
+        """The station's inspection service, with 3 s of wrap-up after the record is written."""
+
+        def __init__(self, service):
+            self._service = service
+
+        async def inspect(self, *args, **kw):
+            outcome = await self._service.inspect(*args, **kw)
+            await asyncio.sleep(3.0)
+            return outcome
+
+    monkeypatch.setattr(session, "service_for", lambda part: SlowToWrapUp(service_for(part)))
+    with api.client("mes") as c:
+        wait_idle(c)
+        first = c.post("/api/v1/job-orders", json=order("SN-NEXT-0"))
+        assert first.status_code == 202, first.text
+        assert wait_done(c, first.json()["id"])["state"] == "complete"
+        assert c.get("/api/v1/station").json()["busy"]  # still wrapping up: the window is real
+        nxt = c.post("/api/v1/job-orders", json=order("SN-NEXT-1"))
+        assert nxt.status_code == 202, nxt.text
+        assert wait_done(c, nxt.json()["id"])["state"] == "complete"
+        wait_idle(c)
