@@ -604,7 +604,7 @@ def estimator_run(frames: int = 400, seed: int = 1000, envelope: str = "station"
              "y": _z_stats(ey / sy, ey / uy, uy / sy),
              "centre": _z_stats(np.concatenate([ex / sx, ey / sy]), np.concatenate([ex / ux, ey / uy]),
                                 np.concatenate([ux / sx, uy / sy]))}
-    gls = cfg.photometric.gls_steps if cfg.photometric is not None else 0
+    gls = cfg.gls_steps if cfg.photometric is not None else 0
     out = {"frames": frames, "seed": seed, "envelope": envelope, "bound": variant,
            "fit": f"{gls} grain-aware step(s)" if gls else "weighted", "whole_holes_measured": len(rows),
            "misses": misses, "criteria": CRITERIA, "stats": stats,
@@ -668,9 +668,10 @@ def register(bench_app: typer.Typer) -> None:
         old_variants: bool = typer.Option(True, "--old-variants/--frame-aware-only",
                                           help="also the first rounds' per-hole bounds (square patch, tilt free)"),
         cache: str = typer.Option(None, "--cache", help="a JSON file keeping each frame's bounds between runs"),
-        gls_steps: int = typer.Option(0, "--gls-steps", min=0, max=3,
+        gls_steps: int = typer.Option(None, "--gls-steps", min=0, max=3,
                                       help="with --estimator: the photometric fit's grain-aware steps "
-                                           "(PhotometricConfig.gls_steps; 0: the default weighted fit)"),
+                                           "(MeasureConfig.gls_steps; 0: the weighted fit only; default: "
+                                           "the station's)"),
         as_json: bool = typer.Option(False, "--json", help="one JSON object on stdout"),
     ) -> None:
         """Cramer-Rao bound of the diameter on the vision bench's frames (what any estimator could reach);
@@ -692,8 +693,8 @@ def register(bench_app: typer.Typer) -> None:
             from station.vision.measure import MeasureConfig
 
             mcfg = MeasureConfig()
-            if gls_steps:
-                mcfg = replace(mcfg, photometric=replace(mcfg.photometric, gls_steps=gls_steps))
+            if gls_steps is not None:
+                mcfg = replace(mcfg, gls_steps=gls_steps)
             r = estimator_run(frames, seed, envelope, bounds=bounds, measure_cfg=mcfg)
             if as_json:
                 print_json(r)

@@ -1601,7 +1601,8 @@ def _measure_holes_for_rims(img: np.ndarray, mm_per_px: float, cfg: DefectConfig
     from station.vision.detect import detect_candidates
     from station.vision.measure import MeasureConfig, measure_candidate, measure_holes
 
-    holes = list(measure_holes(img, mm_per_px))
+    # the rims need no grain-aware step: the weighted fit places them well within a px
+    holes = list(measure_holes(img, mm_per_px, cfg=MeasureConfig(gls_steps=0)))
     rays_only = MeasureConfig(photometric=None)
     for cand in detect_candidates(img, rays_only.detect):
         if 2.0 * cand.radius_px * mm_per_px < 0.8 * cfg.min_hole_diameter_mm:

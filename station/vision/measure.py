@@ -122,9 +122,13 @@ class MeasureConfig:
     correlated_uncertainty_factor: float = 1.35
     #: the centre's (x and y pooled): 1.25 (96.3 %, 99.65 %, 1.20)
     correlated_centre_uncertainty_factor: float = 1.25
-    #: the factor on a grain-aware fit's uncertainties (``PhotometricConfig.gls_steps``):
-    #: the inverse normal matrix scaled by the chi-square, diameter and centre alike
-    gls_uncertainty_factor: float = 1.0
+    #: the factors on a grain-aware fit's uncertainties (``gls_steps``: the inverse normal
+    #: matrix scaled by the chi-square), diameter and centre: set on dev frames 3000-3149
+    #: and 5000-5149 (429 holes) for +/- 2u to cover ~95 % (diameter 1.25: 96.3 % and
+    #: 99.5 % within +/- 3u; centre 1.05: 95.4 %, 99.7 %).  The diameter's tail is the
+    #: grooves' (the fit takes its groove model as known)
+    gls_uncertainty_factor: float = 1.25
+    gls_centre_uncertainty_factor: float = 1.05
     #: a candidate whose wide ray search (72 rays) has fewer rays on one RANSAC circle is
     #: dropped before the narrow search: no true hole had fewer than 24 (dev frames,
     #: station seeds 3000-3199 + 5000-5199, 801 holes; wide 3000-3199, 396 holes, cut holes
@@ -138,6 +142,10 @@ class MeasureConfig:
     #: changes across the field keeps each hole's own)
     share_blur: bool = True
     share_blur_chi2: float = 4.0
+    #: grain-aware Gauss-Newton steps in each hole's last photometric fit
+    #: (``PhotometricConfig.gls_steps``, ``gls.py``: the wall's grain as correlated noise;
+    #: docs/vision-history.md, round 14); 0: the weighted fit only
+    gls_steps: int = 1
     #: the honing grooves' profiles read over each hole's wide neighbourhood
     #: (``grooves.py``), the hole's ring giving only their depth there; else each hole
     #: reads them from its ring alone (docs/vision-history.md, round 13)
@@ -396,7 +404,7 @@ def _measure_candidate(
             # way to the fit's (all of it since the hole is flat-fielded: see the setting)
             r_true = ph.r
             if ph.gls:
-                k = kc = cfg.gls_uncertainty_factor
+                k, kc = cfg.gls_uncertainty_factor, cfg.gls_centre_uncertainty_factor
                 r_sd, cx_sd, cy_sd = ph.r_u, ph.cx_u, ph.cy_u
             elif cfg.uncertainty_model == "correlated":
                 k, kc = cfg.correlated_uncertainty_factor, cfg.correlated_centre_uncertainty_factor
@@ -506,10 +514,13 @@ def measure_holes(
     masks = [(c.x_px, c.y_px, 1.3 * c.radius_px + 4.0) for c in candidates]
     level = _Lazy(lambda: wall_level(image, masks))
     whole_frame = _Lazy(lambda: frame_grooves(image, masks, cfg.photometric.groove_angles_deg, level=level()))
-    # the grain-aware steps (``PhotometricConfig.gls_steps``) run once per hole, in the
-    # last fit: the first fits are weighted only
-    gls = cfg.photometric is not None and cfg.photometric.gls_steps > 0
-    first_cfg = replace(cfg, photometric=replace(cfg.photometric, gls_steps=0)) if gls else cfg
+    # the grain-aware steps (``gls_steps``) run once per hole, in the last fit: the first
+    # fits are weighted only
+    gls = cfg.photometric is not None and cfg.gls_steps > 0
+    first_cfg, last_cfg = cfg, cfg
+    if cfg.photometric is not None:
+        first_cfg = replace(cfg, photometric=replace(cfg.photometric, gls_steps=0))
+        last_cfg = replace(cfg, photometric=replace(cfg.photometric, gls_steps=cfg.gls_steps))
     for cand in candidates:
         fg = None
         if grooves_on:
@@ -535,7 +546,7 @@ def measure_holes(
     if frame_blur is not None or gls:
         for i, (cand, ph, fg, rays, fit_cache) in enumerate(kept):
             if ph is not None and ph.converged:
-                m2, _, _ = _measure_candidate(image, cand, cfg, calibration, None, illumination,
+                m2, _, _ = _measure_candidate(image, cand, last_cfg, calibration, None, illumination,
                                               frame_blur=frame_blur, frame_grooves=fg, rays=rays, fit_cache=fit_cache)
                 if m2 is not None:
                     found[i] = m2
