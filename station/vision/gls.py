@@ -17,12 +17,16 @@ v_sensor: the sensor's variance (shot + read noise), the hole's inside residuals
 there, the wall's from the split below; K: the grain's own kernel, a Gaussian of
 ``corr_px``; D: the wall's share of each pixel (1 inside the wall, 0 inside the hole, the
 pixel's area across the rim); B_s: the camera's blur; g: the grain's amplitude.  The wall
-residuals' variance and their correlation at lags 1 and 2 px split the wall's variance
-into sensor and grain and give the grain's correlation length: nothing of the renderer
-is assumed but the Gaussian shape of the correlation.
+ring's residuals (``photometric``: its grooves and a smooth level removed), their
+variance and their correlation at lags 1-3 px, split the wall's variance into sensor and
+grain and give the grain's correlation length: nothing of the renderer is assumed but
+the Gaussian shape of the correlation.  What the ring keeps of grooves and blotches
+counts as grain, so C's scale comes out large; the fit scales its uncertainties by the
+whitened residuals' chi-square, which C's scale does not bias.
 
 C^-1 applied to the Jacobian's columns and the residual by conjugate gradients
-(Jacobi preconditioner), as the bound does: C is never formed.
+(Jacobi preconditioner, to 1e-3: a Gauss-Newton step needs no more), as the bound does:
+C is never formed.
 """
 
 from __future__ import annotations
@@ -60,8 +64,9 @@ def estimate_noise(res_grid: np.ndarray, wall_ok: np.ndarray, inner_var: float, 
     hole's robust residual variance, ``s_cam`` the camera's blur (px, without the pixel).
 
     On the wall the residual's autocovariance is v_w delta(d) + v_g exp(-d^2 / (4 (c^2 +
-    s^2))) (a Gaussian kernel of sigma c, then the camera's): its correlations at 1 and
-    2 px give c and the grain's share.  None when too few wall pixels are read."""
+    s^2))) (a Gaussian kernel of sigma c, then the camera's): its correlations at 1-3 px
+    give c (within 0.3-2 px) and the grain's share.  None when too few wall pixels are
+    read."""
     if int(wall_ok.sum()) < 200:
         return None
     vals = res_grid[wall_ok]
