@@ -602,8 +602,10 @@ class StationRuntime:
             return
         if rec is None or rec.state == "running":
             return
-        with contextlib.suppress(asyncio.TimeoutError, concurrent.futures.CancelledError):
-            await asyncio.wait_for(asyncio.shield(asyncio.wrap_future(job.task)), grace_s)
+        # asyncio.wait neither raises what the job raised nor cancels it on the timeout
+        ended = asyncio.wrap_future(job.task)
+        ended.add_done_callback(lambda f: f.cancelled() or f.exception())  # retrieved: no warning
+        await asyncio.wait({ended}, timeout=grace_s)
 
     async def _finish_if_running(self, iid: str, reason: str) -> None:
         with contextlib.suppress(StoreError, ValueError):
