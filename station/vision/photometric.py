@@ -370,18 +370,26 @@ def _fourier(c1: np.ndarray, s1: np.ndarray, order: int) -> list[np.ndarray]:
     return out
 
 
+def _ring_fit(dx: np.ndarray, dy: np.ndarray, v: np.ndarray, r: float,
+              cfg: PhotometricConfig) -> tuple[np.ndarray, np.ndarray, int]:
+    """The wall ring's smooth level, least squares on the ring pixels ``dx``, ``dy`` with
+    their grooves removed (``v``): level (Fourier order ``wall_order``) + (rho - r) slope
+    (order ``ring_slope_order``).  Returns the coefficients, the design matrix and how
+    many of its columns are the level's."""
+    rho = np.maximum(np.hypot(dx, dy), 1e-9)
+    level = _fourier(dx / rho, dy / rho, max(cfg.wall_order, cfg.ring_slope_order))
+    a = np.stack(level + [b * (rho - r) for b in level[: 2 * max(cfg.ring_slope_order, 0) + 1]], axis=1)
+    m, rhs = _normal(a, a, v)
+    return np.linalg.solve(m + 1e-9 * np.eye(a.shape[1]), rhs), a, len(level)
+
+
 def _ring_slope(dx: np.ndarray, dy: np.ndarray, v: np.ndarray, r: float, basis: list[np.ndarray],
                 cfg: PhotometricConfig) -> np.ndarray:
     """The smooth wall's radial slope (DN/px) at the annulus' pixels (``basis``: their
-    ``_fourier`` terms, at least to ``ring_slope_order``), from the ring pixels ``dx``,
-    ``dy`` with their grooves removed (``v``): level (Fourier order ``wall_order``) +
-    (rho - r) slope (order ``ring_slope_order``), least squares."""
-    rho = np.maximum(np.hypot(dx, dy), 1e-9)
-    level = _fourier(dx / rho, dy / rho, max(cfg.wall_order, cfg.ring_slope_order))
-    a = np.stack(level + [b * (rho - r) for b in level[: 2 * cfg.ring_slope_order + 1]], axis=1)
-    m, rhs = _normal(a, a, v)
-    coef = np.linalg.solve(m + 1e-9 * np.eye(a.shape[1]), rhs)[len(level):]
-    return sum(c * b for c, b in zip(coef, basis))
+    ``_fourier`` terms, at least to ``ring_slope_order``), from the ring's fit
+    (``_ring_fit``)."""
+    coef, _, n_level = _ring_fit(dx, dy, v, r, cfg)
+    return sum(c * b for c, b in zip(coef[n_level:], basis))
 
 
 def refine_hole(
@@ -568,7 +576,7 @@ def refine_hole(
             if use_gls:
                 if gls_op is None:
                     gls_op = _gls_operator(res, u, sel, roi_shape, s, r0, ox, oy, dxa, dya,
-                                           va, wall_px if grooves else None, g_wall if grooves else None)
+                                           va, wall_px if grooves else None, g_wall if grooves else None, cfg)
                 if gls_op is None:
                     break
                 m, rhs, gls_chi2 = _gls_normal(gls_op, jac, res, sel, roi_shape)
@@ -624,7 +632,7 @@ def refine_hole(
                           gls=gls_op is not None)
 
 
-def _gls_operator(res, u, sel, shape, s, r0, ox, oy, dxa, dya, va, wall_px, g_wall):
+def _gls_operator(res, u, sel, shape, s, r0, ox, oy, dxa, dya, va, wall_px, g_wall, cfg):
     """The hole's noise operator (``gls.NoiseOperator``) from the weighted fit's residuals
     (the hole's side) and the wall ring's, its grooves removed, about a smooth level."""
     from station.vision.gls import NoiseOperator, estimate_noise
@@ -634,14 +642,11 @@ def _gls_operator(res, u, sel, shape, s, r0, ox, oy, dxa, dya, va, wall_px, g_wa
         return None
     ex, ey = dxa - ox, dya - oy
     rho_f = np.sqrt(ex * ex + ey * ey)
-    # the ring's residuals about a smooth level (Fourier order 4 in angle, a radial slope)
-    rr = np.maximum(rho_f[wall_px], 1e-9)
-    basis = _fourier(ex[wall_px] / rr, ey[wall_px] / rr, 4)
-    a = np.stack(basis + [b * (rr - r0) for b in basis[:3]], axis=1)
+    # the ring's residuals about its smooth level (the fit the ring's slope comes from)
     vw = va[wall_px] - g_wall
-    mm, rhs = _normal(a, a, vw)
+    coef, a, _ = _ring_fit(ex[wall_px], ey[wall_px], vw, r0, cfg)
     grid = np.zeros(shape[0] * shape[1])
-    grid[wall_px] = vw - a @ np.linalg.solve(mm + 1e-9 * np.eye(a.shape[1]), rhs)
+    grid[wall_px] = vw - a @ coef
     grid = grid.reshape(shape)
     sel_g = sel.reshape(shape)
     rho = rho_f.reshape(shape)
