@@ -102,6 +102,10 @@ class Frame:
     params: FrameParams | None = None
     #: ``sim.camera.defects.DefectTruth`` of each surface defect rendered (issue 23)
     defects: list = field(default_factory=list)
+    #: ground truth for benches only (``render_frame(keep_grooves=True)``): the honing
+    #: grooves' relative darkening of the wall at each pixel's centre (float32, <= 0),
+    #: before the holes, the blur and the vignetting; None when not kept
+    grooves: np.ndarray | None = None
 
 
 def _groove_profile(rng: np.random.Generator, length_px: float, params: FrameParams, step_px: float = 0.25):
@@ -126,8 +130,10 @@ def _lowfreq(rng: np.random.Generator, width_px: int, height_px: int, cell_px: i
     return field_ / max(float(field_.std()), 1e-6)
 
 
-def wall_radiance(rng: np.random.Generator, xu: np.ndarray, yu: np.ndarray, params: FrameParams) -> np.ndarray:
-    """Honed wall reflectance (DN) at ideal coordinates ``xu``, ``yu``."""
+def wall_radiance(rng: np.random.Generator, xu: np.ndarray, yu: np.ndarray, params: FrameParams,
+                  parts: dict | None = None) -> np.ndarray:
+    """Honed wall reflectance (DN) at ideal coordinates ``xu``, ``yu``; ``parts``, if
+    given, receives ``"grooves"``: the grooves' share of it (relative, a copy)."""
     h, w = xu.shape
     rel = np.zeros((h, w), np.float32)
     for sign in (+1.0, -1.0):
@@ -139,6 +145,8 @@ def wall_radiance(rng: np.random.Generator, xu: np.ndarray, yu: np.ndarray, para
         grooves = np.interp(u, grid, profile).astype(np.float32)
         # grooves fade in and out along their length (worn stones, plateau honing)
         rel -= grooves * (0.6 + 0.4 * np.tanh(_lowfreq(rng, w, h, 96)))
+    if parts is not None:
+        parts["grooves"] = rel.copy()
     grain = rng.standard_normal((h, w), dtype=np.float32)
     grain = cv2.GaussianBlur(grain, (0, 0), 0.7)
     rel += params.grain * grain / max(float(grain.std()), 1e-6)
@@ -257,7 +265,7 @@ def vignetting_gain(width_px: int, height_px: int, cx: float, cy: float, strengt
 
 
 def render_frame(params: FrameParams, holes: list[HoleSpec], seed: int | None = 0,
-                 wall: np.ndarray | None = None, defects=()) -> Frame:
+                 wall: np.ndarray | None = None, defects=(), keep_grooves: bool = False) -> Frame:
     """Render one frame; the same (params, holes, seed, wall, defects) gives the same image.
 
     ``wall``: the wall's radiance from :func:`wall_patch` (not modified), for a camera
@@ -267,12 +275,15 @@ def render_frame(params: FrameParams, holes: list[HoleSpec], seed: int | None = 
     the holes' rims), painted after the holes and before the blur; their shapes come
     from their own seeds, so without defects the frame is exactly what it was before
     they existed, and with them only the defects differ.
+    ``keep_grooves``: keep the grooves' field in ``Frame.grooves`` (a bench's ground
+    truth; the image is the same either way); not with a given ``wall``.
     """
     rng = np.random.default_rng(seed)
     w, h = params.width_px, params.height_px
+    parts: dict | None = {} if keep_grooves else None
     if wall is None:
         xu, yu = ideal_pixel_grid(params.lens, w, h)
-        radiance = wall_radiance(rng, xu, yu, params)
+        radiance = wall_radiance(rng, xu, yu, params, parts)
     else:
         if wall.shape != (h, w):
             raise ValueError(f"wall patch is {wall.shape[1]} x {wall.shape[0]} px, the frame {w} x {h}")
@@ -302,7 +313,8 @@ def render_frame(params: FrameParams, holes: list[HoleSpec], seed: int | None = 
     noise = np.sqrt(signal / params.gain_e_per_dn) * rng.standard_normal((h, w), dtype=np.float32)
     noise += params.read_noise_dn * rng.standard_normal((h, w), dtype=np.float32)
     image = np.clip(np.rint(signal + noise), 0, 255).astype(np.uint8)
-    return Frame(image=image, holes=truths, params=params, defects=defect_truths)
+    return Frame(image=image, holes=truths, params=params, defects=defect_truths,
+                 grooves=parts.get("grooves") if parts else None)
 
 
 #: supersampling per axis for defect outlines: 64 samples -> area to 1/64 of a pixel,
@@ -455,9 +467,11 @@ def random_holes(
 
 
 def random_frame(
-    seed: int, n_whole: int | None = None, n_partial: int | None = None, envelope: str = "station", **overrides
+    seed: int, n_whole: int | None = None, n_partial: int | None = None, envelope: str = "station",
+    keep_grooves: bool = False, **overrides
 ) -> Frame:
-    """A random frame (condition and holes) from one seed: the tests' and bench's unit of work."""
+    """A random frame (condition and holes) from one seed: the tests' and bench's unit of work
+    (``keep_grooves``: as ``render_frame``'s)."""
     rng = np.random.default_rng(seed)
     params = random_params(rng, envelope, **overrides)
     if n_whole is None:
@@ -465,4 +479,4 @@ def random_frame(
     if n_partial is None:
         n_partial = int(rng.integers(0, 2))
     holes = random_holes(rng, params, n_whole, n_partial)
-    return render_frame(params, holes, seed=int(rng.integers(2**31)))
+    return render_frame(params, holes, seed=int(rng.integers(2**31)), keep_grooves=keep_grooves)

@@ -173,3 +173,63 @@ def test_the_correlated_uncertainty_sees_the_grains_correlation_and_not_more():
     assert 0.8 < hac / sd < 1.25 and 0.85 < hac / white < 1.15, out
     sd, hac, white = out[0.04]
     assert hac > 1.15 * white and hac < 1.0 * sd, out
+
+
+def _renderer_column(params, hole, wall, dr):
+    """d(noise-free image)/dR by the renderer's own steps (its pixel coverage, the hole's
+    level cut into the wall, cv2's Gaussian blur), central differences in the radius."""
+    import cv2
+    from dataclasses import replace as rep
+
+    from sim.camera.render import hole_coverage
+
+    def image(d):
+        (x0, y0, x1, y1), cover, _, _ = hole_coverage(rep(hole, diameter_px=d), params)
+        rad = wall.copy()
+        rad[y0:y1, x0:x1] = rad[y0:y1, x0:x1] * (1 - cover) + params.hole_level_dn * cover
+        return cv2.GaussianBlur(rad, (0, 0), params.blur_sigma_px, borderType=cv2.BORDER_REFLECT).astype(float)
+
+    return (image(hole.diameter_px + 2 * dr) - image(hole.diameter_px - 2 * dr)) / (2 * dr)
+
+
+@pytest.mark.parametrize("blur, diameter", [(0.9, 40.0), (1.6, 26.0)])
+def test_with_the_grooves_known_the_bounds_radius_column_is_the_renderers(blur, diameter):
+    """The grooved bound's d(mean)/dR against the renderer's own: a deep cross-hatch at
+    low contrast, no grain or blotches, no vignetting. The renderer's column is itself
+    noisy (its pixel coverage is supersampled, 16 x 16): its distance from the flat
+    bound's column on a flat wall is the yardstick. On the grooved wall the grooved
+    bound's column is as close to the renderer's as that, and carries the same
+    information (sum of squares); the flat wall's column is several times farther off and
+    overstates the information by the grooves' share of the edge's contrast."""
+    from dataclasses import replace as rep
+
+    from sim.camera.lens import ideal_pixel_grid
+    from sim.camera.render import FrameParams, HoleSpec, wall_radiance
+
+    params = FrameParams(width_px=160, height_px=160, wall_level_dn=150.0, hole_level_dn=80.0, groove_depth=0.12,
+                         grain=0.0, blotch=0.0, blur_sigma_px=blur, vignetting=0.0)
+    xu, yu = ideal_pixel_grid(None, 160, 160)
+    parts = {}
+    wall = wall_radiance(np.random.default_rng(7), xu, yu, params, parts)
+    grooves = parts["grooves"]
+    assert np.allclose(wall, params.wall_level_dn * (1 + grooves), atol=1e-3)  # nothing but the grooves
+    hole = HoleSpec(80.3, 79.6, diameter)
+    case = HoleCase(radius_px=diameter / 2, blur_px=blur, wall_dn=150.0, hole_dn=80.0, grain=0.03,
+                    gain_e_per_dn=40.0, read_noise_dn=1.5, frac_x=0.3, frac_y=-0.4, grooves=grooves,
+                    grooves_origin=(80, 80))
+
+    def compare(c, w):
+        render = _renderer_column(params, hole, w, dr=0.25)
+        geo = _Geometry(c, blur_known=False, with_grain=True, **FRAME_GEOMETRY)
+        col = geo.jac[geo.names.index("R")]
+        half = (col.shape[0] - 1) // 2
+        ref = render[80 - half:80 + half + 1, 80 - half:80 + half + 1] * geo.mask
+        return np.linalg.norm(col - ref) / np.linalg.norm(ref), np.sum(col**2) / np.sum(ref**2)
+
+    flat = rep(case, grooves=None)
+    yardstick, info_flat_flat = compare(flat, np.full_like(wall, 150.0))
+    err_g, info_g = compare(case, wall)
+    err_f, info_f = compare(flat, wall)
+    assert yardstick < 0.08 and abs(info_flat_flat - 1) < 0.02
+    assert err_g < 1.3 * yardstick and abs(info_g - 1) < 0.025
+    assert err_f > 2.5 * err_g and info_f > 1.1
