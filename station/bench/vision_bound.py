@@ -24,8 +24,9 @@ were known: the bound for the photometric fit's own model, which takes the slope
 the wall ring outside the annulus instead of fitting it there.
 
 Left out, so the bound is *optimistic* (lower than any real estimator can reach): the
-honing grooves (treated as known exactly) and the low-frequency blotches (absorbed by
-the wall's Fourier series).  An estimator's median |error| above the bound's is the
+honing grooves and the low-frequency blotches (absorbed by the wall's Fourier series).
+The first variants take the wall as flat: no grooves in the mean image at all, which is
+not the same as grooves known (``frame_aware_grooves`` below).  An estimator's median |error| above the bound's is the
 room that is left; a goal below the bound cannot be met by any unbiased estimator.
 
 The predicted median |diameter error| over the bench's holes is the median over Monte
@@ -39,7 +40,15 @@ over it, ``combine_frame``), the illumination is known (the frame's ~10^6 wall p
 it, ``station.vision.illumination``: its tilt is in the mean and the grain, and the hole
 level has no free tilt), and the pixels are the disc the photometric fit reads, 2.5 s + 1
 + 18 px past the rim (its groove ring), not a square of R + 3 s + 6 px.  Still left out,
-so it is still optimistic: the grooves (known) and the blotches (smooth).  With
+so it is still optimistic: the grooves (known) and the blotches (smooth).
+
+**Issue 23's criteria are judged against ``frame_aware_grooves``**: the frame-aware bound
+with the frame's own grooves in the wall, known exactly (``Frame.grooves``, the
+renderer's ground truth: a bench's annotation, never the station's). A groove at the rim
+changes the edge's local contrast, B[(H - W (1 + g)) dc/dR] instead of (H - W) du/dR, so
+the flat wall's bound misstates a grooved hole's information (on a deep cross-hatch at
+low contrast by 20-25 %; on the station's frames its sigma is 0.5-7 % lower). Known
+exactly, the grooves are still optimistic: an estimator has to read them.  With
 ``--estimator`` the bench measures the same frames with the station and prints the
 criteria (``estimator_run``): per whole hole z = error / sigma for the diameter, x and y,
 the RMS of z, the shares beyond 3 and 5 sigma, the coverage of +/- 2u and 3u and the
