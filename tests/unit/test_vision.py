@@ -298,8 +298,11 @@ def test_the_walls_radial_slope_is_read_from_the_ring(slope_dn_per_px):
     1.8 px blur: the rim's edge moves by the slope's share of the blur (B[W (1 - c)] for
     a sloped W), which the annulus cannot tell from the radius.  Without the ring's
     slope the diameter reads ~0.10 px off (observed +0.104 / -0.099 px over these 10
-    frames, noise 0.05 px each); with it at full size the bias is gone (+0.000 /
-    +0.002); the default, shrunk by half for real blotches, leaves about half."""
+    frames, noise 0.05 px each); with the ring's Fourier slope at full size the bias is
+    gone (+0.000 / +0.002), shrunk by half (round 14's default) half of it is left.  The
+    default since round 15, a 2-D polynomial of the ring carried in to the rim, leaves
+    about a quarter (+0.026 / -0.027 px): a quadratic's radial slope grows with the
+    radius, a cone's does not, and blotches are smooth fields, not cones."""
     from station.vision.photometric import PhotometricConfig
 
     p = FrameParams(width_px=320, height_px=256, groove_depth=0.0, grain=0.0, blotch=0.0, vignetting=0.0,
@@ -311,8 +314,8 @@ def test_the_walls_radial_slope_is_read_from_the_ring(slope_dn_per_px):
         wall = (150.0 + slope_dn_per_px * (np.hypot(xx - cx, yy - cy) - 20.0)).astype(np.float32)
         frames.append(render_frame(p, [HoleSpec(cx, cy, 40.0)], seed=k, wall=wall))
 
-    def bias(shrink: float) -> float:
-        cfg = MeasureConfig(photometric=PhotometricConfig(ring_slope_shrink=shrink))
+    def bias(shrink: float, poly: int = 0) -> float:
+        cfg = MeasureConfig(photometric=PhotometricConfig(ring_slope_shrink=shrink, ring_slope_poly=poly))
         errs = []
         for f in frames:
             (m,) = measure_holes(f.image, cfg=cfg)
@@ -320,10 +323,13 @@ def test_the_walls_radial_slope_is_read_from_the_ring(slope_dn_per_px):
         return float(np.mean(errs))
 
     sign = np.sign(slope_dn_per_px)
-    none, full, default = bias(0.0), bias(1.0), bias(PhotometricConfig().ring_slope_shrink)
+    d = PhotometricConfig()
+    none, full, half = bias(0.0), bias(1.0), bias(0.5)
+    default = bias(d.ring_slope_shrink, d.ring_slope_poly)
     assert sign * none > 0.06
     assert abs(full) < 0.025
-    assert 0.2 * sign * none < sign * default < 0.8 * sign * none
+    assert 0.3 * sign * none < sign * half < 0.7 * sign * none
+    assert 0.1 * sign * none < sign * default < 0.4 * sign * none
 
 
 # ---------------------------------------------------------------- blur correction, fits, helpers
