@@ -26,8 +26,9 @@ the wall ring outside the annulus instead of fitting it there.
 Left out, so the bound is *optimistic* (lower than any real estimator can reach): the
 honing grooves and the low-frequency blotches (absorbed by the wall's Fourier series).
 The first variants take the wall as flat: no grooves in the mean image at all, which is
-not the same as grooves known (``frame_aware_grooves`` below).  An estimator's median |error| above the bound's is the
-room that is left; a goal below the bound cannot be met by any unbiased estimator.
+not the same as grooves known (``frame_aware_grooves`` below).  An estimator's median
+|error| above the bound's is the room that is left; a goal below the bound cannot be met
+by any unbiased estimator.
 
 The predicted median |diameter error| over the bench's holes is the median over Monte
 Carlo draws of the median of |N(0, sigma_i)| over the holes (the holes' bounds differ;
@@ -46,8 +47,9 @@ so it is still optimistic: the grooves (known) and the blotches (smooth).
 with the frame's own grooves in the wall, known exactly (``Frame.grooves``, the
 renderer's ground truth: a bench's annotation, never the station's). A groove at the rim
 changes the edge's local contrast, B[(H - W (1 + g)) dc/dR] instead of (H - W) du/dR, so
-the flat wall's bound misstates a grooved hole's information (on a deep cross-hatch at
-low contrast by 20-25 %; on the station's frames its sigma is 0.5-7 % lower). Known
+the flat wall's bound misstates a grooved hole's information (it overstates it by 18-26 %
+on a deep cross-hatch at low contrast; on the station's frames the flat wall's sigma is
+0.5-7 % below the grooved one). Known
 exactly, the grooves are still optimistic: an estimator has to read them.  With
 ``--estimator`` the bench measures the same frames with the station and prints the
 criteria (``estimator_run``): per whole hole z = error / sigma for the diameter, x and y,

@@ -233,3 +233,53 @@ def test_with_the_grooves_known_the_bounds_radius_column_is_the_renderers(blur, 
     assert yardstick < 0.08 and abs(info_flat_flat - 1) < 0.02
     assert err_g < 1.3 * yardstick and abs(info_g - 1) < 0.025
     assert err_f > 2.5 * err_g and info_f > 1.1
+
+
+def test_a_cache_without_the_grooved_bound_gains_it_and_keeps_the_rest(tmp_path, monkeypatch):
+    """A cache written before the grooved bound existed: only that bound is computed for
+    its frames, the flat ones are read back as they were, and the grooved values equal a
+    fresh computation's."""
+    import json
+
+    import station.bench.vision_bound as vb
+
+    path = tmp_path / "bounds.json"
+    fresh = vb.per_frame_bounds(2, 3000, old_variants=(), cache=str(path))
+    assert [len(f) for f in fresh] == [2, 1]
+    store = json.loads(path.read_text())
+    for entry in store.values():
+        for hole in entry:
+            del hole[vb.GROOVED]
+            hole["frame_aware"][0] *= 1.5  # a mark: recomputed, it would be gone
+    path.write_text(json.dumps(store))
+    asked = []
+    work = vb._frame_work
+    monkeypatch.setattr(vb, "_frame_work", lambda args: asked.append(args[2]) or work(args))
+    again = vb.per_frame_bounds(2, 3000, old_variants=(), cache=str(path))
+    assert asked == [(vb.GROOVED,), (vb.GROOVED,)]
+    for f0, f1 in zip(fresh, again):
+        for h0, h1 in zip(f0, f1):
+            assert h1["frame_aware"][0] == pytest.approx(1.5 * h0["frame_aware"][0], rel=1e-12)
+            assert h1[vb.GROOVED][0] == pytest.approx(h0[vb.GROOVED][0], rel=1e-12)
+            assert np.allclose(h1[vb.GROOVED][1], h0[vb.GROOVED][1], rtol=1e-12)
+    # read back again: nothing left to compute
+    asked.clear()
+    vb.per_frame_bounds(2, 3000, old_variants=(), cache=str(path))
+    assert asked == []
+
+
+def test_the_criteria_are_judged_against_the_grooved_bound_and_printed_against_the_flat_one():
+    """The estimator's figures against the grooved bound (the criteria's) and, under
+    ``also``, against the flat wall's: on these frames every hole's grooved sigma is the
+    larger (0.8-4.6 %), so the same errors give a smaller RMS z against it."""
+    import station.bench.vision_bound as vb
+
+    bounds = vb.per_frame_bounds(2, 3000, old_variants=())
+    r = vb.estimator_run(2, 3000, hough=False, bounds=bounds)
+    assert r["bound"] == vb.GROOVED and r["whole_holes_measured"] == 3
+    flat = r["also"]["frame_aware"]["stats"]["diameter"]
+    grooved = r["stats"]["diameter"]
+    ratios = [h[vb.GROOVED][0] / h["frame_aware"][0] for f in bounds for h in f]
+    assert all(1.0 < q < 1.1 for q in ratios)
+    assert grooved["rms_z"] < flat["rms_z"] < grooved["rms_z"] * max(ratios) * (1 + 1e-9)
+    assert set(r["also"]["frame_aware"]["verdict"]["diameter"]) == set(r["verdict"]["diameter"])
