@@ -283,3 +283,14 @@ def test_the_criteria_are_judged_against_the_grooved_bound_and_printed_against_t
     assert all(1.0 < q < 1.1 for q in ratios)
     assert grooved["rms_z"] < flat["rms_z"] < grooved["rms_z"] * max(ratios) * (1 + 1e-9)
     assert set(r["also"]["frame_aware"]["verdict"]["diameter"]) == set(r["verdict"]["diameter"])
+
+
+def test_keeping_the_grooves_leaves_the_frame_as_it_was():
+    """The groove field is an annotation: the same seed renders the same image with it
+    kept or not, and the field is the grooves' darkening (<= 0, some of it deep)."""
+    from sim.camera.render import random_frame
+
+    a, b = random_frame(3001), random_frame(3001, keep_grooves=True)
+    assert a.grooves is None
+    assert np.array_equal(a.image, b.image)
+    assert b.grooves.shape == b.image.shape and b.grooves.max() <= 0.0 and b.grooves.min() < -0.1
