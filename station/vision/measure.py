@@ -125,11 +125,12 @@ class MeasureConfig:
     #: the factors on a grain-aware fit's uncertainties (``gls_steps``: the inverse normal
     #: matrix scaled by the chi-square), diameter and centre: set on dev frames 3000-3149
     #: and 5000-5149 (429 holes) for +/- 2u to cover ~95 % (diameter 1.25: 96.3 % and
-    #: 99.5 % within +/- 3u).  The diameter's tail is the grooves' (the fit takes its
-    #: groove model as known).  The centre's, first 1.05 there, was re-set on the same
-    #: seeds taken to 400 frames each (1,212 holes, 2,424 coordinates), where 1.05 held
-    #: +/- 2u 94.3 % and +/- 3u 99.67 %: 1.10 holds 95.3 % and 99.71 % (95.5 % wants 1.11,
-    #: 99.73 % 1.09)
+    #: 99.5 % within +/- 3u).  The diameter's errors have a heavier tail than its u: on
+    #: the same seeds at 400 frames, with round 15's slope, 1.25 holds +/- 2u 96.9 % and
+    #: +/- 3u 99.42 %, and no factor holds both bands by a margin.  The centre's, first
+    #: 1.05 there, was re-set on the same seeds taken to 400 frames each (1,212 holes,
+    #: 2,424 coordinates), where 1.05 held +/- 2u 94.3 % and +/- 3u 99.67 %: 1.10 holds
+    #: 95.3 % and 99.71 % (95.5 % wants 1.11, 99.73 % 1.09)
     gls_uncertainty_factor: float = 1.25
     gls_centre_uncertainty_factor: float = 1.10
     #: a candidate whose wide ray search (72 rays) has fewer rays on one RANSAC circle is
