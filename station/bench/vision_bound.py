@@ -9,8 +9,9 @@ the renderer's own physics (``sim.camera.render``):
   area, between a wall and a hole level, times the vignetting (the photometric model's
   ``disc_fraction``).  Nuisance parameters, as an estimator that does not know them
   has to carry: the centre, an oval (2nd harmonic of R), the wall level as a Fourier
-  series of order 4 in angle with a radial slope of order 1, the hole level with a
-  tilt, and the blur (unless it is taken as known);
+  series of order 4 in angle with a radial slope of order 1 (cut by the hole before the
+  blur, as the renderer does), the hole level with a tilt, and the blur (unless it is
+  taken as known);
 * noise covariance: the sensor's shot + read noise + 8-bit quantisation (white), plus
   the wall's fine grain as the renderer makes it: white noise blurred by a 0.7 px
   Gaussian, scaled to the frame's ``grain`` share of the wall level, cut by the hole
@@ -164,10 +165,16 @@ class _Geometry:
             for name, f in ((f"wall_c{k}", np.cos(k * theta)), (f"wall_s{k}", np.sin(k * theta))):
                 if k or name.startswith("wall_c"):
                     cols[name] = f * (1 - u)
-        for k in range(slope_order + 1):  # the wall's radial slope, Fourier order 1 by default
+        # the wall's radial slope, Fourier order 1 by default.  The hole cuts the sloped
+        # wall before the camera blurs it: B[f (rho - R) (1 - c)] = f (rho - r) (1 - u) plus
+        # the blur's product rule, s_cam^2 grad[f (rho - R)] . grad(1 - u) = -s_cam^2 f du/drho
+        # (grad f is along the rim, grad u across it).  Before round 16 the second term was
+        # missing: the column was 10-12 % off the renderer's near the rim and the bound 1-3 %
+        # high (``test_the_bounds_wall_columns_are_the_renderers``)
+        for k in range(slope_order + 1):
             for name, f in ((f"slope_c{k}", np.cos(k * theta)), (f"slope_s{k}", np.sin(k * theta))):
                 if k or name.startswith("slope_c"):
-                    cols[name] = f * (rho - r) / 10.0 * (1 - u)
+                    cols[name] = f * ((rho - r) * (1 - u) - c.blur_px**2 * du_drho) / 10.0
         cols["hole"] = u
         if hole_tilt:  # a free tilt of the hole's level (the illumination's, not known)
             cols["hole_tx"], cols["hole_ty"] = u * xx / 10.0, u * yy / 10.0
@@ -375,6 +382,11 @@ VARIANTS = {"blur_free": dict(blur_known=False, with_grain=True),
 #: groove ring ends 2.5 s + 1 + 18 px past the rim: ``PhotometricConfig.groove_margin_px``),
 #: the illumination's tilt known (the frame reveals it: ``station.vision.illumination``,
 #: ~10^6 wall pixels against a hole's 10^4), so no free tilt of the hole's level
+#: the bound's revision, kept in a bench cache (``per_frame_bounds``): a cache of another
+#: revision is computed again.  2 (round 16): the wall slope's columns with the hole's cut
+BOUND_REVISION = 2
+_REVISION_KEY = "_bound_revision"
+
 FRAME_GEOMETRY = dict(fit_reach_px=18.0, hole_tilt=False, illumination_known=True)
 #: the parameters every hole of a frame shares: the camera's blur (one PSF per frame)
 SHARED = ("blur",)
@@ -493,7 +505,8 @@ def baseline_diameter_errs(frames: int, seed: int, envelope: str = "station") ->
 def per_frame_bounds(frames: int, seed: int, envelope: str = "station", jobs: int = 1, progress=None,
                      old_variants: tuple[str, ...] = tuple(VARIANTS), cache: str | None = None) -> list[list[dict]]:
     """Every frame's per-hole bounds (``_frame_work``), in frame order; ``cache``: a JSON
-    file that keeps them between runs (keyed by frame seed, envelope and variant)."""
+    file that keeps them between runs (keyed by frame seed, envelope and variant), for
+    this ``BOUND_REVISION`` only: a cache of another is computed again."""
     import json
     import os
 
@@ -501,6 +514,9 @@ def per_frame_bounds(frames: int, seed: int, envelope: str = "station", jobs: in
     if cache and os.path.exists(cache):
         with open(cache) as fh:
             store = json.load(fh)
+        if store.get(_REVISION_KEY) != BOUND_REVISION:
+            store = {}
+    store[_REVISION_KEY] = BOUND_REVISION
 
     def key(i):
         return f"{envelope}:{seed + i}"

@@ -247,11 +247,12 @@ def test_a_cache_without_the_grooved_bound_gains_it_and_keeps_the_rest(tmp_path,
     fresh = vb.per_frame_bounds(2, 3000, old_variants=(), cache=str(path))
     assert [len(f) for f in fresh] == [2, 1]
     store = json.loads(path.read_text())
+    assert store.pop(vb._REVISION_KEY) == vb.BOUND_REVISION
     for entry in store.values():
         for hole in entry:
             del hole[vb.GROOVED]
             hole["frame_aware"][0] *= 1.5  # a mark: recomputed, it would be gone
-    path.write_text(json.dumps(store))
+    path.write_text(json.dumps({**store, vb._REVISION_KEY: vb.BOUND_REVISION}))
     asked = []
     work = vb._frame_work
     monkeypatch.setattr(vb, "_frame_work", lambda args: asked.append(args[2]) or work(args))
@@ -266,6 +267,96 @@ def test_a_cache_without_the_grooved_bound_gains_it_and_keeps_the_rest(tmp_path,
     asked.clear()
     vb.per_frame_bounds(2, 3000, old_variants=(), cache=str(path))
     assert asked == []
+
+
+def test_a_cache_of_another_revision_of_the_bound_is_computed_again(tmp_path, monkeypatch):
+    """A cache written by an earlier revision of the bound (none recorded, or another
+    number) holds figures the bound no longer gives: every frame is computed again."""
+    import json
+
+    import station.bench.vision_bound as vb
+
+    path = tmp_path / "bounds.json"
+    fresh = vb.per_frame_bounds(1, 3000, old_variants=(), cache=str(path))
+    store = json.loads(path.read_text())
+    for entry in store["station:3000"]:
+        for v in entry.values():
+            v[0] *= 1.5
+    for revision in (None, vb.BOUND_REVISION - 1):
+        stale = {k: v for k, v in store.items() if k != vb._REVISION_KEY}
+        if revision is not None:
+            stale[vb._REVISION_KEY] = revision
+        path.write_text(json.dumps(stale))
+        asked = []
+        work = vb._frame_work
+        monkeypatch.setattr(vb, "_frame_work", lambda args: asked.append(args[2]) or work(args))
+        again = vb.per_frame_bounds(1, 3000, old_variants=(), cache=str(path))
+        monkeypatch.setattr(vb, "_frame_work", work)
+        assert asked == [vb.FRAME_VARIANTS]
+        for h0, h1 in zip(fresh[0], again[0]):
+            assert h1[vb.GROOVED][0] == pytest.approx(h0[vb.GROOVED][0], rel=1e-12)
+        assert json.loads(path.read_text())[vb._REVISION_KEY] == vb.BOUND_REVISION
+
+
+@pytest.mark.parametrize("blur, diameter", [(0.9, 40.0), (2.0, 20.0)])
+def test_the_bounds_wall_columns_are_the_renderers(blur, diameter):
+    """The bound's wall nuisances (its level's Fourier terms, its radial slope's, and the
+    hole's level) against the renderer's own derivatives: a wall of 150 DN plus each term,
+    cut by the hole's pixel coverage and blurred by cv2 (central differences).  Near the
+    rim, where the hole cuts the wall, the slope's columns carry the blur's product rule;
+    without it (``(rho - r) (1 - u)`` alone, the bound before round 16) they are 10-15 %
+    off there, and off along the radius's own column."""
+    import cv2
+    from scipy.special import ndtr
+
+    from sim.camera.render import FrameParams, HoleSpec, hole_coverage
+
+    params = FrameParams(width_px=160, height_px=160, wall_level_dn=150.0, hole_level_dn=80.0, groove_depth=0.0,
+                         grain=0.0, blotch=0.0, blur_sigma_px=blur, vignetting=0.0)
+    hole = HoleSpec(80.3, 79.6, diameter)
+    yy, xx = np.mgrid[0:160, 0:160].astype(float)
+    rho, th = np.hypot(xx - 80.3, yy - 79.6), np.arctan2(yy - 79.6, xx - 80.3)
+    (x0, y0, x1, y1), cover, _, _ = hole_coverage(hole, params)
+
+    def image(wall, hole_dn=80.0):
+        rad = np.array(wall, np.float32) * np.ones((160, 160), np.float32)
+        rad[y0:y1, x0:x1] = rad[y0:y1, x0:x1] * (1 - cover) + hole_dn * cover
+        return cv2.GaussianBlur(rad, (0, 0), blur, borderType=cv2.BORDER_REFLECT).astype(float)
+
+    case = HoleCase(radius_px=diameter / 2, blur_px=blur, wall_dn=150.0, hole_dn=80.0, grain=0.03,
+                    gain_e_per_dn=40.0, read_noise_dn=1.5, frac_x=0.3, frac_y=-0.4)
+    geo = _Geometry(case, blur_known=False, with_grain=True, **FRAME_GEOMETRY)
+    half = (geo.jac.shape[1] - 1) // 2
+    win = (slice(80 - half, 80 + half + 1), slice(80 - half, 80 + half + 1))
+    rim = (np.abs(rho[win] - diameter / 2) < 3 * blur + 1) & geo.mask
+    col_r = geo.jac[geo.names.index("R")]
+    checked = 0
+    for name in geo.names:
+        if name == "hole":
+            ref = (image(150.0, 81.0) - image(150.0, 79.0))[win] / 2.0
+        elif name.startswith(("wall_", "slope_")):
+            k = int(name[-1])
+            f = (np.cos if name.split("_")[1][0] == "c" else np.sin)(k * th)
+            if name.startswith("slope_"):
+                f = f * (rho - diameter / 2) / 10.0
+            ref = (image(150.0 + f) - image(150.0 - f))[win] / 2.0
+        else:
+            continue
+        ref = ref * geo.mask
+        col = geo.jac[geo.names.index(name)]
+        checked += 1
+        # the angular terms' own blur (the Laplacian of cos k theta) grows with k and the
+        # blur over the radius: 9 % at order 4 on a 20 px hole at 2 px; it is orthogonal
+        # to the radius's column
+        tol = 0.01 + 0.6 * (int(name[-1]) * blur / diameter) ** 2 if name.startswith("wall_") else 0.01
+        assert np.linalg.norm(col - ref) / np.linalg.norm(ref) < tol, name
+        assert abs(np.sum((col - ref) * col_r)) / np.sum(col_r**2) < 2e-3, name
+        if name.startswith("slope_"):
+            s_e = np.sqrt(blur**2 + 1.0 / 12.0)
+            u = ndtr((diameter / 2 - np.sqrt(rho[win] ** 2 + s_e**2)) / s_e)
+            old = f[win] * (1 - u) * geo.mask
+            assert np.linalg.norm((old - ref)[rim]) / np.linalg.norm(ref[rim]) > 0.08, name
+    assert checked == 13
 
 
 def test_the_criteria_are_judged_against_the_grooved_bound_and_printed_against_the_flat_one():
