@@ -75,6 +75,8 @@ import typer
 from scipy.ndimage import correlate1d, gaussian_filter
 from scipy.special import ndtr
 
+from station.vision.photometric import disc_edge, disc_fraction
+
 _INV_SQRT_2PI = 0.3989422804014327
 #: the renderer's grain kernel (``cv2.GaussianBlur(grain, (0, 0), 0.7)``)
 GRAIN_SIGMA_PX = 0.7
@@ -142,14 +144,15 @@ class _Geometry:
         self.gain_field = c.vignetting_gain * tilt * np.ones_like(rho)  # (n, n)
 
         def u_of(radius, s):
-            return ndtr((radius - np.sqrt(rho * rho + s * s)) / s)
+            return disc_fraction(rho, radius, s)
 
-        root = np.sqrt(rho * rho + s_e * s_e)
-        z = (r - root) / s_e
+        # the blurred disc's edge to second order in s / rho, as the photometric fit's
+        m_e, v_e, (dm_drho, dv_drho), _ = disc_edge(rho, s_e)
+        z = (r - m_e) / v_e
         phi = _INV_SQRT_2PI * np.exp(-0.5 * z * z)
         u = ndtr(z)
-        du_dr = phi / s_e
-        du_drho = -phi * rho / (s_e * root)
+        du_dr = phi / v_e
+        du_drho = -phi * (dm_drho + z * dv_drho) / v_e
         ds = 1e-4
         s_hi, s_lo = np.sqrt((c.blur_px + ds) ** 2 + 1 / 12), np.sqrt((c.blur_px - ds) ** 2 + 1 / 12)
         du_ds = (u_of(r, s_hi) - u_of(r, s_lo)) / (2 * ds)
@@ -383,8 +386,9 @@ VARIANTS = {"blur_free": dict(blur_known=False, with_grain=True),
 #: the illumination's tilt known (the frame reveals it: ``station.vision.illumination``,
 #: ~10^6 wall pixels against a hole's 10^4), so no free tilt of the hole's level
 #: the bound's revision, kept in a bench cache (``per_frame_bounds``): a cache of another
-#: revision is computed again.  2 (round 16): the wall slope's columns with the hole's cut
-BOUND_REVISION = 2
+#: revision is computed again.  2 (round 16): the wall slope's columns with the hole's cut; 3: the
+#: blurred disc's edge to second order in s / rho (``photometric.disc_edge``)
+BOUND_REVISION = 3
 _REVISION_KEY = "_bound_revision"
 
 FRAME_GEOMETRY = dict(fit_reach_px=18.0, hole_tilt=False, illumination_known=True)
