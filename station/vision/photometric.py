@@ -203,6 +203,10 @@ class PhotometricFit:
     #: standard deviation of the blur s by white-noise theory (NaN when the blur was
     #: held fixed or the fit did not converge): what a frame-shared blur weighs it by
     blur_sd: float = float("nan")
+    #: the same from the residuals' spatial correlation (``hac_lengths``), with the blur
+    #: fitted by the weighted steps only: what a frame-shared blur weighs it by
+    #: (``measure._frame_blur``); NaN otherwise
+    blur_u: float = float("nan")
     #: the last step was weighed by the noise's covariance (``PhotometricConfig.gls_steps``):
     #: the uncertainties are its inverse normal matrix, scaled by the chi-square
     gls: bool = False
@@ -697,13 +701,18 @@ def refine_hole(
         dof = max(n - m.shape[0], 1)
         sd = np.sqrt(np.where(var > 0, var, np.nan) * max(gls_chi2, 0.0) / dof)
         hac = sd.copy()
-    elif cfg.hac_lengths > 0:
-        hac = _hac_sd(m, jw, res, sel, roi_shape, s, cfg.hac_lengths)
+    blur_u = float("nan")
+    if gls_op is None and cfg.hac_lengths > 0:
+        cols = (0, 1, 2, k) if cfg.fit_blur else (0, 1, 2)
+        hac_all = _hac_sd(m, jw, res, sel, roi_shape, s, cfg.hac_lengths, cols)
+        hac = hac_all[:3]
+        if cfg.fit_blur:
+            blur_u = float(hac_all[3])
     return PhotometricFit(cx + ox, cy + oy, r0, s, contrast, float(scale), n, it,
                           r_sd=float(sd[2]), cx_sd=float(sd[0]), cy_sd=float(sd[1]),
                           r_u=float(hac[2]), cx_u=float(hac[0]), cy_u=float(hac[1]), groove_rms_dn=g_rms,
                           blur_sd=float(np.sqrt(var_s)) * float(scale) if var_s > 0 else float("nan"),
-                          gls=gls_op is not None)
+                          blur_u=blur_u, gls=gls_op is not None)
 
 
 def _gls_operator(res, u, sel, shape, s, r0, ox, oy, dxa, dya, va, wall_px, g_wall, cfg):
@@ -747,8 +756,9 @@ def _gls_normal(op, jac, res, sel, shape):
 
 
 def _hac_sd(m: np.ndarray, jw: np.ndarray, res: np.ndarray, sel: np.ndarray, shape: tuple[int, int], s: float,
-            lengths: float) -> np.ndarray:
-    """Standard deviations of the first three parameters (cx, cy, R0) by a kernel
+            lengths: float, cols: tuple[int, ...] = (0, 1, 2)) -> np.ndarray:
+    """Standard deviations of the parameters ``cols`` (by default the first three: cx,
+    cy, R0) by a kernel
     (Bartlett) estimate of the least-squares sandwich: with G the rows of m^-1 for
     them, pixel i's influence is e_i = G jw_i res_i and var = sum over pairs (i, j) of
     w(i - j) e_i e_j, w = (1 - |dx| / (L + 1)) (1 - |dy| / (L + 1)) for |dx|, |dy| <= L.
@@ -756,18 +766,19 @@ def _hac_sd(m: np.ndarray, jw: np.ndarray, res: np.ndarray, sel: np.ndarray, sha
     The Bartlett kernel is a box's autocorrelation over (L + 1)^2, so the double sum is
     the sum of squares of the influences' (L + 1) x (L + 1) box sums, over every
     placement of the box: positive by construction, one box filter per parameter."""
+    nc = len(cols)
     try:
-        g = np.linalg.solve(m, np.eye(m.shape[0])[:, :3]).T  # (3, p): m is symmetric
+        g = np.linalg.solve(m, np.eye(m.shape[0])[:, list(cols)]).T  # (nc, p): m is symmetric
     except np.linalg.LinAlgError:
-        return np.full(3, np.nan)
-    e = (jw @ g.T) * res[:, None]  # (n, 3)
+        return np.full(nc, np.nan)
+    e = (jw @ g.T) * res[:, None]  # (n, nc)
     lag = int(np.ceil(lengths * np.sqrt(s * s + 0.49)))
     iy, ix = np.divmod(np.flatnonzero(sel), shape[1])
     if iy.size == 0:
-        return np.full(3, np.nan)
+        return np.full(nc, np.nan)
     iy, ix = iy - iy.min() + lag, ix - ix.min() + lag
     k = lag + 1
-    grid = np.zeros((iy.max() + lag + 1, ix.max() + lag + 1, 3))  # the three parameters as channels
+    grid = np.zeros((iy.max() + lag + 1, ix.max() + lag + 1, nc))  # the parameters as channels
     grid[iy, ix] = e
     box = cv2.boxFilter(grid, cv2.CV_64F, (k, k), normalize=False, borderType=cv2.BORDER_CONSTANT)
     out = np.einsum("ijc,ijc->c", box, box) / (k * k)

@@ -151,7 +151,9 @@ def test_the_correlated_uncertainty_sees_the_grains_correlation_and_not_more():
     the scatter of 60 renders of one hole with fresh noise: on white sensor noise it is
     the white-noise figure and the scatter (within the 60 draws' ~10 %); on grain blurred
     by the camera it grows over the white-noise figure, towards the scatter, without
-    passing it (measured: 0.66 of the scatter, the white figure 0.53)."""
+    passing it (measured: 0.66 of the scatter, the white figure 0.53).  The same for the
+    blur (``blur_u``, what a frame's shared blur weighs each hole by): 0.96 of the scatter
+    on white noise, and on grain 0.86 of it where the white-noise figure is 0.74."""
     from sim.camera.render import FrameParams, HoleSpec, render_frame
     from station.vision.photometric import refine_hole
 
@@ -162,17 +164,22 @@ def test_the_correlated_uncertainty_sees_the_grains_correlation_and_not_more():
         params = FrameParams(width_px=160, height_px=160, wall_level_dn=150, hole_level_dn=60, grain=grain,
                              groove_depth=0.0, blotch=0.0, blur_sigma_px=s, gain_e_per_dn=30, read_noise_dn=1.5,
                              vignetting=0.0)
-        e, hac, white = [], [], []
+        e, hac, white, blur = [], [], [], []
         for seed in range(60):
             fit = refine_hole(render_frame(params, [hole], seed=seed).image, 80.3, 79.8, r, np.hypot(s, 0.29))
             e.append(fit.r - r)
             hac.append(fit.r_u)
             white.append(fit.r_sd)
-        out[grain] = (float(np.std(e)), float(np.median(hac)), float(np.median(white)))
-    sd, hac, white = out[0.0]
+            blur.append((fit.blur_px, fit.blur_u, fit.blur_sd))
+        b = np.array(blur)
+        out[grain] = (float(np.std(e)), float(np.median(hac)), float(np.median(white)),
+                      float(np.std(b[:, 0])), float(np.median(b[:, 1])), float(np.median(b[:, 2])))
+    sd, hac, white, b_sd, b_hac, b_white = out[0.0]
     assert 0.8 < hac / sd < 1.25 and 0.85 < hac / white < 1.15, out
-    sd, hac, white = out[0.04]
+    assert 0.8 < b_hac / b_sd < 1.25 and 0.9 < b_hac / b_white < 1.15, out
+    sd, hac, white, b_sd, b_hac, b_white = out[0.04]
     assert hac > 1.15 * white and hac < 1.0 * sd, out
+    assert b_hac > 1.1 * b_white and b_hac < 1.0 * b_sd, out
 
 
 def _renderer_column(params, hole, wall, dr):
