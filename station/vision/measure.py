@@ -149,9 +149,6 @@ class MeasureConfig:
     #: changes across the field keeps each hole's own)
     share_blur: bool = True
     share_blur_chi2: float = 4.0
-    #: the last photometric fit's annulus pad (``PhotometricConfig.pad_px``; None: the
-    #: first fit's)
-    last_pad_px: float | None = None
     #: grain-aware Gauss-Newton steps in each hole's last photometric fit
     #: (``PhotometricConfig.gls_steps``, ``gls.py``: the wall's grain as correlated noise;
     #: docs/vision-history.md, round 14); 0: the weighted fit only
@@ -531,8 +528,6 @@ def measure_holes(
     if cfg.photometric is not None:
         first_cfg = replace(cfg, photometric=replace(cfg.photometric, gls_steps=0))
         last_cfg = replace(cfg, photometric=replace(cfg.photometric, gls_steps=cfg.gls_steps))
-        if cfg.last_pad_px is not None:
-            last_cfg = replace(last_cfg, photometric=replace(last_cfg.photometric, pad_px=cfg.last_pad_px))
     for cand in candidates:
         fg = None
         if grooves_on:

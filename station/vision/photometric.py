@@ -511,11 +511,6 @@ def refine_hole(
         va = va / (1.0 + illumination_grad[0] * dxa + illumination_grad[1] * dya)
     sel = (d2 >= r_in * r_in) & (d2 <= r_out * r_out)
     roi_shape = (y1 - y0, x1 - x0)
-    if cache is not None and cache.get("half") != half:
-        # the groove model and the slope are kept on the fit's pixels: another annulus
-        # (``pad_px``) reads them again
-        cache.clear()
-        cache["half"] = half
     groove = 0.0
     if grooves:
         wall_px = (d2 > r_clear * r_clear) & (d2 <= r_roi * r_roi)
