@@ -381,16 +381,17 @@ VARIANTS = {"blur_free": dict(blur_known=False, with_grain=True),
             "blur_known": dict(blur_known=True, with_grain=True),
             "sensor_only_blur_free": dict(blur_known=False, with_grain=False)}
 
+#: the bound's revision, kept in a bench cache (``per_frame_bounds``): a cache of another
+#: revision is computed again.  1: rounds 13-15; 2 (round 16): the wall slope's columns
+#: with the hole's cut; 3: the blurred disc's edge to second order in s / rho
+#: (``photometric.disc_edge``)
+BOUND_REVISION = 3
+_REVISION_KEY = "_bound_revision"
+
 #: the frame-aware bound's pixels and nuisances: the disc the photometric fit reads (its
 #: groove ring ends 2.5 s + 1 + 18 px past the rim: ``PhotometricConfig.groove_margin_px``),
 #: the illumination's tilt known (the frame reveals it: ``station.vision.illumination``,
 #: ~10^6 wall pixels against a hole's 10^4), so no free tilt of the hole's level
-#: the bound's revision, kept in a bench cache (``per_frame_bounds``): a cache of another
-#: revision is computed again.  2 (round 16): the wall slope's columns with the hole's cut; 3: the
-#: blurred disc's edge to second order in s / rho (``photometric.disc_edge``)
-BOUND_REVISION = 3
-_REVISION_KEY = "_bound_revision"
-
 FRAME_GEOMETRY = dict(fit_reach_px=18.0, hole_tilt=False, illumination_known=True)
 #: the parameters every hole of a frame shares: the camera's blur (one PSF per frame)
 SHARED = ("blur",)
