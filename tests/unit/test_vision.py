@@ -228,8 +228,9 @@ def test_photometric_disc_model_matches_the_exact_blurred_disc():
     to the exact profile over the annulus the refinement reads, agree with the truth to
     0.0005 px and 0.002 px down to a 6 px radius at 1.5 px of blur and a 10 px radius at
     2.1 px.  The first-order model Phi((R - sqrt(rho^2 + s^2)) / s) (before round 16) is
-    fitted here too: it reads the blur 0.01-0.02 px low on the small holes, as much as
-    a frame's shared blur is known to, and the radius 0.003 px low."""
+    fitted here too: on the three small holes it reads the blur 0.015-0.023 px low, more
+    than a frame's shared blur is known to (0.006-0.012 px), and the radius 0.002-0.004 px
+    low."""
     from scipy.optimize import least_squares
     from scipy.special import ndtr
     from scipy.stats import ncx2
