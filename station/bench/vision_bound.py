@@ -147,15 +147,14 @@ class _Geometry:
             return disc_fraction(rho, radius, s)
 
         # the blurred disc's edge to second order in s / rho, as the photometric fit's
-        m_e, v_e, (dm_drho, dv_drho), _ = disc_edge(rho, s_e)
+        m_e, v_e, (dm_drho, dv_drho), (dm_ds, dv_ds) = disc_edge(rho, s_e)
         z = (r - m_e) / v_e
         phi = _INV_SQRT_2PI * np.exp(-0.5 * z * z)
         u = ndtr(z)
         du_dr = phi / v_e
         du_drho = -phi * (dm_drho + z * dv_drho) / v_e
-        ds = 1e-4
-        s_hi, s_lo = np.sqrt((c.blur_px + ds) ** 2 + 1 / 12), np.sqrt((c.blur_px - ds) ** 2 + 1 / 12)
-        du_ds = (u_of(r, s_hi) - u_of(r, s_lo)) / (2 * ds)
+        # in the camera's blur: ds_e / d blur = blur / s_e
+        du_ds = -phi * (dm_ds + z * dv_ds) / v_e * (c.blur_px / s_e)
         step = hl - wl  # d(mean)/du
         cols = {"R": step * du_dr,
                 "cx": step * du_drho * (-np.cos(theta)),

@@ -204,6 +204,7 @@ class PhotometricFit:
     groove_rms_dn: float = float("nan")
     #: standard deviation of the blur s by white-noise theory (NaN when the blur was
     #: held fixed or the fit did not converge): what a frame-shared blur weighs it by
+    #: when ``blur_u`` is missing
     blur_sd: float = float("nan")
     #: the same from the residuals' spatial correlation (``hac_lengths``), with the blur
     #: fitted by the weighted steps only: what a frame-shared blur weighs it by
@@ -214,7 +215,8 @@ class PhotometricFit:
     gls: bool = False
 
 
-def disc_edge(rho: np.ndarray, s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def disc_edge(rho: np.ndarray, s: float) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, np.ndarray],
+                                                  tuple[np.ndarray, np.ndarray]]:
     """The blurred disc's edge at distance ``rho`` (Gaussian blur of std ``s``): the
     share of a disc of radius R there is Phi((R - m) / v), with
 
@@ -700,8 +702,8 @@ def refine_hole(
         hac = sd.copy()
     blur_u = float("nan")
     if gls_op is None and cfg.hac_lengths > 0:
-        cols = (0, 1, 2, k) if cfg.fit_blur else (0, 1, 2)
-        hac_all = _hac_sd(m, jw, res, sel, roi_shape, s, cfg.hac_lengths, cols)
+        hac_cols = (0, 1, 2, k) if cfg.fit_blur else (0, 1, 2)  # cx, cy, R0 and the blur
+        hac_all = _hac_sd(m, jw, res, sel, roi_shape, s, cfg.hac_lengths, hac_cols)
         hac = hac_all[:3]
         if cfg.fit_blur:
             blur_u = float(hac_all[3])

@@ -59,8 +59,8 @@ def test_a_window_reads_the_same_lines_in_frame_coordinates():
     assert frame_grooves(img, [(320.0, 240.0, 900.0)]) is None
 
 
-def _fit(blur: float, sd: float) -> PhotometricFit:
-    return PhotometricFit(0.0, 0.0, 20.0, blur, 80.0, 2.0, 1000, 3, blur_sd=sd)
+def _fit(blur: float, sd: float, u: float = float("nan")) -> PhotometricFit:
+    return PhotometricFit(0.0, 0.0, 20.0, blur, 80.0, 2.0, 1000, 3, blur_sd=sd, blur_u=u)
 
 
 def test_the_frame_blur_is_the_precision_weighted_mean_and_says_when_holes_disagree():
@@ -71,6 +71,11 @@ def test_the_frame_blur_is_the_precision_weighted_mean_and_says_when_holes_disag
     assert _frame_blur([_fit(1.0, 0.01), _fit(1.5, 0.01)])[1] > MeasureConfig().share_blur_chi2
     assert _frame_blur([_fit(1.2, 0.01)]) is None
     assert _frame_blur([_fit(1.2, 0.01), _fit(1.2, float("nan"))]) is None
+    # each hole weighed by its blur's correlated uncertainty when it has one (a grainy
+    # hole's white figure understates its scatter), by the white figure when not
+    mean, _ = _frame_blur([_fit(1.20, 0.01, u=0.03), _fit(1.23, 0.01), _fit(1.26, 0.02, u=0.01)])
+    w = np.array([1 / 0.03**2, 1 / 0.01**2, 1 / 0.01**2])
+    assert mean == pytest.approx(np.dot(w, [1.20, 1.23, 1.26]) / w.sum())
 
 
 def test_sharing_the_blur_changes_nothing_for_a_frame_of_one_hole_and_moves_a_small_hole_of_two():
