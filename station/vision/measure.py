@@ -17,11 +17,13 @@ camera matrix, so that mm follow from one scale.
 from __future__ import annotations
 
 import functools
+from typing import NamedTuple
 from dataclasses import asdict, dataclass, replace
 
 import cv2
 import numpy as np
 from numba import njit
+from scipy.special import chdtrc
 
 from station.vision.calibration import CameraCalibration
 from station.vision.detect import Candidate, DetectConfig, detect_candidates
@@ -144,11 +146,16 @@ class MeasureConfig:
     #: holes' own fitted blurs weighted by their precision (since round 16 from the
     #: residuals' spatial correlation, ``PhotometricFit.blur_u``: the white-noise figure
     #: overweighs a grainy hole; dev seeds 3000 + 5000, 200 frames each, diameter RMS z
-    #: 1.090 -> 1.076 and beyond 3 sigma 1.02 % -> 0.68 %), when they agree with it
-    #: (chi-square per degree of freedom below ``share_blur_chi2``; a lens whose blur
-    #: changes across the field keeps each hole's own)
+    #: 1.090 -> 1.076 and beyond 3 sigma 1.02 % -> 0.68 %), when they agree with it: a
+    #: lens whose blur changes across the field keeps each hole's own.  They disagree when
+    #: the chi-square of their blurs about the mean (n - 1 degrees of freedom) has a
+    #: p-value below ``share_blur_alpha``.  Round 16 and before gated at 4 per degree of
+    #: freedom, a false alarm in 4.6 % of two-hole frames and 1.8 % of three-hole frames,
+    #: and a false alarm is the frame whose hole read its blur worst, which then kept it
+    #: (bench seed 1000: 8 of 197 frames, 21 holes at diameter RMS z 1.91, three of the
+    #: eight diameters beyond 3 sigma; docs/vision-history.md, round 17)
     share_blur: bool = True
-    share_blur_chi2: float = 4.0
+    share_blur_alpha: float = 0.001
     #: grain-aware Gauss-Newton steps in each hole's last photometric fit
     #: (``PhotometricConfig.gls_steps``, ``gls.py``: the wall's grain as correlated noise;
     #: docs/vision-history.md, round 14); 0: the weighted fit only
@@ -549,7 +556,7 @@ def measure_holes(
         found.append(m)
         kept.append((cand, ph, fg, rays, fit_cache))
     shared = _frame_blur([k[1] for k in kept]) if cfg.share_blur else None
-    frame_blur = shared[0] if shared is not None and shared[1] <= cfg.share_blur_chi2 else None
+    frame_blur = shared.mean if shared is not None and shared.p_value >= cfg.share_blur_alpha else None
     if frame_blur is not None or gls:
         for i, (cand, ph, fg, rays, fit_cache) in enumerate(kept):
             if ph is not None and ph.converged:
@@ -579,10 +586,18 @@ class _Lazy:
         return self._value
 
 
-def _frame_blur(fits: list[PhotometricFit | None]) -> tuple[float, float] | None:
+class FrameBlur(NamedTuple):
+    """The blur a frame's holes share (``_frame_blur``)."""
+
+    mean: float  # px, the holes' fitted blurs weighted by their precision
+    chi2: float  # of the holes' blurs about the mean, per degree of freedom
+    dof: int  # the holes less one
+    p_value: float  # of chi2 * dof on dof degrees of freedom: the chance of a worse spread
+
+
+def _frame_blur(fits: list[PhotometricFit | None]) -> FrameBlur | None:
     """The blur the frame's converged photometric fits share: their precision-weighted
-    mean, and the chi-square per degree of freedom of their blurs about it; None with
-    fewer than two such fits."""
+    mean, and how well their blurs agree with it; None with fewer than two such fits."""
     ok = [f for f in fits if f is not None and f.converged and np.isfinite(f.blur_sd)]
     s = np.array([f.blur_px for f in ok])
     sd = np.array([f.blur_u if np.isfinite(f.blur_u) else f.blur_sd for f in ok])
@@ -590,7 +605,8 @@ def _frame_blur(fits: list[PhotometricFit | None]) -> tuple[float, float] | None
         return None
     w = 1.0 / (sd * sd)
     mean = float(np.sum(w * s) / np.sum(w))
-    return mean, float(np.sum(w * (s - mean) ** 2) / (s.size - 1))
+    q, dof = float(np.sum(w * (s - mean) ** 2)), s.size - 1
+    return FrameBlur(mean, q / dof, dof, float(chdtrc(dof, q)))
 
 
 @functools.cache

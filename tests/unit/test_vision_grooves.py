@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from scipy.stats import chi2 as chi2_dist
 
 from sim.camera.render import FrameParams, HoleSpec, render_frame
 from station.vision.grooves import frame_grooves
@@ -64,18 +65,50 @@ def _fit(blur: float, sd: float, u: float = float("nan")) -> PhotometricFit:
 
 
 def test_the_frame_blur_is_the_precision_weighted_mean_and_says_when_holes_disagree():
-    mean, chi2 = _frame_blur([_fit(1.20, 0.01), _fit(1.23, 0.03), None])
-    assert mean == pytest.approx((1.20 / 0.01**2 + 1.23 / 0.03**2) / (1 / 0.01**2 + 1 / 0.03**2))
-    assert chi2 < MeasureConfig().share_blur_chi2
+    fb = _frame_blur([_fit(1.20, 0.01), _fit(1.23, 0.03), None])
+    assert fb.mean == pytest.approx((1.20 / 0.01**2 + 1.23 / 0.03**2) / (1 / 0.01**2 + 1 / 0.03**2))
+    q = (1.20 - fb.mean) ** 2 / 0.01**2 + (1.23 - fb.mean) ** 2 / 0.03**2
+    assert (fb.dof, fb.chi2) == (1, pytest.approx(q))
+    assert fb.p_value == pytest.approx(chi2_dist.sf(q, 1))
+    assert fb.p_value >= MeasureConfig().share_blur_alpha
+    # two holes 3 sigma apart (a chance of 0.27 %; round 16's gate, 4 per degree of
+    # freedom, kept each its own, worst-read, blur): they share. Six holes, one 4 sigma
+    # from the others: shared too (p 2 % on 5 degrees of freedom)
+    assert _frame_blur([_fit(1.20, 0.01), _fit(1.20 + 3 * np.sqrt(2) * 0.01, 0.01)]).p_value > 0.001
+    assert _frame_blur([_fit(1.20, 0.01)] * 5 + [_fit(1.24, 0.01)]).p_value > 0.001
     # a lens whose blur changes across the field: the holes keep their own
-    assert _frame_blur([_fit(1.0, 0.01), _fit(1.5, 0.01)])[1] > MeasureConfig().share_blur_chi2
+    assert _frame_blur([_fit(1.0, 0.01), _fit(1.5, 0.01)]).p_value < MeasureConfig().share_blur_alpha
     assert _frame_blur([_fit(1.2, 0.01)]) is None
     assert _frame_blur([_fit(1.2, 0.01), _fit(1.2, float("nan"))]) is None
     # each hole weighed by its blur's correlated uncertainty when it has one (a grainy
     # hole's white figure understates its scatter), by the white figure when not
-    mean, _ = _frame_blur([_fit(1.20, 0.01, u=0.03), _fit(1.23, 0.01), _fit(1.26, 0.02, u=0.01)])
+    fb = _frame_blur([_fit(1.20, 0.01, u=0.03), _fit(1.23, 0.01), _fit(1.26, 0.02, u=0.01)])
     w = np.array([1 / 0.03**2, 1 / 0.01**2, 1 / 0.01**2])
-    assert mean == pytest.approx(np.dot(w, [1.20, 1.23, 1.26]) / w.sum())
+    assert fb.mean == pytest.approx(np.dot(w, [1.20, 1.23, 1.26]) / w.sum())
+    assert fb.dof == 2
+
+
+def test_holes_under_a_blur_that_changes_across_the_field_keep_their_own():
+    """The left half of the frame at 1.0 px of blur, the right at 2.2 px (a lens whose
+    focus changes across the field): the gate finds the holes' blurs disagree, and each
+    hole keeps its own, as with sharing off. Forced to share (``share_blur_alpha`` 0),
+    both diameters are tens of u off: what the gate is for."""
+    p = dict(width_px=480, height_px=360, groove_depth=0.05, grain=0.03, blotch=0.0, gain_e_per_dn=30.0,
+             read_noise_dn=1.0, vignetting=0.0, wall_level_dn=150, hole_level_dn=50)
+    holes = [HoleSpec(130.4, 180.2, 60.0), HoleSpec(350.7, 170.3, 60.0)]
+    image = render_frame(FrameParams(blur_sigma_px=1.0, **p), holes, seed=2).image
+    image[:, 240:] = render_frame(FrameParams(blur_sigma_px=2.2, **p), holes, seed=2).image[:, 240:]
+
+    def measured(**cfg):
+        return sorted(measure_holes(image, cfg=MeasureConfig(**cfg)), key=lambda m: m.x_px)
+
+    gated, own, forced = measured(), measured(share_blur=False), measured(share_blur_alpha=0.0)
+    assert len(gated) == len(own) == len(forced) == 2
+    assert [m.diameter_px for m in gated] == [m.diameter_px for m in own]
+    for m in gated:
+        assert abs(m.diameter_px - 60.0) < 3 * m.diameter_u_px
+    for m in forced:
+        assert abs(m.diameter_px - 60.0) > 10 * m.diameter_u_px
 
 
 def test_sharing_the_blur_changes_nothing_for_a_frame_of_one_hole_and_moves_a_small_hole_of_two():
