@@ -9,9 +9,16 @@ must survive is present and its size is known:
    holes (discs or ellipses);
 2. the lens: Brown distortion moves the geometry (each sensor pixel asks which ideal
    point it sees), vignetting darkens the corners, Gaussian blur spreads edges;
-3. the sensor: each pixel integrates its area (hole edges are rendered by 16x16
-   supersampling of the edge band, i.e. exact area coverage to 1/256), shot noise,
+3. the sensor: each pixel integrates its area (hole edges are rendered by 48x48
+   supersampling of the edge band, i.e. exact area coverage to 1/2304), shot noise,
    read noise, 8-bit quantisation.
+
+The camera blurs the scene before the pixels integrate it.  The frame is blurred on the
+pixel grid, which is that order for the wall's texture (defined per pixel); a hole's
+sharp edge is blurred on a grid ``EDGE_FINE`` times finer and area-averaged back
+(``_edge_blur_correction``): blurring the pixels' coverage instead aliases the edge, a
+ripple of up to 0.6 % of the step near axis-aligned stretches of rim at 1 px of blur,
+which a grain-aware fit turned into a diameter bias (docs/vision-history.md, round 17).
 
 Pixel convention (shared with ``station.vision``): the centre of pixel (0, 0) is at
 (0, 0), x to the right, y down; pixel (i, j) covers [j-0.5, j+0.5] x [i-0.5, i+0.5].
@@ -31,8 +38,15 @@ from scipy.ndimage import gaussian_filter1d
 
 from sim.camera.lens import BrownLens, ideal_pixel_grid
 
-#: supersampling per axis for hole-edge pixels: 256 samples -> coverage to 1/256
-SUPERSAMPLE = 16
+#: supersampling per axis for hole-edge pixels: 48 x 48 samples, 12 x 12 per sub-pixel
+#: of ``EDGE_FINE`` (before round 17: 16 x 16, 0.09 s per station frame against 0.13 s)
+SUPERSAMPLE = 48
+#: a hole's edge is blurred on a grid this many times finer than the pixels (the
+#: supersamples grouped into EDGE_FINE^2 sub-pixels), then area-averaged back: against
+#: the exact disc (x) Gaussian (x) pixel, 7e-5 of the step RMS at 1 px of blur and 1e-4
+#: at 0.8 px, against 1.8e-3 (6e-3 at worst) for the pixels' coverage blurred (16
+#: supersamples per axis: 3e-4, 32: 1.1e-4); 1: the coverage blurred
+EDGE_FINE = 4
 #: honing cross-hatch half-angle; plateau-honed cylinder bores use 20-35 deg
 #: (typical specification 30 deg +/- 5, e.g. Sunnen/Nagel honing guides)
 HONING_ANGLE_DEG = 30.0
@@ -196,11 +210,12 @@ def _ideal_centres(lens: BrownLens | None, w: int, h: int, box: tuple[int, int, 
 
 
 def _edge_coverage(inside, xu: np.ndarray, yu: np.ndarray, band: np.ndarray, n: int, lens: BrownLens | None,
-                   w: int, h: int, box: tuple[int, int, int, int]) -> np.ndarray:
+                   w: int, h: int, box: tuple[int, int, int, int], fine: int = 1) -> np.ndarray:
     """Area fraction inside (``inside(x, y)``: a boolean array) of the pixels in ``band``,
     from n x n sub-samples per pixel. Through a distorting lens the sub-samples follow
     its local Jacobian: inside one pixel the distortion is linear to ~1e-5 px (its
-    second derivative is ~1e-4 / px)."""
+    second derivative is ~1e-4 / px).  ``fine`` > 1 (a divisor of n): each pixel's
+    fine x fine sub-pixels' fractions instead, (band pixels, fine rows, fine columns)."""
     x0, y0, x1, y1 = box
     off = (np.arange(n) + 0.5) / n - 0.5
     ox, oy = (o.ravel()[None, :] for o in np.meshgrid(off, off))
@@ -211,13 +226,20 @@ def _edge_coverage(inside, xu: np.ndarray, yu: np.ndarray, band: np.ndarray, n: 
         sy = cy_ + jyx * ox + jyy * oy
     else:
         sx, sy = cx_ + ox, cy_ + oy
-    return inside(sx, sy).mean(axis=1)
+    hits = inside(sx, sy)
+    if fine == 1:
+        return hits.mean(axis=1)
+    q = n // fine  # the sub-samples are row-major (y, x): group them in fine x fine blocks
+    return hits.reshape(-1, fine, q, fine, q).mean(axis=(2, 4))
 
 
-def hole_coverage(hole: HoleSpec, params: FrameParams) -> tuple[tuple[int, int, int, int], np.ndarray, bool, tuple]:
+def hole_coverage(hole: HoleSpec, params: FrameParams, fine: int = 1
+                  ) -> tuple[tuple[int, int, int, int], np.ndarray, bool, tuple]:
     """Area fraction of each pixel inside the hole, over the hole's bounding box.
 
-    Returns (x0, y0, x1, y1), coverage (y1-y0, x1-x0), partial flag, image centre.
+    Returns (x0, y0, x1, y1), coverage (y1-y0, x1-x0), partial flag, image centre; with
+    ``fine`` > 1 the coverage of each pixel's fine x fine sub-pixels instead, ((y1-y0)
+    fine, (x1-x0) fine), from the same supersamples.
     """
     lens = params.lens
     a, b = hole.semi_axes_px
@@ -238,13 +260,39 @@ def hole_coverage(hole: HoleSpec, params: FrameParams) -> tuple[tuple[int, int, 
     xu, yu = _ideal_centres(lens, w, h, box)
     q = _inside(hole, xu, yu)
     cover = (q < 1.0).astype(np.float64)
+    if fine > 1:
+        cover = np.repeat(np.repeat(cover, fine, axis=0), fine, axis=1)
     # band where a pixel may be cut by the edge: distance ~ (q-1)*b, pixel half-diagonal
     # 0.71 px, widened for the local magnification of the lens
     band = np.abs(q - 1.0) * b < 1.5
     if band.any():
-        cover[band] = _edge_coverage(lambda x, y: _inside(hole, x, y) < 1.0, xu, yu, band, SUPERSAMPLE, lens, w, h,
-                                     box)
+        part = _edge_coverage(lambda x, y: _inside(hole, x, y) < 1.0, xu, yu, band, SUPERSAMPLE, lens, w, h, box,
+                              fine)
+        if fine > 1:
+            iy, ix = np.nonzero(band)
+            cover.reshape(y1 - y0, fine, x1 - x0, fine)[iy, :, ix, :] = part
+        else:
+            cover[band] = part
     return (x0, y0, x1, y1), cover, partial, (float(icx), float(icy))
+
+
+def _edge_blur_correction(fine_cover: np.ndarray, box: tuple[int, int, int, int], blur_px: float, fine: int,
+                          w: int, h: int) -> tuple[tuple[int, int, int, int], np.ndarray]:
+    """What blurring a hole's edge before the pixels integrate it (the camera's order)
+    changes against blurring its pixels' coverage, per unit of the step across the edge:
+    the fine coverage (``hole_coverage(fine=...)``) blurred on its grid and area-averaged
+    back, less the pixel coverage blurred on the pixels' grid, over the hole's box widened
+    by the blur's reach.  Both blurs reflect at the frame's border, as the frame's does.
+    Returns the window (x0, y0, x1, y1) and the correction there."""
+    x0, y0, x1, y1 = box
+    pad = int(np.ceil(4.0 * blur_px)) + 2
+    wx0, wy0, wx1, wy1 = max(x0 - pad, 0), max(y0 - pad, 0), min(x1 + pad, w), min(y1 + pad, h)
+    cf = np.zeros(((wy1 - wy0) * fine, (wx1 - wx0) * fine), np.float32)
+    cf[(y0 - wy0) * fine:(y1 - wy0) * fine, (x0 - wx0) * fine:(x1 - wx0) * fine] = fine_cover
+    coarse = cf.reshape(wy1 - wy0, fine, wx1 - wx0, fine).mean(axis=(1, 3))  # the pixels' coverage
+    fine_blurred = cv2.GaussianBlur(cf, (0, 0), blur_px * fine, borderType=cv2.BORDER_REFLECT)
+    exact = fine_blurred.reshape(wy1 - wy0, fine, wx1 - wx0, fine).mean(axis=(1, 3))
+    return (wx0, wy0, wx1, wy1), exact - cv2.GaussianBlur(coarse, (0, 0), blur_px, borderType=cv2.BORDER_REFLECT)
 
 
 def wall_patch(params: FrameParams, seed: int | None) -> np.ndarray:
@@ -292,19 +340,32 @@ def render_frame(params: FrameParams, holes: list[HoleSpec], seed: int | None = 
     bare = radiance.copy() if defects else None
     truths: list[HoleTruth] = []
     inner_levels: list[float] = []
+    edge_fixes = []
+    fine = EDGE_FINE if params.blur_sigma_px > 0 else 1
     for hole in holes:
-        (x0, y0, x1, y1), cover, partial, (icx, icy) = hole_coverage(hole, params)
+        (x0, y0, x1, y1), cover, partial, (icx, icy) = hole_coverage(hole, params, fine)
         inner = params.hole_level_dn
         if cover.size:
+            fine_cover = cover
+            if fine > 1:
+                cover = fine_cover.reshape(y1 - y0, fine, x1 - x0, fine).mean(axis=(1, 3))
             # the hole's far side: dark, with a faint low-frequency sheen
             inner = params.hole_level_dn * (1.0 + 0.03 * rng.standard_normal())
             patch = radiance[y0:y1, x0:x1]
+            if fine > 1:
+                # the step across the edge: the hole's level less the wall's along the rim
+                rim = (cover > 0.0) & (cover < 1.0)
+                wall_at_rim = float(np.mean(patch[rim])) if rim.any() else float(np.mean(patch))
+                window, corr = _edge_blur_correction(fine_cover, (x0, y0, x1, y1), params.blur_sigma_px, fine, w, h)
+                edge_fixes.append((window, (inner - wall_at_rim) * corr))
             radiance[y0:y1, x0:x1] = patch * (1.0 - cover) + inner * cover
         inner_levels.append(float(inner))
         truths.append(HoleTruth(hole.x_px, hole.y_px, hole.diameter_px, icx, icy, partial, hole.aspect))
     defect_truths = paint_defects(radiance, bare, params, holes, inner_levels, defects) if defects else []
     if params.blur_sigma_px > 0:
         radiance = cv2.GaussianBlur(radiance, (0, 0), params.blur_sigma_px, borderType=cv2.BORDER_REFLECT)
+        for (wx0, wy0, wx1, wy1), fix in edge_fixes:
+            radiance[wy0:wy1, wx0:wx1] += fix
     if params.vignetting:
         cx = params.lens.cx_px if params.lens else (w - 1) / 2
         cy = params.lens.cy_px if params.lens else (h - 1) / 2

@@ -37,6 +37,10 @@ import cv2
 import numpy as np
 
 
+#: an 8-bit pixel's quantisation variance (DN^2): the least noise any pixel has
+_QUANT_VAR_DN2 = 1.0 / 12.0
+
+
 @dataclass(frozen=True)
 class GrainNoise:
     """The noise of one hole's pixels (DN^2 and px)."""
@@ -76,9 +80,13 @@ def estimate_noise(res_grid: np.ndarray, wall_ok: np.ndarray, inner_var: float, 
     g = np.where(ok, res_grid - med, 0.0)
     var = float(np.mean(g[ok] ** 2))
     r = np.array([_lag_corr(g, ok, k) for k in (1, 2, 3)])
+    # the wall's sensor variance is never below a quarter of the hole side's, nor the 8-bit
+    # quantisation's 1/12 DN^2 (a noise-free wall read 3e-8 DN^2 once, and its pixels then
+    # outweighed the hole's a million times: round 17)
+    floor = max(0.25 * inner_var, _QUANT_VAR_DN2)
     if not 0.02 < r[0] < 0.98:
         # no measurable correlation: white noise, no grain term
-        return GrainNoise(inner_var, var, 0.0, 0.0)
+        return GrainNoise(inner_var, max(var, floor), 0.0, 0.0)
     # the grain's share f and its scale c: least squares of f exp(-d^2 / (4 (c^2 + s^2)))
     # over lags 1-3, c on a grid within what a fine grain can be (0.3-2 px)
     d2 = np.array([1.0, 4.0, 9.0])
@@ -92,7 +100,7 @@ def estimate_noise(res_grid: np.ndarray, wall_ok: np.ndarray, inner_var: float, 
     _, share, corr = best
     corr = float(corr)
     v_g = share * var
-    return GrainNoise(inner_var, max(var - v_g, 0.25 * inner_var), v_g, corr)
+    return GrainNoise(inner_var, max(var - v_g, floor), v_g, corr)
 
 
 def _blur(x: np.ndarray, sigma: float) -> np.ndarray:

@@ -251,6 +251,35 @@ def test_photometric_disc_model_matches_the_exact_blurred_disc():
             assert old.x[1] - s < -0.008 and old.x[0] - radius < -0.0015
 
 
+def test_the_pixels_square_is_in_the_disc_model():
+    """The camera blurs the scene, then each pixel integrates its square.  The model's
+    Gaussian of s^2 = blur^2 + 1/12 holds the square's variance; ``pixel_box_term`` adds
+    its fourth cumulant.  Against the exact disc (x) Gaussian (x) pixel over a 60 px hole's
+    edge, the model with the term is within 1.5e-5 of the step (RMS; measured 1.1e-5 at
+    0.8 px of blur, 3.6e-6 at 1 px), without it 12-15 times further (1.3e-4, 5.6e-5): an
+    odd ripple that a grain-aware fit,
+    whose covariance differs on the two sides of the rim, read as a diameter 0.001 px
+    short (docs/vision-history.md, round 17)."""
+    from scipy.special import ndtr
+
+    from edge_physics import exact_pixel_share
+    from station.vision.photometric import disc_edge, pixel_box_term
+
+    for blur in (0.8, 1.0):
+        yy, xx = np.mgrid[0:200, 0:200].astype(float)
+        ex, ey = xx - 100.3, yy - 99.6
+        rho = np.hypot(ex, ey)
+        band = np.abs(rho - 30.0) < 4 * blur + 1
+        exact = exact_pixel_share(xx[band], yy[band], 100.3, 99.6, 30.0, blur)
+        m, v, _, _ = disc_edge(rho[band], float(np.sqrt(blur**2 + 1 / 12)))
+        t = (30.0 - m) / v
+        gauss = ndtr(t)
+        boxed = gauss + pixel_box_term(t, v, ex[band] / rho[band], ey[band] / rho[band])
+        with_term, without = np.sqrt(np.mean((boxed - exact) ** 2)), np.sqrt(np.mean((gauss - exact) ** 2))
+        assert with_term < 1.5e-5
+        assert without > 4 * with_term
+
+
 def test_photometric_refinement_on_clean_and_grooved_holes():
     """Clean frames: the refined diameter within 0.03 px (observed -0.025 px on a 24 px
     hole at 2 px blur, the largest model error found).  Grooved walls: within 0.1 px
