@@ -40,6 +40,16 @@ def test_white_wall_residuals_carry_no_grain():
     assert abs(n.sensor_out_var - 4.0) < 0.4
 
 
+def test_a_wall_without_noise_still_has_the_quantisations():
+    """A noise-free wall (a synthetic frame) leaves residuals of ~0: its pixels' variance is
+    floored at the 8-bit quantisation's 1/12 DN^2 and a quarter of the hole side's, never 0
+    (it read 3e-8 DN^2 once, and a noise-free hole's grain-aware step moved 0.18 px)."""
+    for field in (np.zeros((60, 60)), 1e-4 * np.random.default_rng(7).standard_normal((60, 60))):
+        n = estimate_noise(field, np.ones(field.shape, bool), inner_var=0.25, s_cam=1.0)
+        assert n.sensor_out_var >= 1.0 / 12.0
+    assert estimate_noise(np.zeros((60, 60)), np.ones((60, 60), bool), inner_var=4.0, s_cam=1.0).sensor_out_var == 1.0
+
+
 def test_too_little_wall_gives_no_noise_model():
     assert estimate_noise(np.zeros((10, 10)), np.ones((10, 10), bool), 1.0, 1.0) is None
 
