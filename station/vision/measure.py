@@ -17,8 +17,8 @@ camera matrix, so that mm follow from one scale.
 from __future__ import annotations
 
 import functools
-from typing import NamedTuple
 from dataclasses import asdict, dataclass, replace
+from typing import NamedTuple
 
 import cv2
 import numpy as np
