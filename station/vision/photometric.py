@@ -172,10 +172,11 @@ class PhotometricConfig:
     gls_steps: int = 0
     #: the pixel's square area in the edge's profile beyond its variance (``pixel_box_term``:
     #: the fourth cumulant of the square projected on the radius).  Without it the model
-    #: misfits a rendered (or real) rim by an odd, +/-0.015 DN ripple at 1 px of blur that
-    #: a weighted fit hardly sees, but the grain-aware step, whose covariance is lopsided
-    #: (grain on the wall side only), turns into a diameter bias: +0.002 px at the
-    #: station's noise, +0.005 px with little sensor noise (docs/vision-history.md, round 17)
+    #: misfits the camera's rim (optics, then the pixel's square) by an odd ripple, up to
+    #: 1.6e-4 of the step at 1 px of blur, that a weighted fit hardly sees but the
+    #: grain-aware step, whose covariance is lopsided (grain on the wall side only), reads
+    #: as a diameter 0.001 px short (from the true parameters, on a noise-free render;
+    #: docs/vision-history.md, round 17)
     pixel_box: bool = True
 
 
@@ -265,8 +266,10 @@ def pixel_box_term(t: np.ndarray, v: np.ndarray, cos_t: np.ndarray, sin_t: np.nd
     radius (direction ``cos_t``, ``sin_t``) is the sum of two uniform variables of widths
     |cos|, |sin|, whose fourth cumulant is -(cos^4 + sin^4) / 120 px^4 (a Gaussian's is 0).
     To first order in it (Edgeworth) the share gains kappa_4 / 24 d^4 Phi / drho^4 =
-    kappa_4 / 24 (3 t - t^3) phi(t) / v^4: an odd ripple about the edge, -0.6 to +0.6 per
-    mille of the step at v = 1 px (the next cumulant's term is ~50 times smaller)."""
+    kappa_4 / 24 (3 t - t^3) phi(t) / v^4: an odd ripple about the edge, up to 1.6e-4 of
+    the step at v = 1 px.  What is left against the exact disc (x) Gaussian (x) pixel is 15
+    times smaller at 1 px of blur, 12 times at 0.8 px
+    (``test_the_pixels_square_is_in_the_disc_model``)."""
     k4 = -(cos_t**4 + sin_t**4) / 120.0
     return k4 / (24.0 * v**4) * (3.0 * t - t**3) * (_INV_SQRT_2PI * np.exp(-0.5 * t * t))
 
