@@ -267,8 +267,8 @@ def pixel_box_term(t: np.ndarray, v: np.ndarray, cos_t: np.ndarray, sin_t: np.nd
     |cos|, |sin|, whose fourth cumulant is -(cos^4 + sin^4) / 120 px^4 (a Gaussian's is 0).
     To first order in it (Edgeworth) the share gains kappa_4 / 24 d^4 Phi / drho^4 =
     kappa_4 / 24 (3 t - t^3) phi(t) / v^4: an odd ripple about the edge, up to 1.6e-4 of
-    the step at v = 1 px.  What is left against the exact disc (x) Gaussian (x) pixel is 15
-    times smaller at 1 px of blur, 12 times at 0.8 px
+    the step at v = 1 px.  With it, the misfit to the exact disc (x) Gaussian (x) pixel is 15
+    times smaller than without it at 1 px of blur, 12 times at 0.8 px
     (``test_the_pixels_square_is_in_the_disc_model``)."""
     k4 = -(cos_t**4 + sin_t**4) / 120.0
     return k4 / (24.0 * v**4) * (3.0 * t - t**3) * (_INV_SQRT_2PI * np.exp(-0.5 * t * t))
