@@ -276,20 +276,22 @@ def hole_coverage(hole: HoleSpec, params: FrameParams, fine: int = 1
     return (x0, y0, x1, y1), cover, partial, (float(icx), float(icy))
 
 
-def _edge_blur_correction(fine_cover: np.ndarray, box: tuple[int, int, int, int], blur_px: float, fine: int,
-                          w: int, h: int) -> tuple[tuple[int, int, int, int], np.ndarray]:
+def _edge_blur_correction(fine_cover: np.ndarray, cover: np.ndarray, box: tuple[int, int, int, int], blur_px: float,
+                          fine: int, w: int, h: int) -> tuple[tuple[int, int, int, int], np.ndarray]:
     """What blurring a hole's edge before the pixels integrate it (the camera's order)
     changes against blurring its pixels' coverage, per unit of the step across the edge:
     the fine coverage (``hole_coverage(fine=...)``) blurred on its grid and area-averaged
-    back, less the pixel coverage blurred on the pixels' grid, over the hole's box widened
-    by the blur's reach.  Both blurs reflect at the frame's border, as the frame's does.
+    back, less the pixel coverage (``cover``, its mean over each pixel) blurred on the
+    pixels' grid, over the hole's box widened by the blur's reach.  Both blurs reflect at
+    the frame's border, as the frame's does.
     Returns the window (x0, y0, x1, y1) and the correction there."""
     x0, y0, x1, y1 = box
     pad = int(np.ceil(4.0 * blur_px)) + 2
     wx0, wy0, wx1, wy1 = max(x0 - pad, 0), max(y0 - pad, 0), min(x1 + pad, w), min(y1 + pad, h)
     cf = np.zeros(((wy1 - wy0) * fine, (wx1 - wx0) * fine), np.float32)
     cf[(y0 - wy0) * fine:(y1 - wy0) * fine, (x0 - wx0) * fine:(x1 - wx0) * fine] = fine_cover
-    coarse = cf.reshape(wy1 - wy0, fine, wx1 - wx0, fine).mean(axis=(1, 3))  # the pixels' coverage
+    coarse = np.zeros((wy1 - wy0, wx1 - wx0), np.float32)
+    coarse[y0 - wy0:y1 - wy0, x0 - wx0:x1 - wx0] = cover
     fine_blurred = cv2.GaussianBlur(cf, (0, 0), blur_px * fine, borderType=cv2.BORDER_REFLECT)
     exact = fine_blurred.reshape(wy1 - wy0, fine, wx1 - wx0, fine).mean(axis=(1, 3))
     return (wx0, wy0, wx1, wy1), exact - cv2.GaussianBlur(coarse, (0, 0), blur_px, borderType=cv2.BORDER_REFLECT)
@@ -358,7 +360,8 @@ def render_frame(params: FrameParams, holes: list[HoleSpec], seed: int | None = 
                 # most the 0.6 % of the step it corrects, where the defect covers the edge)
                 rim = (cover > 0.0) & (cover < 1.0)
                 wall_at_rim = float(np.mean(patch[rim])) if rim.any() else float(np.mean(patch))
-                window, corr = _edge_blur_correction(fine_cover, (x0, y0, x1, y1), params.blur_sigma_px, fine, w, h)
+                window, corr = _edge_blur_correction(fine_cover, cover, (x0, y0, x1, y1), params.blur_sigma_px,
+                                                     fine, w, h)
                 edge_fixes.append((window, (inner - wall_at_rim) * corr))
             radiance[y0:y1, x0:x1] = patch * (1.0 - cover) + inner * cover
         inner_levels.append(float(inner))
