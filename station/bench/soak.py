@@ -30,7 +30,11 @@ caches and SQLite pages fill up):
   soak on PostgreSQL saw single steps of 1.3-1.5 MB with the vision stage of round 12 and
   of ~3.9 MB with round 13's larger temporary arrays, once in a run, and none with the
   threshold fixed (``MALLOC_MMAP_THRESHOLD_``); one such step late in a 12-inspection rest
-  is a least-squares slope of up to ~500 kB.
+  is a least-squares slope of up to ~500 kB;
+* the renderer: its least-squares slope below ``RSS_SLOPE_KB``. The worker trims its
+  heap after each frame (sim/camera/renderer.py), so its memory is flat to a few
+  kB per inspection; before the trim it swung by 5-18 MB between inspections and its
+  slope over 12 was noise of a few hundred kB (a CI run failed on it).
 """
 
 from __future__ import annotations

@@ -91,3 +91,36 @@ def test_a_worker_ends_itself_when_its_station_is_killed_outright():
         if owner.poll() is None:
             owner.kill()
             owner.wait(timeout=10)
+
+
+def _rss_kb(pid: int) -> int:
+    with open(f"/proc/{pid}/status") as f:
+        return next(int(line.split()[1]) for line in f if line.startswith("VmRSS"))
+
+
+def test_the_workers_memory_is_flat_from_frame_to_frame():
+    """Full-size frames of changing views: the worker hands its freed temporaries back
+    after each, so its resident memory is what it keeps (the wall patches), not what
+    the allocator happened to hold on to (30-40 MB of swing without the trim), and a
+    leak would show in the soak (station/bench/soak.py) above the noise."""
+    from sim.camera.render import FrameParams
+
+    params = FrameParams()
+    rng = np.random.default_rng(4)
+    views = [[HoleSpec(rng.uniform(200, 1000), rng.uniform(200, 800), rng.uniform(20, 120))
+              for _ in range(rng.integers(1, 4))] for _ in range(14)]
+
+    async def go():
+        r = RendererProcess()
+        await r.start()
+        try:
+            out = []
+            for i, specs in enumerate(views):
+                await r.render(params, specs, i, (i % 6, 0), i % 6)  # 6 views, 4 walls kept
+                out.append(_rss_kb(r.pid))
+            return out
+        finally:
+            r.stop()
+
+    rss = asyncio.run(go())[6:]  # after the wall cache is full
+    assert max(rss) - min(rss) < 4 * 1024, rss
