@@ -132,8 +132,14 @@ class MeasureConfig:
     #: +/- 3u 99.42 %, and no factor holds both bands by a margin.  The centre's, first
     #: 1.05 there, was re-set on the same seeds taken to 400 frames each (1,212 holes,
     #: 2,424 coordinates), where 1.05 held +/- 2u 94.3 % and +/- 3u 99.67 %: 1.10 holds
-    #: 95.3 % and 99.71 % (95.5 % wants 1.11, 99.73 % 1.09)
-    gls_uncertainty_factor: float = 1.25
+    #: 95.3 % and 99.71 % (95.5 % wants 1.11, 99.73 % 1.09).  Since round 18 a hole that
+    #: holds the frame's shared blur carries that blur's own uncertainty too
+    #: (``PhotometricFit.r_ds``; 83 % of the holes, whose u grows by 9.5 % at the median
+    #: and 22 % at the 90th percentile), which the diameter's 1.25 had absorbed on
+    #: average: re-set on the same 1,212 holes (round 18's fit), 1.10 holds +/- 2u 96.3 %
+    #: and +/- 3u 99.59 % (1.05: 95.5 % / 99.59 %; 1.15: 96.6 % / 99.83 %; the old u at
+    #: 1.25: 96.5 % / 99.59 %), and 95 % within +/- 2u wants 1.02 instead of 1.15
+    gls_uncertainty_factor: float = 1.10
     gls_centre_uncertainty_factor: float = 1.10
     #: a candidate whose wide ray search (72 rays) has fewer rays on one RANSAC circle is
     #: dropped before the narrow search: no true hole had fewer than 24 (dev frames,
@@ -379,11 +385,14 @@ def _measure_candidate(
     frame_grooves=None,
     rays: _Rays | None = None,
     fit_cache: dict | None = None,
+    frame_blur_sd: float = 0.0,
 ) -> tuple[HoleMeasurement | None, PhotometricFit | None, _Rays | None]:
     """``measure_candidate``, its photometric fit (None without one) and its rays' stage
     (``rays``: one already run, not run again).  ``frame_blur``: the blur s the frame's
     holes share (``MeasureConfig.share_blur``), held fixed in the photometric fit instead
-    of the rays' start and a free blur.  ``frame_grooves``: the grooves' profiles for the
+    of the rays' start and a free blur; ``frame_blur_sd`` its standard deviation, which
+    the hole's uncertainties carry through the fit's sensitivity to the blur
+    (``PhotometricFit.r_ds``).  ``frame_grooves``: the grooves' profiles for the
     photometric fit (``grooves.FrameGrooves``), or a function that reads them, called
     only when the fit runs.  ``fit_cache``: kept between a hole's two photometric fits
     (the first with its own blur, the second with the frame's), which then share their
@@ -426,6 +435,12 @@ def _measure_candidate(
             else:
                 k = kc = cfg.uncertainty_factor
                 r_sd, cx_sd, cy_sd = ph.r_sd, ph.cx_sd, ph.cy_sd
+            if frame_blur is not None and frame_blur_sd > 0 and np.isfinite(ph.r_ds):
+                # the held blur's own error moves the hole too (independent of the fit's
+                # error at the true blur, to first order: the blur's estimate comes from
+                # what the other parameters leave unexplained)
+                r_sd, cx_sd, cy_sd = (float(np.hypot(a, frame_blur_sd * d)) for a, d in
+                                      ((r_sd, ph.r_ds), (cx_sd, ph.cx_ds), (cy_sd, ph.cy_ds)))
             if np.isfinite(r_sd):
                 diameter_u = k * 2.0 * r_sd
             if np.isfinite(cx_sd) and np.isfinite(cy_sd) and cfg.photometric_centre_weight == 1.0:
@@ -561,7 +576,8 @@ def measure_holes(
         for i, (cand, ph, fg, rays, fit_cache) in enumerate(kept):
             if ph is not None and ph.converged:
                 m2, _, _ = _measure_candidate(image, cand, last_cfg, calibration, None, illumination,
-                                              frame_blur=frame_blur, frame_grooves=fg, rays=rays, fit_cache=fit_cache)
+                                              frame_blur=frame_blur, frame_grooves=fg, rays=rays, fit_cache=fit_cache,
+                                              frame_blur_sd=shared.sd if frame_blur is not None else 0.0)
                 if m2 is not None:
                     found[i] = m2
     out: list[HoleMeasurement] = []
@@ -590,6 +606,7 @@ class FrameBlur(NamedTuple):
     """The blur a frame's holes share (``_frame_blur``)."""
 
     mean: float  # px, the holes' fitted blurs weighted by their precision
+    sd: float  # px, its standard deviation from theirs (1 / sqrt of the summed precisions)
     chi2: float  # of the holes' blurs about the mean, per degree of freedom
     dof: int  # the holes less one
     p_value: float  # of chi2 * dof on dof degrees of freedom: the chance of a worse spread
@@ -606,7 +623,7 @@ def _frame_blur(fits: list[PhotometricFit | None]) -> FrameBlur | None:
     w = 1.0 / (sd * sd)
     mean = float(np.sum(w * s) / np.sum(w))
     q, dof = float(np.sum(w * (s - mean) ** 2)), s.size - 1
-    return FrameBlur(mean, q / dof, dof, float(chdtrc(dof, q)))
+    return FrameBlur(mean, float(np.sqrt(1.0 / np.sum(w))), q / dof, dof, float(chdtrc(dof, q)))
 
 
 @functools.cache

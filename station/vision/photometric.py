@@ -221,6 +221,13 @@ class PhotometricFit:
     #: the last step was weighed by the noise's covariance (``PhotometricConfig.gls_steps``):
     #: the uncertainties are its inverse normal matrix, scaled by the chi-square
     gls: bool = False
+    #: with the blur held fixed (``fit_blur`` False: the frame's shared blur), how R0, cx
+    #: and cy move per px of that blur (-M^-1 m_s of the last step's normal matrix M and
+    #: the blur's column m_s): an error e of the held blur moves them by e times these,
+    #: which r_u, cx_u and cy_u (the blur taken as exact) leave out.  NaN otherwise
+    r_ds: float = float("nan")
+    cx_ds: float = float("nan")
+    cy_ds: float = float("nan")
 
 
 def disc_edge(rho: np.ndarray, s: float) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, np.ndarray],
@@ -675,6 +682,9 @@ def refine_hole(
         nl = len(cols)
         jac = np.concatenate([np.stack(cols, axis=1), lin_cols], axis=1)
         jw = jac * wts[:, None]
+        # a blur held fixed (the frame's) joins the normal matrix, not the step: the
+        # parameters' sensitivity to it (``PhotometricFit.r_ds``)
+        jac_x = jac if cfg.fit_blur else np.concatenate([jac, (-dh * (dm_ds + t * dv_ds) / v_e)[:, None]], axis=1)
         try:
             if use_gls:
                 if gls_op is None:
@@ -682,9 +692,11 @@ def refine_hole(
                                            va, wall_px if grooves else None, g_wall if grooves else None, cfg)
                 if gls_op is None:
                     break
-                m, rhs, gls_chi2 = _gls_normal(gls_op, jac, res, sel, roi_shape)
+                m, rhs, gls_chi2 = _gls_normal(gls_op, jac_x, res, sel, roi_shape)
             else:
-                m, rhs = _normal(jac, jw, res)
+                m, rhs = _normal(jac_x, jac_x * wts[:, None], res)
+            if not cfg.fit_blur:
+                m, rhs, m_blur = m[:-1, :-1], rhs[:-1], m[:-1, -1]
             step = np.linalg.solve(m, rhs)
         except np.linalg.LinAlgError:
             return None
@@ -704,10 +716,14 @@ def refine_hole(
     if not (np.isfinite(ox) and np.isfinite(oy) and np.isfinite(r0)) or abs(r0 - r) > 2.0 or np.hypot(ox, oy) > 2.0:
         return PhotometricFit(cx, cy, r, float(blur_px), float("nan"), float(scale), n, it, converged=False)
     contrast = median(bw @ lin[:nw] - bh @ lin[nw:])
+    ds = np.full(3, np.nan)
     try:
-        diag = np.diag(np.linalg.inv(m))
+        m_inv = np.linalg.inv(m)
+        diag = np.diag(m_inv)
         var = diag[:3]
         var_s = float(diag[k]) if cfg.fit_blur else float("nan")
+        if not cfg.fit_blur:
+            ds = -(m_inv[:3] @ m_blur)  # d(cx, cy, R0) / d(blur held)
     except np.linalg.LinAlgError:
         var, var_s = np.full(3, np.nan), float("nan")
     # NaN (not a warning) where the inverse gives no positive variance
@@ -737,7 +753,8 @@ def refine_hole(
                           r_sd=float(sd[2]), cx_sd=float(sd[0]), cy_sd=float(sd[1]),
                           r_u=float(hac[2]), cx_u=float(hac[0]), cy_u=float(hac[1]), groove_rms_dn=g_rms,
                           blur_sd=float(np.sqrt(var_s)) * float(scale) if var_s > 0 else float("nan"),
-                          blur_u=blur_u, gls=gls_op is not None)
+                          blur_u=blur_u, gls=gls_op is not None,
+                          r_ds=float(ds[2]), cx_ds=float(ds[0]), cy_ds=float(ds[1]))
 
 
 def _gls_operator(res, u, sel, shape, s, r0, ox, oy, dxa, dya, va, wall_px, g_wall, cfg):

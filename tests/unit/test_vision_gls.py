@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
+import pytest
 from scipy.ndimage import gaussian_filter
 
 from station.vision.gls import GrainNoise, NoiseOperator, estimate_noise
@@ -133,3 +134,34 @@ def test_the_gls_step_beats_the_weighted_fit_on_grain_and_knows_its_scatter():
     sd_w, sd_g, u = float(np.std(e_w)), float(np.std(e_g)), float(np.median(u_g))
     assert sd_g < 0.95 * sd_w, (sd_g, sd_w)
     assert 0.75 < u / sd_g < 1.3, (u, sd_g)
+
+
+def test_a_held_blur_reports_how_the_hole_moves_with_it():
+    """With the blur held (the frame's shared blur), the fit reports d(R0, cx, cy)/d(blur):
+    refitting with the blur held 0.005 px higher or lower moves the radius by that much
+    (weighted and grain-aware steps alike; 0.47 and 0.58 px per px here, so a frame blur
+    known to 0.007 px adds 0.004 px to the radius's error); the centre, on a round
+    hole's symmetry, barely moves. A free blur reports none: it is in the fit's own
+    uncertainty."""
+    from sim.camera.render import FrameParams, HoleSpec, render_frame
+    from station.vision.photometric import PhotometricConfig, refine_hole
+
+    p = FrameParams(width_px=200, height_px=200, wall_level_dn=150.0, hole_level_dn=50.0, groove_depth=0.05,
+                    grain=0.02, blotch=0.0, blur_sigma_px=1.3, gain_e_per_dn=30.0, read_noise_dn=1.0,
+                    vignetting=0.0)
+    hole = HoleSpec(100.4, 99.7, 36.0, aspect=1.02, angle_deg=20.0)
+    img = render_frame(p, [hole], seed=3).image.astype(np.float64)
+    s = float(np.hypot(1.3, 0.29))
+    for steps in (0, 1):
+        cfg = dataclasses.replace(PhotometricConfig(), fit_blur=False, gls_steps=steps)
+        a = refine_hole(img, 100.0, 100.0, 18.1, s, cfg)
+        assert a.converged and a.gls == bool(steps)
+        assert np.isfinite([a.r_ds, a.cx_ds, a.cy_ds]).all()
+        assert abs(a.r_ds) > 0.2  # the blur and the radius are coupled
+        for d in (-0.005, 0.005):
+            b = refine_hole(img, 100.0, 100.0, 18.1, s + d, cfg)
+            assert (b.r - a.r) / d == pytest.approx(a.r_ds, rel=0.05)
+            assert max(abs(b.cx - a.cx), abs(b.cy - a.cy)) / 0.005 < 0.2 * abs(a.r_ds)
+        assert max(abs(a.cx_ds), abs(a.cy_ds)) < 0.2 * abs(a.r_ds)
+    free = refine_hole(img, 100.0, 100.0, 18.1, s, dataclasses.replace(PhotometricConfig(), gls_steps=1))
+    assert free.converged and np.isnan(free.r_ds)
