@@ -90,6 +90,33 @@ def test_the_disc_patch_solve_equals_the_dense_computation_on_its_pixels():
     assert np.all(geo.jac.reshape(p, n)[:, ~geo.mask.ravel()] == 0)
 
 
+def test_only_the_frames_pixels_inform_the_bound():
+    """A hole whose patch runs past the frame's border is bounded by the pixels that
+    exist: the same hole well inside the frame gives the bound without a border; moved
+    to the border, its patch loses the pixels beyond (no Jacobian there) and its bound
+    loosens, most across the border (x here), and more the closer it sits: the ring
+    beyond the rim only fixes the wall, so the loss is small until the rim's own blur
+    reaches the border (x's sigma +0.7 % with the rim 10 px from it, +3 % at 1 px)."""
+    r, blur = 14.0, 1.2
+    free_d, free_c = hole_bound(_case(r, blur), **FRAME_GEOMETRY)
+    inside = _case(r, blur, origin_px=(320, 240), frame_px=(640, 480))
+    d, c = hole_bound(inside, **FRAME_GEOMETRY)
+    assert d == pytest.approx(free_d, rel=1e-9) and np.allclose(c, free_c, rtol=1e-9)
+    reach = r + 2.5 * np.hypot(blur, 0.29) + 1 + 18
+    last = (free_d, free_c)
+    for gap in (30, 20, 10, 3, 1):  # the rim's distance from the left border, px
+        near = _case(r, blur, origin_px=(int(r + gap), 240), frame_px=(640, 480))
+        geo = _Geometry(near, blur_known=False, with_grain=True, **FRAME_GEOMETRY)
+        half = (geo.jac.shape[2] - 1) // 2
+        outside = np.arange(geo.jac.shape[2]) - half + near.origin_px[0] < 0
+        assert np.all(geo.jac[:, :, outside] == 0) and (outside.any() == (r + gap < reach))
+        d, c = hole_bound(near, **FRAME_GEOMETRY)
+        assert d >= last[0] * (1 - 1e-9) and c[0, 0] >= last[1][0, 0] * (1 - 1e-9)
+        last = (d, c)
+    assert last[0] > 1.02 * free_d and last[1][0, 0] > 1.04 * free_c[0, 0]
+    assert last[1][0, 0] / free_c[0, 0] > last[1][1, 1] / free_c[1, 1]
+
+
 def test_the_fits_reach_and_the_frames_tilt_tighten_the_first_bound():
     """A wider patch (the fit's 18 px ring) and a hole level whose tilt the frame reveals
     carry more information than the first bound's square of R + 3 s + 6 px with a free tilt."""
@@ -223,7 +250,7 @@ def test_with_the_grooves_known_the_bounds_radius_column_is_the_renderers(blur, 
     hole = HoleSpec(80.3, 79.6, diameter)
     case = HoleCase(radius_px=diameter / 2, blur_px=blur, wall_dn=150.0, hole_dn=80.0, grain=0.03,
                     gain_e_per_dn=40.0, read_noise_dn=1.5, frac_x=0.3, frac_y=-0.4, grooves=grooves,
-                    grooves_origin=(80, 80))
+                    origin_px=(80, 80))
 
     def compare(c, w):
         render = _renderer_column(params, hole, w, dr=0.25)
