@@ -694,7 +694,7 @@ def refine_hole(
                     break
                 m, rhs, gls_chi2 = _gls_normal(gls_op, jac_x, res, sel, roi_shape)
             else:
-                m, rhs = _normal(jac_x, jac_x * wts[:, None], res)
+                m, rhs = _normal(jac_x, jw if cfg.fit_blur else jac_x * wts[:, None], res)
             if not cfg.fit_blur:
                 m, rhs, m_blur = m[:-1, :-1], rhs[:-1], m[:-1, -1]
             step = np.linalg.solve(m, rhs)
