@@ -75,13 +75,12 @@ import typer
 from scipy.ndimage import correlate1d, gaussian_filter
 from scipy.special import ndtr
 
+from station.vision.gls import QUANT_VAR_DN2, block_cg
 from station.vision.photometric import disc_edge, disc_fraction
 
 _INV_SQRT_2PI = 0.3989422804014327
 #: the renderer's grain kernel (``cv2.GaussianBlur(grain, (0, 0), 0.7)``)
 GRAIN_SIGMA_PX = 0.7
-#: 8-bit quantisation: a uniform error of one DN
-_QUANT_VAR_DN2 = 1.0 / 12.0
 
 
 @dataclass(frozen=True)
@@ -201,7 +200,7 @@ class _Geometry:
         if self.mask is not None:
             self.jac = self.jac * self.mask
         mean = (tilt * mean)[self.inner]
-        self.sensor_var = mean / c.gain_e_per_dn + c.read_noise_dn**2 + _QUANT_VAR_DN2
+        self.sensor_var = mean / c.gain_e_per_dn + c.read_noise_dn**2 + QUANT_VAR_DN2
         self.with_grain = with_grain and c.grain > 0
         if self.with_grain:
             k = _cv2_kernel(GRAIN_SIGMA_PX)
@@ -279,8 +278,6 @@ class _Geometry:
 
 def _block_cg(geo: _Geometry, b: np.ndarray, tol: float = 1e-10, max_iter: int = 400) -> np.ndarray:
     """Solve C x = b for every column of the block b (p, h, w): CG, Jacobi-preconditioned."""
-    from station.vision.gls import block_cg
-
     precond = 1.0 / (geo.sensor_var + (geo.case.grain * geo.case.wall_dn) ** 2 * 0.25)
     if geo.mask is not None:
         precond = precond * geo.mask

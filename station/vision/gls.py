@@ -37,8 +37,9 @@ import cv2
 import numpy as np
 
 
-#: an 8-bit pixel's quantisation variance (DN^2): the least noise any pixel has
-_QUANT_VAR_DN2 = 1.0 / 12.0
+#: an 8-bit pixel's quantisation variance (DN^2): the least noise any pixel has (the
+#: bound's sensor noise carries it too: ``station.bench.vision_bound``)
+QUANT_VAR_DN2 = 1.0 / 12.0
 
 
 @dataclass(frozen=True)
@@ -83,7 +84,7 @@ def estimate_noise(res_grid: np.ndarray, wall_ok: np.ndarray, inner_var: float, 
     # the wall's sensor variance is never below a quarter of the hole side's, nor the 8-bit
     # quantisation's 1/12 DN^2 (a noise-free wall read 3e-8 DN^2 once, and its pixels then
     # outweighed the hole's a million times: round 17)
-    floor = max(0.25 * inner_var, _QUANT_VAR_DN2)
+    floor = max(0.25 * inner_var, QUANT_VAR_DN2)
     if not 0.02 < r[0] < 0.98:
         # no measurable correlation: white noise, no grain term
         return GrainNoise(inner_var, max(var, floor), 0.0, 0.0)
