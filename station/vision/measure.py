@@ -171,8 +171,14 @@ class MeasureConfig:
     #: reads them from its ring alone (docs/vision-history.md, round 13)
     frame_grooves: bool = True
     #: ... read over a window this far (px) beyond 1.3 x each candidate's radius, not the
-    #: whole frame (None): a lens's distortion bends a straight groove across a frame
-    groove_window_px: float | None = 150.0
+    #: whole frame (None): a lens's distortion bends a straight groove across a frame.
+    #: 250 since round 19 (150 before): more of each groove's line in its profile.  Dev
+    #: seeds 3000 / 5000 (400 frames each, paired over the same holes), with the ring's
+    #: local profile per side (``PhotometricConfig.groove_frame_local_sides``): diameter
+    #: RMS z 1.069 / 1.077 -> 1.058 / 1.067, centre 1.077 / 1.055 -> 1.065 / 1.047; 400 px
+    #: was no better.  The profiles' cost grows with the window's area, the vision's time
+    #: by ~2 % (docs/vision-history.md, round 19)
+    groove_window_px: float | None = 250.0
 
 
 @dataclass(frozen=True)
