@@ -128,10 +128,10 @@ def test_sharing_the_blur_changes_nothing_for_a_frame_of_one_hole_and_moves_a_sm
 
 
 def _one_sided_groove_frame(depth: float = 0.15):
-    """A honed wall (the renderer's cross-hatch and grain, no blotches) and one deep groove at +30 deg that fades under a hole: full
-    where it leaves the rim on one side, a fifth of that on the other (a worn stone's
-    stroke), blurred by the camera; and that groove's true field as the camera shows it
-    (DN about the wall's level)."""
+    """A honed wall (the renderer's cross-hatch and grain, no blotches) and one deep
+    groove at +30 deg that fades under a hole: full where it leaves the rim on one side,
+    a fifth of that on the other (a worn stone's stroke), blurred by the camera; and the
+    grooves' true field as the camera shows it (DN about the wall's level)."""
     from scipy.ndimage import gaussian_filter
 
     from sim.camera.lens import ideal_pixel_grid
