@@ -4,8 +4,8 @@ Why: a honing groove is a straight line that crosses the whole frame, so its pro
 across its direction is read on every wall pixel along it, not only on the 18 px ring
 around one hole (``photometric._groove_field``).  On the ring each 0.5 px bin of a
 family's profile holds some tens of pixels of grain; along a window of a few hundred px
-it holds hundreds.  ``measure_holes`` reads a window of 150 px beyond 1.3 x each
-candidate's radius (``MeasureConfig.groove_window_px``), not the frame: a lens's barrel
+it holds hundreds.  ``measure_holes`` reads a window of 250 px (150 before round 19)
+beyond 1.3 x each candidate's radius (``MeasureConfig.groove_window_px``), not the frame: a lens's barrel
 distortion bends a straight groove by tens of pixels across a frame, by under a pixel
 across such a window near the optical axis.
 What the frame cannot give is a groove's depth at the hole: grooves fade in and out
@@ -13,6 +13,9 @@ along their length (worn stones, plateau honing) over ~100 px.  So the frame giv
 shape P_k(u) of each family k, and each hole's ring gives only how deep the family is
 there: an amplitude that varies linearly across the ring (three numbers per family, in
 place of a profile of some hundred bins).
+What that leaves, the ring reads as a profile of its own on each side of the hole along
+the grooves, shrunk towards 0 (``PhotometricConfig.groove_frame_local_sides``): a
+groove's two crossings of the rim differ as it fades.
 
 Model: the wall's relative reflectance about its smooth level (``wall_level``: a 40 px
 Gaussian of the frame normalised by a mask of its holes, at 1/8 scale, once per frame)
