@@ -5,9 +5,9 @@ across its direction is read on every wall pixel along it, not only on the 18 px
 around one hole (``photometric._groove_field``).  On the ring each 0.5 px bin of a
 family's profile holds some tens of pixels of grain; along a window of a few hundred px
 it holds hundreds.  ``measure_holes`` reads a window of 250 px (150 before round 19)
-beyond 1.3 x each candidate's radius (``MeasureConfig.groove_window_px``), not the frame: a lens's barrel
-distortion bends a straight groove by tens of pixels across a frame, by under a pixel
-across such a window near the optical axis.
+beyond 1.3 x each candidate's radius (``MeasureConfig.groove_window_px``), not the
+frame: a lens's barrel distortion bends a straight groove by tens of pixels across a
+frame, by under a pixel across such a window near the optical axis.
 What the frame cannot give is a groove's depth at the hole: grooves fade in and out
 along their length (worn stones, plateau honing) over ~100 px.  So the frame gives the
 shape P_k(u) of each family k, and each hole's ring gives only how deep the family is
