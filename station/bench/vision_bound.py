@@ -109,6 +109,10 @@ class HoleCase:
     #: the frame's (width, height): the patch's pixels beyond its border are not
     #: measured, and neither an estimator nor the bound has them; None: no border
     frame_px: tuple[int, int] | None = None
+    #: relative std of the wall's low-frequency blotches (``FrameParams.blotch``) and their
+    #: cells' pitch (x, y) in px: a random field whose statistics the bound may know
+    blotch: float = 0.0
+    blotch_pitch_px: tuple[float, float] = (64.0, 64.0)
 
 
 def _cv2_kernel(sigma: float) -> np.ndarray:
@@ -122,7 +126,7 @@ class _Geometry:
 
     def __init__(self, case: HoleCase, blur_known: bool, with_grain: bool, margin_px: float = 6.0,
                  slope_order: int = 1, fit_reach_px: float | None = None, hole_tilt: bool = True,
-                 illumination_known: bool = False):
+                 illumination_known: bool = False, blotch_prior: bool = False):
         c = case
         self.case = c
         s_e = float(np.sqrt(c.blur_px**2 + 1.0 / 12.0))  # camera blur with the pixel's area
@@ -185,6 +189,9 @@ class _Geometry:
         mean = wl * (1 - u) + hl * u
         if c.grooves is not None:
             mean = mean + self._add_grooves(cols, c, idx, rho, theta, wl, blur_known)
+        self.prior_names: list[str] = []
+        if blotch_prior and c.blotch > 0:
+            self.prior_names = self._add_blotches(cols, c, idx, rho, wl)
         self.names = list(cols)
         self.mask = None if reach is None else (rho <= reach)[self.inner]
         if c.frame_px is not None:
@@ -255,6 +262,26 @@ class _Geometry:
             cols["blur"] = cols["blur"] + (blur(cut, c.blur_px + ds) - blur(cut, c.blur_px - ds)) / (2 * ds)
         return blur(cut)
 
+    @staticmethod
+    def _add_blotches(cols: dict, c: HoleCase, idx: np.ndarray, rho: np.ndarray, wl: float) -> list[str]:
+        """The blotches as a random field of known statistics: its Karhunen-Loeve modes
+        over the patch as columns whose coefficients have a unit normal prior (``fisher``
+        adds it); returns their names."""
+        lam_y, vy = _blotch_modes_1d(idx, c.blotch_pitch_px[1])
+        lam_x, vx = _blotch_modes_1d(idx, c.blotch_pitch_px[0])
+        lam = np.outer(lam_y, lam_x)
+        keep = np.argwhere(lam >= BLOTCH_MODE_TOL * lam.max())
+        s0 = float(np.sqrt(1.0 / 12.0))
+        root0 = np.sqrt(rho * rho + s0 * s0)
+        cut = 1.0 - ndtr((c.radius_px - root0) / s0)
+        names = []
+        for i, j in keep:
+            e = np.outer(vy[:, i], vx[:, j]) * (np.sqrt(lam[i, j]) * c.blotch * wl)
+            name = f"blotch_{i}_{j}"
+            cols[name] = gaussian_filter(e * cut, c.blur_px, mode="constant", truncate=4.0)
+            names.append(name)
+        return names
+
     def apply_cov(self, x: np.ndarray) -> np.ndarray:
         """C x for a block x of shape (p, h, w) on the patch."""
         out = self.sensor_var * x
@@ -276,6 +303,38 @@ class _Geometry:
         return out if self.mask is None else out * self.mask
 
 
+#: the blotches' modes kept: 2-D eigenvalues above this share of the largest
+BLOTCH_MODE_TOL = 1e-4
+
+
+def _cubic_kernel(t: np.ndarray, a: float = -0.75) -> np.ndarray:
+    """The bicubic interpolation kernel cv2.INTER_CUBIC uses (Keys, a = -0.75)."""
+    t = np.abs(t)
+    return np.where(t <= 1, (a + 2) * t**3 - (a + 3) * t**2 + 1,
+                    np.where(t < 2, a * t**3 - 5 * a * t**2 + 8 * a * t - 4 * a, 0.0))
+
+
+def _blotch_correlation(d_px: np.ndarray, pitch_px: float) -> np.ndarray:
+    """Correlation at lag d of the renderer's blotch field along one axis (a cubic
+    interpolation of white nodes ``pitch_px`` apart), averaged over the nodes' phase: the
+    field's statistics, not its grid, which no station could know."""
+    s = np.linspace(-2.0, 2.0, 4001)
+    lags = np.linspace(0.0, 4.0, 1025)
+    phi = _cubic_kernel(s)
+    table = np.array([np.sum(phi * _cubic_kernel(s + t)) for t in lags])
+    return np.interp(np.abs(d_px) / pitch_px, lags, table / table[0], right=0.0)
+
+
+def _blotch_modes_1d(idx: np.ndarray, pitch_px: float) -> tuple[np.ndarray, np.ndarray]:
+    """Eigenvalues (descending) and eigenvectors of the blotch's 1-D correlation over ``idx``."""
+    k = _blotch_correlation(idx[:, None] - idx[None, :], pitch_px)
+    lam, v = np.linalg.eigh(k)
+    order = np.argsort(lam)[::-1]
+    lam, v = np.clip(lam[order], 0.0, None), v[:, order]
+    keep = lam >= BLOTCH_MODE_TOL * lam[0]
+    return lam[keep], v[:, keep]
+
+
 def _block_cg(geo: _Geometry, b: np.ndarray, tol: float = 1e-10, max_iter: int = 400) -> np.ndarray:
     """Solve C x = b for every column of the block b (p, h, w): CG, Jacobi-preconditioned."""
     precond = 1.0 / (geo.sensor_var + (geo.case.grain * geo.case.wall_dn) ** 2 * 0.25)
@@ -292,7 +351,12 @@ def fisher(case: HoleCase, blur_known: bool = False, with_grain: bool = True,
     geo = _Geometry(case, blur_known, with_grain, slope_order=slope_order, **geometry)
     y = _block_cg(geo, geo.jac)
     f = np.einsum("aij,bij->ab", geo.jac, y)
-    return 0.5 * (f + f.T), geo.names
+    f = 0.5 * (f + f.T)
+    # a random nuisance's unit normal prior (the blotches' modes): its information adds
+    for k in geo.prior_names:
+        i = geo.names.index(k)
+        f[i, i] += 1.0
+    return f, geo.names
 
 
 def hole_bound(case: HoleCase, blur_known: bool = False, with_grain: bool = True,
@@ -344,6 +408,12 @@ def attainability(d_sigma: np.ndarray, centre_cov: np.ndarray, worst_diameter_px
     }
 
 
+def blotch_pitch_px(width_px: int, height_px: int) -> tuple[float, float]:
+    """The pitch (x, y) of the blotch field's nodes on a frame of this size: the renderer
+    resizes a grid of (size // 64 + 2) nodes to the frame (``sim.camera.render._lowfreq``)."""
+    return width_px / (width_px // 64 + 2), height_px / (height_px // 64 + 2)
+
+
 def cases_from_frame(frame) -> list[HoleCase]:
     """The whole holes of one rendered frame (``sim.camera.render.Frame``) with its condition."""
     from sim.camera.render import vignetting_gain
@@ -371,7 +441,8 @@ def cases_from_frame(frame) -> list[HoleCase]:
                             hole_dn=p.hole_level_dn, grain=p.grain, gain_e_per_dn=p.gain_e_per_dn,
                             read_noise_dn=p.read_noise_dn, vignetting_gain=vg,
                             frac_x=cx - round(cx), frac_y=cy - round(cy), illum_gx=gx, illum_gy=gy,
-                            grooves=grooves, origin_px=(int(round(cx)), int(round(cy))), frame_px=(w, h)))
+                            grooves=grooves, origin_px=(int(round(cx)), int(round(cy))), frame_px=(w, h),
+                            blotch=float(p.blotch), blotch_pitch_px=blotch_pitch_px(w, h)))
     return out
 
 
@@ -412,6 +483,13 @@ FLAT_FRAME_MODES = {"frame_aware": "shared", "frame_reach_blur_per_hole": "per_h
 #: rim changes the edge's local contrast, which the flat wall's bound leaves out
 GROOVED = "frame_aware_grooves"
 FRAME_VARIANTS = (*FLAT_FRAME_MODES, GROOVED)
+#: ... and the wall's blotches as what they are, a random field whose statistics are known
+#: (``_blotch_correlation``) and whose values are not, on the fit's pixels and on a disc
+#: 70 px past the rim (what the wall around a hole reveals of the blotch at its rim):
+#: the grooved bound's price for leaving the blotches out, and how much of it a wider
+#: read would take back. Opt-in (``--blotches``): 3-4x the grooved bound's time on the
+#: fit's pixels, ~15x on the wider disc
+BLOTCH_VARIANTS = {"frame_aware_blotches": {}, "frame_aware_blotches_wide": dict(fit_reach_px=70.0)}
 
 
 def combine_frame(fishers: list[tuple[np.ndarray, list[str]]], shared: tuple[str, ...] = SHARED,
@@ -468,13 +546,17 @@ def frame_bounds(cases: list[HoleCase], with_grain: bool = True, variants: tuple
     if flat:
         fishers = [fisher(replace(c, grooves=None), blur_known=False, with_grain=with_grain, **geo) for c in cases]
         out.update({k: combine_frame(fishers, mode=FLAT_FRAME_MODES[k]) for k in flat})
-    if GROOVED in variants:
+    if GROOVED in variants or any(k in BLOTCH_VARIANTS for k in variants):
         missing = [i for i, c in enumerate(cases) if c.grooves is None]
         if missing:
             raise ValueError(f"the {GROOVED} bound needs the frame's grooves (holes {missing} have none): "
                              "render with keep_grooves=True")
         fishers = [fisher(c, blur_known=False, with_grain=with_grain, **geo) for c in cases]
         out[GROOVED] = combine_frame(fishers, mode="shared")
+    for k in (k for k in variants if k in BLOTCH_VARIANTS):
+        fishers = [fisher(c, blur_known=False, with_grain=with_grain, blotch_prior=True,
+                          **{**geo, **BLOTCH_VARIANTS[k]}) for c in cases]
+        out[k] = combine_frame(fishers, mode="shared")
     return out
 
 
@@ -486,14 +568,16 @@ def _frame_work(args: tuple) -> list[dict]:
     index, envelope, variants = args
     from sim.camera.render import random_frame
 
-    cases = cases_from_frame(random_frame(index, envelope=envelope, keep_grooves=GROOVED in variants))
+    grooved = GROOVED in variants or any(k in BLOTCH_VARIANTS for k in variants)
+    cases = cases_from_frame(random_frame(index, envelope=envelope, keep_grooves=grooved))
     per_hole = [dict() for _ in cases]
     for k in variants:
         if k in VARIANTS:
             for h, c in zip(per_hole, cases):
                 h[k] = hole_bound(replace(c, grooves=None), **VARIANTS[k])
     if cases:
-        for k, b in frame_bounds(cases, variants=tuple(k for k in variants if k in FRAME_VARIANTS)).items():
+        wanted = tuple(k for k in variants if k in FRAME_VARIANTS or k in BLOTCH_VARIANTS)
+        for k, b in frame_bounds(cases, variants=wanted).items():
             for h, v in zip(per_hole, b):
                 h[k] = v
     return per_hole
@@ -516,10 +600,12 @@ def baseline_diameter_errs(frames: int, seed: int, envelope: str = "station") ->
 
 
 def per_frame_bounds(frames: int, seed: int, envelope: str = "station", jobs: int = 1, progress=None,
-                     old_variants: tuple[str, ...] = tuple(VARIANTS), cache: str | None = None) -> list[list[dict]]:
+                     old_variants: tuple[str, ...] = tuple(VARIANTS), cache: str | None = None,
+                     extra: tuple[str, ...] = ()) -> list[list[dict]]:
     """Every frame's per-hole bounds (``_frame_work``), in frame order; ``cache``: a JSON
     file that keeps them between runs (keyed by frame seed, envelope and variant), for
-    this ``BOUND_REVISION`` only: a cache of another is computed again."""
+    this ``BOUND_REVISION`` only: a cache of another is computed again; ``extra``: opt-in
+    variants (``BLOTCH_VARIANTS``)."""
     import json
     import os
 
@@ -534,7 +620,7 @@ def per_frame_bounds(frames: int, seed: int, envelope: str = "station", jobs: in
     def key(i):
         return f"{envelope}:{seed + i}"
 
-    wanted = (*old_variants, *FRAME_VARIANTS)
+    wanted = (*old_variants, *FRAME_VARIANTS, *extra)
 
     def missing(i):
         e = store.get(key(i))
@@ -606,7 +692,8 @@ def run(frames: int = 60, seed: int = 1000, envelope: str = "station", progress=
     if not per_case:
         raise ValueError(f"the {frames} frame(s) from seed {seed} hold no whole hole: take more frames")
     base, base_p90 = baseline_diameter_errs(frames, seed, envelope) if baseline else (None, None)
-    variants = [k for k in (*old_variants, *FRAME_VARIANTS)]
+    present = set(per_case[0])
+    variants = [k for k in (*old_variants, *FRAME_VARIANTS, *BLOTCH_VARIANTS) if k in present]
     res, per_hole, per_hole_c = _summarise(per_case, variants, base, base_p90)
     out = {"frames": frames, "seed": seed, "envelope": envelope, "whole_holes": len(per_case), "bounds": res,
            "per_hole_sigma_px": per_hole,
@@ -772,7 +859,9 @@ def _print_criteria(r: dict, console) -> None:
 
 
 #: what each bound the criteria are printed against takes as the wall
-_BOUND_WALL = {GROOVED: "the frame's grooves known exactly", "frame_aware": "a flat wall (no grooves)"}
+_BOUND_WALL = {GROOVED: "the frame's grooves known exactly", "frame_aware": "a flat wall (no grooves)",
+               "frame_aware_blotches": "grooves known, blotches a random field of known statistics",
+               "frame_aware_blotches_wide": "as frame_aware_blotches, the wall read 70 px past the rim"}
 
 
 def _criteria_table(r: dict, bound: str, stats: dict, verdict: dict, console) -> None:
@@ -814,6 +903,10 @@ def register(bench_app: typer.Typer) -> None:
         old_variants: bool = typer.Option(True, "--old-variants/--frame-aware-only",
                                           help="also the first rounds' per-hole bounds (square patch, tilt free)"),
         cache: str = typer.Option(None, "--cache", help="a JSON file keeping each frame's bounds between runs"),
+        blotches: bool = typer.Option(False, "--blotches",
+                                      help="also the grooved bound with the wall's blotches as a random field of "
+                                           "known statistics, on the fit's pixels and 70 px past the rim (slow: "
+                                           "take fewer frames)"),
         gls_steps: int = typer.Option(None, "--gls-steps", min=0, max=3,
                                       help="with --estimator: the photometric fit's grain-aware steps "
                                            "(MeasureConfig.gls_steps; 0: the weighted fit only; default: "
@@ -829,7 +922,9 @@ def register(bench_app: typer.Typer) -> None:
         variants = tuple(VARIANTS) if old_variants and not estimator else ()
         with Progress(console=out_console, transient=True, disable=as_json) as bar:
             task = bar.add_task("Fisher information per frame", total=frames)
-            bounds = per_frame_bounds(frames, seed, envelope, jobs, lambda: bar.advance(task), variants, cache)
+            extra = tuple(BLOTCH_VARIANTS) if blotches else ()
+            bounds = per_frame_bounds(frames, seed, envelope, jobs, lambda: bar.advance(task), variants, cache,
+                                      extra)
         if not any(bounds):
             raise typer.BadParameter(f"the {frames} frame(s) from seed {seed} hold no whole hole",
                                      param_hint="--frames")
@@ -841,7 +936,8 @@ def register(bench_app: typer.Typer) -> None:
             mcfg = MeasureConfig()
             if gls_steps is not None:
                 mcfg = replace(mcfg, gls_steps=gls_steps)
-            r = estimator_run(frames, seed, envelope, bounds=bounds, measure_cfg=mcfg)
+            r = estimator_run(frames, seed, envelope, bounds=bounds, measure_cfg=mcfg,
+                              also=("frame_aware", *extra))
             if as_json:
                 print_json(r)
             else:
@@ -869,7 +965,9 @@ def register(bench_app: typer.Typer) -> None:
                   "frame_aware": ("frame-aware: fit's reach, tilt known", "shared by the frame"),
                   "frame_reach_blur_per_hole": ("fit's reach, tilt known", "fitted per hole"),
                   "frame_reach_blur_known": ("fit's reach, tilt known", "known"),
-                  GROOVED: ("frame-aware, the frame's grooves known", "shared by the frame")}
+                  GROOVED: ("frame-aware, the frame's grooves known", "shared by the frame"),
+                  "frame_aware_blotches": ("grooves known, blotches a random field", "shared by the frame"),
+                  "frame_aware_blotches_wide": ("... read 70 px past the rim", "shared by the frame")}
         for k, b in r["bounds"].items():
             row = [*labels[k], f"{b['predicted_median_abs_diameter_err_px']:.4f}",
                    f"{b['median_sigma_px']:.4f}", f"{b['max_sigma_px']:.4f}",
