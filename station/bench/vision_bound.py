@@ -499,8 +499,9 @@ FRAME_VARIANTS = (*FLAT_FRAME_MODES, GROOVED)
 #: (``_blotch_correlation``) and whose values are not, on the fit's pixels and on a disc
 #: 70 px past the rim (what the wall around a hole reveals of the blotch at its rim):
 #: the grooved bound's price for leaving the blotches out, and how much of it a wider
-#: read would take back. Opt-in (``--blotches``): 3-4x the grooved bound's time on the
-#: fit's pixels, ~15x on the wider disc
+#: read would take back (more than all of it: the far wall also pins the wall's free level
+#: and slope, and the limit keeps falling past 70 px; docs/vision.md). Opt-in
+#: (``--blotches``): 3-4x the grooved bound's time on the fit's pixels, ~15x on the wider disc
 BLOTCH_VARIANTS = {"frame_aware_blotches": {}, "frame_aware_blotches_wide": dict(fit_reach_px=70.0)}
 
 
