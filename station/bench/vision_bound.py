@@ -80,6 +80,7 @@ the best diameter ratio an efficient unbiased estimator would show there.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import lru_cache
 
 import cv2
 import numpy as np
@@ -326,15 +327,22 @@ def _cubic_kernel(t: np.ndarray, a: float = -0.75) -> np.ndarray:
                     np.where(t < 2, a * t**3 - 5 * a * t**2 + 8 * a * t - 4 * a, 0.0))
 
 
-def _blotch_correlation(d_px: np.ndarray, pitch_px: float) -> np.ndarray:
-    """Correlation at lag d of the renderer's blotch field along one axis (a cubic
-    interpolation of white nodes ``pitch_px`` apart), averaged over the nodes' phase: the
-    field's statistics, not its grid, which no station could know."""
+@lru_cache(maxsize=1)
+def _cubic_autocorrelation() -> tuple[np.ndarray, np.ndarray]:
+    """The cubic kernel's autocorrelation at lags 0-4 (in node pitches), normalised."""
     s = np.linspace(-2.0, 2.0, 4001)
     lags = np.linspace(0.0, 4.0, 1025)
     phi = _cubic_kernel(s)
     table = np.array([np.sum(phi * _cubic_kernel(s + t)) for t in lags])
-    return np.interp(np.abs(d_px) / pitch_px, lags, table / table[0], right=0.0)
+    return lags, table / table[0]
+
+
+def _blotch_correlation(d_px: np.ndarray, pitch_px: float) -> np.ndarray:
+    """Correlation at lag d of the renderer's blotch field along one axis (a cubic
+    interpolation of white nodes ``pitch_px`` apart), averaged over the nodes' phase: the
+    field's statistics, not its grid, which no station could know."""
+    lags, table = _cubic_autocorrelation()
+    return np.interp(np.abs(d_px) / pitch_px, lags, table, right=0.0)
 
 
 def _blotch_modes_1d(idx: np.ndarray, pitch_px: float) -> tuple[np.ndarray, np.ndarray]:
@@ -559,11 +567,12 @@ def frame_bounds(cases: list[HoleCase], with_grain: bool = True, variants: tuple
     if flat:
         fishers = [fisher(replace(c, grooves=None), blur_known=False, with_grain=with_grain, **geo) for c in cases]
         out.update({k: combine_frame(fishers, mode=FLAT_FRAME_MODES[k]) for k in flat})
-    if GROOVED in variants or any(k in BLOTCH_VARIANTS for k in variants):
-        missing = [i for i, c in enumerate(cases) if c.grooves is None]
-        if missing:
-            raise ValueError(f"the {GROOVED} bound needs the frame's grooves (holes {missing} have none): "
-                             "render with keep_grooves=True")
+    grooved = [k for k in variants if k == GROOVED or k in BLOTCH_VARIANTS]
+    missing = [i for i, c in enumerate(cases) if c.grooves is None]
+    if grooved and missing:
+        raise ValueError(f"the {grooved[0]} bound needs the frame's grooves (holes {missing} have none): "
+                         "render with keep_grooves=True")
+    if GROOVED in variants:
         fishers = [fisher(c, blur_known=False, with_grain=with_grain, **geo) for c in cases]
         out[GROOVED] = combine_frame(fishers, mode="shared")
     for k in (k for k in variants if k in BLOTCH_VARIANTS):

@@ -113,3 +113,20 @@ def test_a_random_blotch_field_costs_information_and_a_wider_read_takes_some_bac
         vb.BLOTCH_MODE_TOL = tol
     assert finer[0] == pytest.approx(prior[0], rel=2e-3)
     assert finer[0] >= prior[0] * (1 - 1e-6)  # more modes: more nuisance, never less
+
+
+def test_a_frame_gives_the_blotch_variant_alone_and_it_needs_the_grooves():
+    """``frame_bounds`` computes the variants asked for and no other; the blotch variants,
+    like the grooved bound they extend, need the frame's grooves, and say so."""
+    from dataclasses import replace
+
+    from sim.camera.render import random_frame
+
+    cases = vb.cases_from_frame(random_frame(1003, keep_grooves=True))
+    assert len(cases) == 1 and cases[0].blotch > 0
+    only = vb.frame_bounds(cases, variants=("frame_aware_blotches",))
+    assert set(only) == {"frame_aware_blotches"}
+    grooved = vb.frame_bounds(cases, variants=(vb.GROOVED,))[vb.GROOVED]
+    assert only["frame_aware_blotches"][0][0] > grooved[0][0]
+    with pytest.raises(ValueError, match="frame_aware_blotches_wide bound needs the frame's grooves"):
+        vb.frame_bounds([replace(cases[0], grooves=None)], variants=("frame_aware_blotches_wide",))
