@@ -128,6 +128,15 @@ class HoleCase:
     blotch_pitch_px: tuple[float, float] = (64.0, 64.0)
 
 
+def _pixel_cover_z(rho: np.ndarray, radius: float) -> tuple[float, np.ndarray, np.ndarray]:
+    """The hole's share of each pixel as the renderer cuts the wall before the blur: the
+    pixel's area as a Gaussian of variance 1/12, share = ndtr(z). Returns (s0, sqrt(rho^2 +
+    s0^2), z)."""
+    s0 = float(np.sqrt(1.0 / 12.0))
+    root0 = np.sqrt(rho * rho + s0 * s0)
+    return s0, root0, (radius - root0) / s0
+
+
 def _cv2_kernel(sigma: float) -> np.ndarray:
     """The 1-D kernel cv2.GaussianBlur(float32, (0, 0), sigma) uses."""
     ksize = int(round(sigma * 4 * 2 + 1)) | 1
@@ -254,9 +263,7 @@ class _Geometry:
         g = np.zeros((n, n))
         g[np.ix_(vy, vx)] = c.grooves[np.ix_(ys[vy], xs[vx])]  # off the frame: no grooves
         wg = wl * g
-        s0 = float(np.sqrt(1.0 / 12.0))
-        root0 = np.sqrt(rho * rho + s0 * s0)
-        z0 = (c.radius_px - root0) / s0
+        s0, root0, z0 = _pixel_cover_z(rho, c.radius_px)
         phi0 = _INV_SQRT_2PI * np.exp(-0.5 * z0 * z0)
         dc_dr = phi0 / s0
         dc_drho = -phi0 * rho / (s0 * root0)
@@ -284,9 +291,7 @@ class _Geometry:
         lam_x, vx = _blotch_modes_1d(idx, c.blotch_pitch_px[0])
         lam = np.outer(lam_y, lam_x)
         keep = np.argwhere(lam >= BLOTCH_MODE_TOL * lam.max())
-        s0 = float(np.sqrt(1.0 / 12.0))
-        root0 = np.sqrt(rho * rho + s0 * s0)
-        cut = 1.0 - ndtr((c.radius_px - root0) / s0)
+        cut = 1.0 - ndtr(_pixel_cover_z(rho, c.radius_px)[2])
         names = []
         for i, j in keep:
             e = np.outer(vy[:, i], vx[:, j]) * (np.sqrt(lam[i, j]) * c.blotch * wl)
