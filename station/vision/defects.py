@@ -186,6 +186,11 @@ class DefectConfig:
     rim_min_height_px: float = 1.0
     #: ... over at least this much of the rim (px of arc)
     rim_min_length_px: float = 2.0
+    #: rim defects are found on the share of "hole" averaged along the rim over this
+    #: Gaussian (px of arc) before its crossing is taken (measured on the raw one)
+    rim_find_smooth_px: float = 1.0
+    #: the grooves at a rim: a profile on each side of the hole along their lines
+    rim_groove_sides: bool = True
     #: standard uncertainties from the fits' and integrals' noise are multiplied by this,
     #: the factor the hole measurement's white-noise u took until round 12 of the vision
     #: stage (docs/vision-history.md): the texture is correlated noise the formulas do not
@@ -603,29 +608,50 @@ def _plane(values: np.ndarray, xx: np.ndarray, yy: np.ndarray, use: np.ndarray) 
 
 
 def _groove_profiles(d: np.ndarray, xx: np.ndarray, yy: np.ndarray, use: np.ndarray, angles_deg,
-                     rounds: int = 3, bin_px: float = 0.5) -> np.ndarray:
+                     rounds: int = 3, bin_px: float = 0.5, sides_about: tuple[float, float] | None = None
+                     ) -> np.ndarray:
     """The two groove families over a patch as 1-D profiles across their lines (means in
     ``bin_px`` bins of the across-line coordinate, fitted where ``use``), backfitted in
-    turn; returns their sum at every pixel of the patch."""
+    turn; returns their sum at every pixel of the patch.
+
+    ``sides_about`` (x, y): a profile for each side of that point along the lines (a
+    groove fades along its length, so where it crosses a hole's rim it is better read on
+    the ring's own side than averaged with the far side); a bin one side lacks takes the
+    two sides' profile."""
     total = np.zeros_like(d)
     parts = []
     for a in angles_deg:
         t = np.deg2rad(a)
         u = -np.sin(t) * xx + np.cos(t) * yy
         idx = np.floor((u - u.min()) / bin_px).astype(np.int64)
-        parts.append([idx, np.zeros_like(d)])
+        side = None
+        if sides_about is not None:
+            v = np.cos(t) * (xx - sides_about[0]) + np.sin(t) * (yy - sides_about[1])
+            side = v > 0
+        parts.append([idx, np.zeros_like(d), side])
     nb = [int(p[0].max()) + 1 for p in parts]
+    centres = [np.arange(n) for n in nb]
+
+    def profile(k: int, idx: np.ndarray, vals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        cnt = np.bincount(idx, minlength=nb[k]).astype(np.float64)
+        s = np.bincount(idx, weights=vals, minlength=nb[k])
+        have = cnt >= 3
+        prof = np.zeros(nb[k])
+        if have.sum() >= 2:
+            prof = np.interp(centres[k], centres[k][have], s[have] / cnt[have])
+        return prof, have
+
     for _ in range(rounds):
-        for k, (idx, current) in enumerate(parts):
+        for k, (idx, current, side) in enumerate(parts):
             rest = d - (total - current)
-            cnt = np.bincount(idx[use], minlength=nb[k]).astype(np.float64)
-            s = np.bincount(idx[use], weights=rest[use], minlength=nb[k])
-            have = cnt >= 3
-            prof = np.zeros(nb[k])
-            if have.sum() >= 2:
-                centres = np.arange(nb[k])
-                prof = np.interp(centres, centres[have], s[have] / cnt[have])
-            new = prof[idx]
+            both, _ = profile(k, idx[use], rest[use])
+            new = both[idx]
+            if side is not None:
+                for this in (side, ~side):
+                    sel = use & this
+                    prof, have = profile(k, idx[sel], rest[sel])
+                    prof = np.where(have, prof, both)
+                    new = np.where(this, prof[idx], new)
             total += new - current
             parts[k][1] = new
     return total
@@ -1280,11 +1306,13 @@ class _RimProfile:
     rr: np.ndarray  # radii sampled along each ray (px)
     share: np.ndarray  # (len(rr), len(theta)): the share of "hole", (W - I) / (W - H)
     valid: np.ndarray  # rays wholly inside the frame and clear of other holes' zones
-    edge: np.ndarray  # per ray: where the share first falls below one half, going out
+    edge: np.ndarray  # per ray: where the share first falls below ``rim_crossing``, going out
+    edge_find: np.ndarray  # the same on the share averaged along the rim (finding defects)
 
 
 def _rim_profile(img: np.ndarray, hole, zone_others: np.ndarray, reach_px: float, wall_level: np.ndarray,
-                 angles_deg, blur_px: float, crossing: float):
+                 angles_deg, blur_px: float, crossing: float, smooth_px: float = 0.0,
+                 groove_sides: bool = False):
     """The rim along rays from the hole's centre: the share of "hole" (W - I) / (W - H)
     over [R - reach, R + reach], and each ray's edge, where that share first falls
     below one half going out.
@@ -1316,7 +1344,7 @@ def _rim_profile(img: np.ndarray, hole, zone_others: np.ndarray, reach_px: float
     if fit_ring.sum() > 100:
         d = 1.0 - p / np.maximum(level, 1.0)
         d -= _plane(d, xx - x0, yy - y0, fit_ring)
-        grooves = _groove_profiles(d, xx, yy, fit_ring, angles_deg)
+        grooves = _groove_profiles(d, xx, yy, fit_ring, angles_deg, sides_about=(cx, cy) if groove_sides else None)
         p = p + level * grooves * ndtr((rho - rad) / max(blur_px, 0.5)).astype(np.float32)
     step = 0.5
     n_th = int(np.ceil(2 * np.pi * rad / step))
@@ -1351,19 +1379,35 @@ def _rim_profile(img: np.ndarray, hole, zone_others: np.ndarray, reach_px: float
     share = (wall_b - polar[band]) / np.maximum(wall_b - hole_s[None, :], 1.0)
     share[:, ~valid] = 0.0
     rb = rr[band]
-    # the first fall below ``crossing``, going out (a ray already below it at the band's
-    # start: the edge is there)
-    below = share < crossing
-    k = np.argmax(below, axis=0)
-    k = np.where(below.any(axis=0), k, rb.size - 1)
-    km = np.maximum(k - 1, 0)
-    cols = np.arange(n_th)
-    s0, s1 = share[km, cols], share[k, cols]
-    t = np.where(k > 0, (s0 - crossing) / np.maximum(s0 - s1, 1e-6), 0.0)
-    edge = rb[km] + np.clip(t, 0.0, 1.0) * step
-    edge = np.where(k > 0, edge, rb[0])
-    edge[~valid] = np.nan
-    return _RimProfile(theta, rb, share, valid, edge)
+
+    def first_crossing(sh: np.ndarray) -> np.ndarray:
+        # the first fall below ``crossing``, going out (a ray already below it at the
+        # band's start: the edge is there)
+        below = sh < crossing
+        k = np.argmax(below, axis=0)
+        k = np.where(below.any(axis=0), k, rb.size - 1)
+        km = np.maximum(k - 1, 0)
+        cols = np.arange(n_th)
+        s0, s1 = sh[km, cols], sh[k, cols]
+        t = np.where(k > 0, (s0 - crossing) / np.maximum(s0 - s1, 1e-6), 0.0)
+        e = rb[km] + np.clip(t, 0.0, 1.0) * step
+        e = np.where(k > 0, e, rb[0])
+        e[~valid] = np.nan
+        return e
+
+    edge = first_crossing(share)
+    # for finding defects, the crossing of the share averaged along the rim first: a first
+    # crossing is a threshold's, and on a dim, noisy frame one noisy pixel moves a ray's
+    # edge by pixels (inwards mostly, where the blurred step is brightest), which the
+    # edge's smoothing afterwards cannot undo (a normalised average over the valid rays)
+    edge_find = edge
+    if smooth_px > 0:
+        sig = smooth_px / (2 * np.pi * rad / n_th)
+        mode = "wrap" if valid.all() else "constant"
+        w = gaussian_filter1d(valid.astype(np.float64), sig, mode=mode)
+        sh = gaussian_filter1d(np.where(valid[None, :], share, 0.0), sig, axis=1, mode=mode)
+        edge_find = first_crossing(sh / np.maximum(w, 1e-6)[None, :])
+    return _RimProfile(theta, rb, share, valid, edge, edge_find)
 
 
 def _rim_integral(prof: _RimProfile, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
@@ -1437,7 +1481,8 @@ def _rim_defects(img: np.ndarray, hole, index: int, zone_others: np.ndarray, wal
     low harmonics, inwards (burr) or outwards (chip)."""
     blur = _hole_blur(hole) if getattr(hole, "edge_sigma_px", None) else 1.3
     reach = cfg.rim_reach_mm / mm_per_px + 2.5 * blur + 2.0
-    prof = _rim_profile(img, hole, zone_others, reach, wall_level, angles_deg, blur, cfg.rim_crossing)
+    prof = _rim_profile(img, hole, zone_others, reach, wall_level, angles_deg, blur, cfg.rim_crossing,
+                        cfg.rim_find_smooth_px, cfg.rim_groove_sides)
     if prof is None:
         return []
     theta, valid = prof.theta, prof.valid
@@ -1455,6 +1500,10 @@ def _rim_defects(img: np.ndarray, hole, index: int, zone_others: np.ndarray, wal
     dev_s = gaussian_filter1d(dev, 1.0 / step_arc, mode="wrap" if whole else "nearest")
     noise = max(_mad_sigma(dev_s[valid]), 0.02)
     thr = max(cfg.rim_k * noise, cfg.rim_min_height_px)
+    # the rays' edges on the share averaged along the rim, where a defect is looked for
+    dev_f = np.where(valid, prof.edge_find - _robust_harmonics(theta, prof.edge_find, valid, 1), 0.0)
+    dev_f = gaussian_filter1d(dev_f, 1.0 / step_arc, mode="wrap" if whole else "nearest")
+    thr_f = max(cfg.rim_k * max(_mad_sigma(dev_f[valid]), 0.02), cfg.rim_min_height_px)
     # the area-true deviation, each ray integrated over its own edge and the baseline
     # plus the blur's reach: thin features (a burr lower than the blur) keep their area
     margin = 3.0 * blur + 1.0
@@ -1470,9 +1519,10 @@ def _rim_defects(img: np.ndarray, hole, index: int, zone_others: np.ndarray, wal
     out: list[Defect] = []
     for sign, kind in ((-1.0, "burr"), (1.0, "chip")):
         sd = sign * dev_s
+        sf = sign * dev_f
         # teeth of one ragged defect join over dips that stay above a third of the
         # threshold: a clean rim between two defects comes back to within the noise
-        for a, b in _merge_runs(_runs((sd > thr) & valid, whole), sd, whole, 0.35 * thr):
+        for a, b in _merge_runs(_runs((sf > thr_f) & valid, whole), sf, whole, 0.35 * thr_f):
             idx = np.arange(a, b) % n
             h_ref = float(np.median(sd[idx]))
             # walk out to half the run's height, sub-sample by linear interpolation

@@ -20,7 +20,7 @@ from sim.camera.defects import DefectSpec, geometry, random_defect_frame
 from sim.camera.render import FrameParams, HoleSpec, random_frame, render_frame
 from station.bench.defects import match
 from station.cli import app
-from station.vision.defects import detect_defects, honing_directions
+from station.vision.defects import _groove_profiles, detect_defects, honing_directions
 
 MM_PER_PX = 0.010
 SMALL = dict(width_px=640, height_px=512)
@@ -311,3 +311,41 @@ def test_cli_refuses_a_scale_that_is_not_positive(tmp_path):
     assert result.exit_code == 2 and "w.png" in result.stderr and result.stdout == ""
     missing = runner.invoke(app, ["vision", "defects", str(tmp_path / "nope.png"), "--mm-per-px", "0.01"])
     assert missing.exit_code == 2 and "nope.png" in missing.stderr and "no such file" in missing.stderr
+
+
+def test_clean_rims_on_dim_frames_with_deep_grooves_give_no_burr_or_chip():
+    """The wide envelope's corner (grooves up to 15 % deep, 5-20 e-/DN, contrast down to
+    30 %): a first crossing of the hole's share is a threshold's, so on a dim frame one
+    noisy pixel moved a ray's edge by pixels (false "burrs"), and a groove that fades
+    along its length, read on the ring averaged over both sides of the hole, was put back
+    at the rim too deep or too shallow (false "chips"). These are the bench's clean wide
+    frames the change was made on, at full size: before it, five of their rims gave a burr
+    or a chip; ``station bench defects --envelope wide`` reports fresh seeds."""
+    rims = []
+    for seed in range(1070000, 1070060):
+        f = random_defect_frame(seed, {}, mm_per_px=MM_PER_PX, envelope="wide")
+        if not f.holes:
+            continue
+        found = detect_defects(f.image, MM_PER_PX)
+        rims += [(seed, d.kind, round(d.x_px), round(d.y_px)) for d in found if d.kind in ("burr", "chip")]
+    assert rims == []
+
+
+def test_a_groove_that_fades_along_its_length_is_read_on_each_side_of_the_hole():
+    """One groove family at 30 deg, 12 % deep on one side of a point along its lines and
+    4 % on the other: profiles per side give each side its own depth; one profile over
+    both gives their mean to both (what a rim was corrected with before)."""
+    yy, xx = np.mgrid[0:120, 0:160].astype(np.float32)
+    t = np.deg2rad(30.0)
+    u = -np.sin(t) * xx + np.cos(t) * yy
+    v = np.cos(t) * (xx - 80.0) + np.sin(t) * (yy - 60.0)
+    depth = np.where(v > 0, 0.12, 0.04)
+    d = (depth * np.exp(-0.5 * ((np.mod(u, 14.0) - 7.0) / 1.2) ** 2)).astype(np.float32)
+    use = np.hypot(xx - 80.0, yy - 60.0) > 25.0  # the ring; the hole's disc left out
+    on_groove = np.abs(np.mod(u, 14.0) - 7.0) < 0.25
+    near = (np.hypot(xx - 80.0, yy - 60.0) < 25.0) & on_groove
+    sides = _groove_profiles(d, xx, yy, use, (30.0,), sides_about=(80.0, 60.0))
+    both = _groove_profiles(d, xx, yy, use, (30.0,))
+    for this, want in ((v > 0, 0.12), (v <= 0, 0.04)):
+        assert np.median(sides[near & this]) == pytest.approx(want, rel=0.05)
+        assert np.median(both[near & this]) == pytest.approx(0.08, rel=0.1)
