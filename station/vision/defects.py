@@ -290,8 +290,8 @@ def honing_directions(darkness: np.ndarray, valid: np.ndarray, default_deg: floa
     orientation histogram tried first was 1-7 deg off, biased by the pixel grid).
 
     The hatch is symmetric about the bore's axis (the camera's y), so the second family
-    is sought within 8 deg of the mirror of the first and, failing a clear peak there,
-    taken as that mirror; no clear first peak falls back to +/-``default_deg``.
+    is sought within 8 deg of the mirror of the first; no clear peak for either falls
+    back to +/-``default_deg``.
     """
     h, w = darkness.shape
     hs, ws = cv2.getOptimalDFTSize(h), cv2.getOptimalDFTSize(w)
@@ -317,8 +317,11 @@ def honing_directions(darkness: np.ndarray, valid: np.ndarray, default_deg: floa
     # a clear hatch stands several times above the median direction (dev frames: 5-50x);
     # grain alone is flat within a factor of ~1.5. Only half-angles a honing tool makes
     # are searched (18-42 deg from the circumferential x axis; plateau honing specifies
-    # 20-35 deg), and the mirror family must carry a quarter of the first's power at
-    # least: one long scratch on a bare wall is one strong direction, not a hatch
+    # 20-35 deg), and the mirror family must carry a quarter of the first's power, or
+    # stand 10x above the median: one long scratch on a bare wall is one strong
+    # direction, not a hatch, but the two families of a real hatch may differ by more
+    # than 4x (a 22 deg hatch whose families stood 283x and 59x above the median fell
+    # back to +/-30 deg, and its grooves became seven "scratches")
     lines = (np.arange(hist.size) + 0.5) / bins
     half_angle = np.minimum(lines, 180.0 - lines)
     honing = (half_angle >= 18.0) & (half_angle <= 42.0)
@@ -329,7 +332,7 @@ def honing_directions(darkness: np.ndarray, valid: np.ndarray, default_deg: floa
     mirror = (180.0 - a1) % 180.0
     near = np.abs((lines - mirror + 90.0) % 180.0 - 90.0) <= 8.0
     second = int(np.argmax(np.where(near, smooth, -np.inf)))
-    if smooth[second] < max(3.0 * base, 0.25 * smooth[first]):
+    if smooth[second] < max(3.0 * base, min(0.25 * smooth[first], 10.0 * base)):
         return fallback
     return tuple(sorted((a1, centroid(second))))
 
