@@ -26,11 +26,13 @@ function of u_k = -sin(a_k) x + cos(a_k) y, fitted by backfitting bin means of 0
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import cv2
 import numpy as np
 from numba import njit
+from scipy.ndimage import gaussian_filter1d
 
 #: the smooth level the grooves are read against: a Gaussian of this sigma (px), wide
 #: against a groove (0.8-3 px) and narrow against the blotches and the vignetting
@@ -233,3 +235,105 @@ def _profiles(rel, ok, xs, ys, angles, step, sweeps):
     for f in range(nf):
         u0[f] += 0.5 * step
     return prof, u0
+
+
+# ---------------------------------------------------------------- the hatch's directions
+@functools.lru_cache(maxsize=4)
+def _spectrum_geometry(hs: int, ws: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """For ``honing_directions`` on an hs x ws spectrum (the same for every frame of a
+    camera): the Hann window (no edge ringing along the axes), the ring of spatial periods
+    4-24 px, and each of its frequencies' line direction in quarter-degree bins."""
+    win = np.outer(np.hanning(hs), np.hanning(ws)).astype(np.float32)
+    fy = np.broadcast_to(np.fft.fftfreq(hs)[:, None], (hs, ws))
+    fx = np.broadcast_to(np.fft.fftfreq(ws)[None, :], (hs, ws))
+    k = np.hypot(fx, fy)
+    ring = (k > 1.0 / 24.0) & (k < 1.0 / 4.0)
+    line_deg = ((np.rad2deg(np.arctan2(fy, fx)) + 90.0) % 180.0)[ring]
+    line_bin = np.minimum((line_deg * 4).astype(np.int64), 180 * 4 - 1)
+    for a in (win, ring, line_bin):
+        a.setflags(write=False)
+    return win, ring, line_bin
+
+
+def honing_directions(darkness: np.ndarray, valid: np.ndarray, default_deg: float = 30.0) -> tuple[float, float]:
+    """The cross-hatch's two line directions (deg, image sense, 0-180) from the frame's
+    power spectrum: a family of straight grooves puts its power on the line through
+    the origin perpendicular to them. The power over spatial periods of 4-24 px
+    (groove widths and spacings; blotches and holes are larger) is histogrammed by the
+    lines' direction; each family's direction is the power-weighted mean over +/-2 deg
+    of its peak (dev frames: within 0.1 deg of the rendered 30 deg; the gradient
+    orientation histogram tried first was 1-7 deg off, biased by the pixel grid).
+
+    The hatch is symmetric about the bore's axis (the camera's y), so the second family
+    is sought within 8 deg of the mirror of the first; no clear peak for either falls
+    back to +/-``default_deg``.
+    """
+    h, w = darkness.shape
+    hs, ws = cv2.getOptimalDFTSize(h), cv2.getOptimalDFTSize(w)
+    hs, ws = (hs if hs <= h else h), (ws if ws <= w else w)
+    d = np.where(valid, darkness, 0.0).astype(np.float32)[:hs, :ws]
+    d -= float(d.mean())
+    win, ring, line_bin = _spectrum_geometry(hs, ws)
+    spec = cv2.dft(d * win, flags=cv2.DFT_COMPLEX_OUTPUT)
+    power = spec[..., 0] ** 2 + spec[..., 1] ** 2
+    bins = 4  # per degree
+    hist = np.bincount(line_bin, weights=power[ring], minlength=180 * bins)
+    smooth = gaussian_filter1d(hist, 2.0, mode="wrap")
+    base = float(np.median(smooth))
+    fallback = (default_deg % 180.0, (-default_deg) % 180.0)
+
+    def centroid(i: int) -> float:
+        idx = np.arange(i - 2 * bins, i + 2 * bins + 1)
+        wts = np.clip(hist[idx % hist.size] - base, 0.0, None)
+        if wts.sum() <= 0:
+            return (i + 0.5) / bins
+        return float(((idx + 0.5) / bins * wts).sum() / wts.sum()) % 180.0
+
+    # a clear hatch stands several times above the median direction (dev frames: 5-50x);
+    # grain alone is flat within a factor of ~1.5. Only half-angles a honing tool makes
+    # are searched (18-42 deg from the circumferential x axis; plateau honing specifies
+    # 20-35 deg), and the mirror family must carry a quarter of the first's power, or
+    # stand 10x above the median: one long scratch on a bare wall is one strong
+    # direction, not a hatch, but the two families of a real hatch may differ by more
+    # than 4x (a 22 deg hatch whose families stood 283x and 59x above the median fell
+    # back to +/-30 deg, and its grooves became seven "scratches")
+    lines = (np.arange(hist.size) + 0.5) / bins
+    half_angle = np.minimum(lines, 180.0 - lines)
+    honing = (half_angle >= 18.0) & (half_angle <= 42.0)
+    first = int(np.argmax(np.where(honing, smooth, -np.inf)))
+    if base <= 0 or smooth[first] < 3.0 * base:
+        return fallback
+    a1 = centroid(first)
+    mirror = (180.0 - a1) % 180.0
+    near = np.abs((lines - mirror + 90.0) % 180.0 - 90.0) <= 8.0
+    second = int(np.argmax(np.where(near, smooth, -np.inf)))
+    if smooth[second] < max(3.0 * base, min(0.25 * smooth[first], 10.0 * base)):
+        return fallback
+    return tuple(sorted((a1, centroid(second))))
+
+
+def frame_hatch(image: np.ndarray, holes: list[tuple[float, float, float]],
+                nominal_deg: tuple[float, ...] = (30.0, -30.0)) -> tuple[float, float]:
+    """The cross-hatch's two line directions on a grey frame, as the photometric fit
+    takes them (deg from the x axis, y down, in (-90, 90]): ``honing_directions`` on the
+    frame's relative darkness at half resolution (about a 16 px Gaussian level, the
+    holes given as ``frame_grooves`` takes them left out), or ``nominal_deg`` when the
+    frame shows no clear hatch.
+
+    Why: the honing angle is the part's (plateau honing specifies 20-35 deg, and a
+    machine holds it to a few degrees), not the station's. The hole fit reads each
+    family's profile along its lines over hundreds of px, so a model half a degree off
+    already costs (dev seeds: diameter z^2 +0.03 to +0.06), and a 25 deg hatch read as
+    30 deg costs +0.33 to +0.50 (docs/vision.md, "The hatch's angle")."""
+    h, w = image.shape[:2]
+    small = cv2.resize(image, (w // 2, h // 2), interpolation=cv2.INTER_AREA).astype(np.float32)
+    level = cv2.GaussianBlur(small, (0, 0), 8.0, borderType=cv2.BORDER_REFLECT)
+    darkness = 1.0 - small / np.maximum(level, 1.0)
+    valid = np.ones(small.shape, np.uint8)
+    for x, y, r in holes:  # the hole and the level's 8 px Gaussian round it (3 sigma)
+        cv2.circle(valid, (int(round(x / 2)), int(round(y / 2))), int(np.ceil(r / 2 + 24.0)), 0, -1)
+    default = abs(float(nominal_deg[0])) if nominal_deg else 30.0
+    a1, a2 = honing_directions(darkness, valid.astype(bool), default)
+    if abs(a1 - default % 180.0) < 1e-9 and abs(a2 - (-default) % 180.0) < 1e-9:
+        return tuple(float(a) for a in nominal_deg)  # the fallback: the nominal, as given
+    return tuple(float(a if a <= 90.0 else a - 180.0) for a in (a1, a2))

@@ -30,7 +30,7 @@ from station.vision.detect import Candidate, DetectConfig, detect_candidates
 from station.vision.edges import KERNEL_RADIUS_PX, deblurred_radius, gradient, profile_width2, psf_variance, ray_edges
 from station.vision.edges import SMOOTH_SIGMA_PX
 from station.vision.fit import fit_ellipse_direct, gradient_1d, median, ransac_circle, robust_circle, taubin_circle
-from station.vision.grooves import frame_grooves, wall_level
+from station.vision.grooves import frame_grooves, frame_hatch, wall_level
 from station.vision.illumination import Illumination, estimate_illumination
 from station.vision.imageio import to_8bit, to_grey
 from station.vision.photometric import PhotometricConfig, PhotometricFit, refine_hole
@@ -170,6 +170,10 @@ class MeasureConfig:
     #: (``grooves.py``), the hole's ring giving only their depth there; else each hole
     #: reads them from its ring alone (docs/vision-history.md, round 13)
     frame_grooves: bool = True
+    #: the hatch's two directions read from the frame (``grooves.frame_hatch``), the
+    #: photometric config's ``groove_angles_deg`` the nominal it falls back to when the
+    #: frame shows no clear hatch: the honing angle is the part's, not the station's
+    read_hatch: bool = True
     #: ... read over a window this far (px) beyond 1.3 x each candidate's radius, not the
     #: whole frame (None): a lens's distortion bends a straight groove across a frame.
     #: 250 since round 19 (150 before): more of each groove's line in its profile.  Dev
@@ -547,6 +551,9 @@ def measure_holes(
     kept: list[tuple[Candidate, PhotometricFit | None, object, _Rays, dict]] = []
     grooves_on = bool(cfg.frame_grooves and cfg.photometric is not None and cfg.photometric.groove_angles_deg)
     masks = [(c.x_px, c.y_px, 1.3 * c.radius_px + 4.0) for c in candidates]
+    if candidates and cfg.read_hatch and cfg.photometric is not None and cfg.photometric.groove_angles_deg:
+        hatch = frame_hatch(image, masks, cfg.photometric.groove_angles_deg)
+        cfg = replace(cfg, photometric=replace(cfg.photometric, groove_angles_deg=hatch))
     level = _Lazy(lambda: wall_level(image, masks))
     whole_frame = _Lazy(lambda: frame_grooves(image, masks, cfg.photometric.groove_angles_deg, level=level()))
     # the grain-aware steps (``gls_steps``) run once per hole, in the last fit: the first
