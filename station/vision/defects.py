@@ -1245,7 +1245,8 @@ def _rim_profile(img: np.ndarray, hole, zone_others: np.ndarray, reach_px: float
                  groove_sides: bool = False):
     """The rim along rays from the hole's centre: the share of "hole" (W - I) / (W - H)
     over [R - reach, R + reach], and each ray's edge, where that share first falls
-    below one half going out.
+    below ``crossing`` going out (``edge``; ``edge_find`` on the share averaged along
+    the rim over ``smooth_px`` of arc first).
 
     W is the frame's wall level (``wall_level``, full res: it follows the blotches,
     carried over the hole's zone from the wall round it), recalibrated per angle on a
