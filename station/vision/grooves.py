@@ -1,4 +1,6 @@
-"""The honing cross-hatch over a hole's wide neighbourhood: one profile per groove family.
+"""The honing cross-hatch over a hole's wide neighbourhood: one profile per groove family;
+and the hatch's two directions, read from the frame's power spectrum (``frame_hatch``,
+``honing_directions``: the honing angle is the part's, 20-35 deg, not the station's).
 
 Why: a honing groove is a straight line that crosses the whole frame, so its profile
 across its direction is read on every wall pixel along it, not only on the 18 px ring
