@@ -40,6 +40,6 @@ def test_a_database_locked_by_another_program_gives_503_then_recovers(lone_serve
         while (rec := c.get(f"/api/v1/inspections/{iid}").json())["state"] == "running":
             assert time.monotonic() < deadline
             time.sleep(0.2)
-        assert rec["state"] == "complete" and rec["result"] == "pass"
+        assert rec["state"] == "complete" and rec["result"] == "pass", rec
         states = c.get("/api/v1/station").json()
         assert states["state"] in ("ready", "idle"), states
