@@ -1241,8 +1241,7 @@ class _RimProfile:
 
 
 def _rim_profile(img: np.ndarray, hole, zone_others: np.ndarray, reach_px: float, wall_level: np.ndarray,
-                 angles_deg, blur_px: float, crossing: float, smooth_px: float = 0.0,
-                 groove_sides: bool = False):
+                 angles_deg, blur_px: float, crossing: float, smooth_px: float, groove_sides: bool):
     """The rim along rays from the hole's centre: the share of "hole" (W - I) / (W - H)
     over [R - reach, R + reach], and each ray's edge, where that share first falls
     below ``crossing`` going out (``edge``; ``edge_find`` on the share averaged along
