@@ -73,7 +73,7 @@ from dataclasses import asdict, dataclass
 
 import cv2
 import numpy as np
-from scipy.ndimage import gaussian_filter1d
+from scipy.ndimage import gaussian_filter1d, maximum_filter1d, minimum_filter1d
 from scipy.special import ndtr
 
 from station.vision.grooves import honing_directions
@@ -91,6 +91,10 @@ NOISE_FLOOR = 0.002
 #: largest pore the issue names 0.5 mm. The bore scan takes nothing smaller for a hole
 #: (``station.inspection.scan.ScanSettings.min_hole_mm``)
 MIN_HOLE_DIAMETER_MM = 0.55
+#: the share of "hole" below which a rim's ray has left whatever is darker than the wall
+#: (a chip's floor, lit up to ~0.3 of the wall-to-hole step, stands well above it; a deep
+#: groove beside a hole reads ~0.25 and the groove model takes most of that away)
+RIM_FLOOR_CROSSING = 0.2
 
 
 @dataclass(frozen=True)
@@ -1238,6 +1242,10 @@ class _RimProfile:
     valid: np.ndarray  # rays wholly inside the frame and clear of other holes' zones
     edge: np.ndarray  # per ray: where the share first falls below ``rim_crossing``, going out
     edge_find: np.ndarray  # the same on the share averaged along the rim (finding defects)
+    #: per ray: where the share averaged along the rim first falls below ``RIM_FLOOR_CROSSING``,
+    #: going out: the outer end of whatever is darker than the wall there (a chip whose
+    #: floor is lit stays below ``rim_crossing`` and does not move ``edge``)
+    edge_out: np.ndarray | None = None
 
 
 def _rim_profile(img: np.ndarray, hole, zone_others: np.ndarray, reach_px: float, wall_level: np.ndarray,
@@ -1310,7 +1318,7 @@ def _rim_profile(img: np.ndarray, hole, zone_others: np.ndarray, reach_px: float
     share[:, ~valid] = 0.0
     rb = rr[band]
 
-    def first_crossing(sh: np.ndarray) -> np.ndarray:
+    def first_crossing(sh: np.ndarray, crossing: float = crossing) -> np.ndarray:
         # the first fall below ``crossing``, going out (a ray already below it at the
         # band's start: the edge is there)
         below = sh < crossing
@@ -1330,24 +1338,33 @@ def _rim_profile(img: np.ndarray, hole, zone_others: np.ndarray, reach_px: float
     # crossing is a threshold's, and on a dim, noisy frame one noisy pixel moves a ray's
     # edge by pixels (inwards mostly, where the blurred step is brightest), which the
     # edge's smoothing afterwards cannot undo (a normalised average over the valid rays)
-    edge_find = edge
+    edge_find, sh = edge, share
     if smooth_px > 0:
         sig = smooth_px / (2 * np.pi * rad / n_th)
         mode = "wrap" if valid.all() else "constant"
         w = gaussian_filter1d(valid.astype(np.float64), sig, mode=mode)
         sh = gaussian_filter1d(np.where(valid[None, :], share, 0.0), sig, axis=1, mode=mode)
-        edge_find = first_crossing(sh / np.maximum(w, 1e-6)[None, :])
-    return _RimProfile(theta, rb, share, valid, edge, edge_find)
+        sh = sh / np.maximum(w, 1e-6)[None, :]
+        edge_find = first_crossing(sh)
+    edge_out = first_crossing(sh, RIM_FLOOR_CROSSING)
+    edge_out[~(sh < RIM_FLOOR_CROSSING).any(axis=0)] = np.nan  # never left it within the band: not read
+    return _RimProfile(theta, rb, share, valid, edge, edge_find, edge_out)
 
 
 def _rim_integral(prof: _RimProfile, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
     """Per ray, the equivalent edge over [lower, upper]: lower + the share of hole
     integrated over it. Blur moves light along a ray, not in or out of the interval,
     so this is the area-true edge however thin the feature (rays' own bands)."""
-    step = prof.rr[1] - prof.rr[0]
-    cum = np.vstack([np.zeros(prof.share.shape[1]), np.cumsum(prof.share, axis=0) * step])
-    pos = np.concatenate([[prof.rr[0] - step / 2], prof.rr + step / 2])  # cumulative sums' abscissae
-    cols = np.arange(prof.share.shape[1])
+    return lower + _band_sum(prof.rr, prof.share, lower, upper)
+
+
+def _band_sum(rr: np.ndarray, values: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
+    """Per ray (column of ``values``, sampled at radii ``rr``), the integral of the values
+    over [lower, upper] (px), the samples taken as cells of the radii's step."""
+    step = rr[1] - rr[0]
+    cum = np.vstack([np.zeros(values.shape[1]), np.cumsum(values, axis=0) * step])
+    pos = np.concatenate([[rr[0] - step / 2], rr + step / 2])  # cumulative sums' abscissae
+    cols = np.arange(values.shape[1])
 
     def at(r):
         f = np.clip((r - pos[0]) / step, 0.0, pos.size - 1.000001)
@@ -1355,7 +1372,7 @@ def _rim_integral(prof: _RimProfile, lower: np.ndarray, upper: np.ndarray) -> np
         w = f - i
         return cum[i, cols] * (1 - w) + cum[np.minimum(i + 1, pos.size - 1), cols] * w
 
-    return lower + at(upper) - at(lower)
+    return at(upper) - at(lower)
 
 
 def _robust_harmonics(theta: np.ndarray, edge: np.ndarray, valid: np.ndarray, order: int) -> np.ndarray:
@@ -1435,17 +1452,41 @@ def _rim_defects(img: np.ndarray, hole, index: int, zone_others: np.ndarray, wal
     dev_f = gaussian_filter1d(dev_f, 1.0 / step_arc, mode="wrap" if whole else "nearest")
     thr_f = max(cfg.rim_k * max(_mad_sigma(dev_f[valid]), 0.02), cfg.rim_min_height_px)
     # the area-true deviation, each ray integrated over its own edge and the baseline
-    # plus the blur's reach: thin features (a burr lower than the blur) keep their area
+    # plus the blur's reach: thin features (a burr lower than the blur) keep their area.
+    # The ends are found on it; the height is read on the same integral over wider bands
+    # (``area``), as far as the deepest ray within the blur's spill along the rim, whose
+    # light the blur carried over (a deep narrow burr's flanks lost it to their own rays'
+    # shallow bands: 7.3 px read 5.2), and as far as whatever is darker than the wall
+    # outside (a chip's lit floor stays below the edge's crossing: 6.5 px read 3.2). The
+    # ends on the wider bands came out 1-3 px long on short defects (dev frames).
     margin = 3.0 * blur + 1.0
-    lower = np.minimum(np.nan_to_num(prof.edge, nan=0.0), base) - margin
-    upper = np.maximum(np.nan_to_num(prof.edge, nan=0.0), base) + margin
-    dev_int = np.where(valid, _rim_integral(prof, lower, upper) - base, 0.0)
-    # what the integral reads on the rim's clean rays (its small bias from the rim's
-    # curvature and the band's texture), taken off
+    edge0 = np.nan_to_num(prof.edge, nan=0.0)
     clean = valid & (np.abs(dev_s) < 2.0 * noise)
+    mode = "wrap" if whole else "nearest"
+
+    def integral(lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
+        d = np.where(valid, _rim_integral(prof, lower, upper) - base, 0.0)
+        # what the integral reads on the rim's clean rays (its small bias from the rim's
+        # curvature and the band's texture), taken off
+        return d - float(np.median(d[clean])) if clean.sum() > 10 else d
+
+    lower, upper = np.minimum(edge0, base) - margin, np.maximum(edge0, base) + margin
+    dev_int = integral(lower, upper)
+    dev_int_s = gaussian_filter1d(dev_int, 1.0 / step_arc, mode=mode)
+    # the wider bands' extra reach is read against the clean rays' own share at each
+    # radius (inside: the hole's 1; outside: the wall's ~0, which on some rims reads
+    # -0.05 to -0.15 where the wall round the hole is lit above the ring that calibrates it)
+    spill = 2 * int(np.ceil(margin / step_arc)) + 1
+    edge_out = np.maximum(edge0, np.nan_to_num(prof.edge_out, nan=0.0)) if prof.edge_out is not None else edge0
+    lower_w = np.minimum(minimum_filter1d(np.where(valid, np.minimum(edge0, base), base), spill, mode=mode) - margin,
+                         lower)
+    upper_w = np.maximum(maximum_filter1d(np.where(valid, np.maximum(edge_out, base), base), spill, mode=mode) + margin,
+                         upper)
+    area = dev_int
     if clean.sum() > 10:
-        dev_int = dev_int - float(np.median(dev_int[clean]))
-    dev_int_s = gaussian_filter1d(dev_int, 1.0 / step_arc, mode="wrap" if whole else "nearest")
+        excess = prof.share - np.median(prof.share[:, clean], axis=1)[:, None]
+        area = dev_int + np.where(valid, _band_sum(prof.rr, excess, lower_w, lower)
+                                  + _band_sum(prof.rr, excess, upper, upper_w), 0.0)
     out: list[Defect] = []
     for sign, kind in ((-1.0, "burr"), (1.0, "chip")):
         sd = sign * dev_s
@@ -1483,7 +1524,10 @@ def _rim_defects(img: np.ndarray, hole, index: int, zone_others: np.ndarray, wal
             # the mean height: the area-true deviation integrated over the defect and the
             # blur's spill along the rim
             inside = (s_arc >= s1 - 2.5 * blur) & (s_arc <= s2 + 2.5 * blur)
-            height = float(np.sum(sign * dev_int[win[ok] % n][inside]) * step_arc) / length
+            height = float(np.sum(sign * area[win[ok] % n][inside]) * step_arc) / length
+            if kind == "chip":
+                # the area counts a chip's floor at the hole's level; it may be lit
+                height /= _chip_floor(prof, win[ok] % n, s_arc, s1, s2, base, edge_out, blur)
             if height < cfg.rim_min_height_px:
                 continue  # the area-true height is what counts; the crossing only found it
             partial = not ok.all()
@@ -1501,6 +1545,36 @@ def _rim_defects(img: np.ndarray, hole, index: int, zone_others: np.ndarray, wal
                               float(length), float(height), _confidence(significance, cfg.min_significance),
                               float(np.rad2deg(th) % 360.0), u_len, u_h, float(significance), partial, index))
     return out
+
+
+def _chip_floor(prof: _RimProfile, rays: np.ndarray, s_arc: np.ndarray, s1: float, s2: float, base: np.ndarray,
+                edge_out: np.ndarray, blur: float) -> float:
+    """A chip's floor as a share of the wall-to-hole step (1: as dark as the hole), by
+    which its area-true height is divided. Its broken face slopes into the hole in
+    shadow, but not always at the hole's level: a floor lit to 0.7 of the step read a
+    6.5 px notch as 3.2 px (dev frames). Read on the rays clear of its ends by 1.2 blur,
+    just beyond the rim's own blurred step (1.5 blur to 1.5 blur + 1.5 px out), where the
+    ray's notch is deep enough to hold a plateau there (its outer end, ``edge_out``, 3
+    blur + 1.5 px out); the median over them. 1 where fewer than 3 rays hold one: a
+    shallow notch's floor and depth trade off under the blur, and only their product is
+    read.
+
+    Not for burrs: a burr's torn metal is 0.9-1.15 of the wall's level, which at a hole
+    of 40 % contrast is a share of -0.4 to 0.25, but a burr is ragged (its height varies
+    by 30 % over 1.5 px along the rim), its rays' shares fall off across any window
+    inside its rim, and the same reading over-corrected deep burrs by 30-40 % (dev
+    frames). A burr's level stays in its height's uncertainty."""
+    use = (s_arc >= s1 + 1.2 * blur) & (s_arc <= s2 - 1.2 * blur)
+    vals = []
+    for i in rays[use]:
+        if not prof.valid[i] or not edge_out[i] - base[i] >= 3.0 * blur + 1.5:
+            continue
+        sel = (prof.rr >= base[i] + 1.5 * blur) & (prof.rr <= base[i] + 1.5 * blur + 1.5)
+        if sel.any():
+            vals.append(float(np.mean(prof.share[sel, i])))
+    if len(vals) < 3:
+        return 1.0
+    return float(np.clip(np.median(vals), 0.3, 1.3))
 
 
 def _fit_end(s: np.ndarray, data: np.ndarray, guess: float, blur: float, rising: bool) -> tuple[float, float]:

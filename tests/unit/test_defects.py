@@ -128,6 +128,30 @@ def test_each_kind_is_found_and_measured(one_of_each, kind):
         assert abs(d.width_px - truth.width_px) <= 0.8
 
 
+@pytest.mark.parametrize("floor_share", [1.0, 0.7])
+def test_a_deep_chip_is_as_deep_as_it_is_whatever_its_floors_light(floor_share):
+    """A chip's broken face slopes into the hole in shadow, but may be lit above the
+    hole's level: its floor then stands at 0.7 of the wall-to-hole step, below the rim
+    edge's crossing (0.75), and an area-true height that took the floor at the hole's
+    level and integrated only to the edge read a 7 px notch 3-4 px shallow (dev frames:
+    6.5 px read 3.2). The floor's own level is read where the notch is deep enough."""
+    p = FrameParams(wall_level_dn=150.0, hole_level_dn=50.0, groove_depth=0.05, grain=0.02, blotch=0.02,
+                    blur_sigma_px=1.3, gain_e_per_dn=30.0, read_noise_dn=1.5, vignetting=0.1, **SMALL)
+    holes = [HoleSpec(300.4, 256.2, 90.0)]
+    # the chip's level as a share of the wall's: the hole's (50/150) or 70 % of the step
+    refl = (150.0 - floor_share * 100.0) / 150.0
+    chip = DefectSpec("chip", length_px=10.0, width_px=7.0, angle_deg=35.0, reflectance=refl, hole=0, shape_seed=3)
+    f = render_frame(p, holes, seed=5, defects=[chip])
+    f.defects = [d.with_scale(MM_PER_PX) for d in f.defects]
+    found = detect_defects(f.image, MM_PER_PX)
+    pairs, false = match(f.defects, found, MM_PER_PX)
+    assert not false, [(found[i].kind, found[i].width_px) for i in false]
+    ((truth, d),) = pairs
+    assert d is not None and d.kind == "chip"
+    assert abs(d.width_px - truth.width_px) <= 1.0, (d.width_px, truth.width_px)
+    assert _within(d.length_mm, truth.length_mm), (d.length_mm, truth.length_mm)
+
+
 def test_random_frames_above_the_limits_are_found_within_tolerance():
     """Frames of the bench's kind (seeds apart from the dev seeds and the bench's), each
     defect above the limits found with its kind and its length right."""
