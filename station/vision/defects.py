@@ -1480,8 +1480,10 @@ def _rim_defects(img: np.ndarray, hole, index: int, zone_others: np.ndarray, wal
     edge_out = np.maximum(edge0, np.nan_to_num(prof.edge_out, nan=0.0)) if prof.edge_out is not None else edge0
     lower_w = np.minimum(minimum_filter1d(np.where(valid, np.minimum(edge0, base), base), spill, mode=mode) - margin,
                          lower)
-    upper_w = np.maximum(maximum_filter1d(np.where(valid, np.maximum(edge_out, base), base), spill, mode=mode) + margin,
-                         upper)
+    # (the floor's crossing, 0.2, is already ~0.8-1.5 blur past a notch's end: 1.5 blur +
+    # 1 px beyond it holds 99.5 % of the blurred step, and each px further only adds noise)
+    upper_w = np.maximum(maximum_filter1d(np.where(valid, np.maximum(edge_out, base), base), spill, mode=mode)
+                         + 1.5 * blur + 1.0, upper)
     area = dev_int
     if clean.sum() > 10:
         excess = prof.share - np.median(prof.share[:, clean], axis=1)[:, None]
@@ -1552,26 +1554,28 @@ def _chip_floor(prof: _RimProfile, rays: np.ndarray, s_arc: np.ndarray, s1: floa
     """A chip's floor as a share of the wall-to-hole step (1: as dark as the hole), by
     which its area-true height is divided. Its broken face slopes into the hole in
     shadow, but not always at the hole's level: a floor lit to 0.7 of the step read a
-    6.5 px notch as 3.2 px (dev frames). Read on the rays clear of its ends by 1.2 blur,
-    just beyond the rim's own blurred step (1.5 blur to 1.5 blur + 1.5 px out), where the
-    ray's notch is deep enough to hold a plateau there (its outer end, ``edge_out``, 3
-    blur + 1.5 px out); the median over them. 1 where fewer than 3 rays hold one: a
-    shallow notch's floor and depth trade off under the blur, and only their product is
-    read.
+    6.5 px notch as 3.2 px (dev frames). Read just beyond the rim's own blurred step (1.5
+    blur to 1.5 blur + 1.5 px out) on the rays where the notch is deep enough to hold a
+    plateau there (its outer end, ``edge_out``, 3 blur + 1.5 px out) and whose share of
+    the notch along the rim, under the blur, is at least 0.9 (a 6 px chip under 1.9 px of
+    blur covers 0.85 of its middle ray: its floor read 0.68 for 0.95), divided by that
+    share; the median over them. 1 where fewer than 3 rays hold one: a shallow or short
+    notch's floor and size trade off under the blur, and only their product is read.
 
     Not for burrs: a burr's torn metal is 0.9-1.15 of the wall's level, which at a hole
     of 40 % contrast is a share of -0.4 to 0.25, but a burr is ragged (its height varies
-    by 30 % over 1.5 px along the rim), its rays' shares fall off across any window
+    by 30 % over 1.5 px along the rim), its rays' share falls off across any window
     inside its rim, and the same reading over-corrected deep burrs by 30-40 % (dev
     frames). A burr's level stays in its height's uncertainty."""
-    use = (s_arc >= s1 + 1.2 * blur) & (s_arc <= s2 - 1.2 * blur)
+    along = float(np.sqrt(blur**2 + 1.0 / 6.0))  # the camera's blur and the rays' sampling
+    cover = ndtr((s_arc - s1) / along) - ndtr((s_arc - s2) / along)
     vals = []
-    for i in rays[use]:
+    for i, c in zip(rays[cover >= 0.9], cover[cover >= 0.9]):
         if not prof.valid[i] or not edge_out[i] - base[i] >= 3.0 * blur + 1.5:
             continue
         sel = (prof.rr >= base[i] + 1.5 * blur) & (prof.rr <= base[i] + 1.5 * blur + 1.5)
         if sel.any():
-            vals.append(float(np.mean(prof.share[sel, i])))
+            vals.append(float(np.mean(prof.share[sel, i])) / c)
     if len(vals) < 3:
         return 1.0
     return float(np.clip(np.median(vals), 0.3, 1.3))
