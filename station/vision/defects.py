@@ -73,7 +73,7 @@ from dataclasses import asdict, dataclass
 
 import cv2
 import numpy as np
-from scipy.ndimage import gaussian_filter1d, maximum_filter1d, minimum_filter1d
+from scipy.ndimage import gaussian_filter1d, maximum_filter1d
 from scipy.special import ndtr
 
 from station.vision.grooves import honing_directions
@@ -734,19 +734,22 @@ def _ellipse_model(p, xx, yy):
     return off + c * np.minimum(ndtr((r_e - rho) / s), peak)
 
 
-def _fit_contrast(r, xx, yy, use, cx, cy, cov, mass) -> tuple[float, float, float, float]:
+def _fit_contrast(r, xx, yy, use, cx, cy, cov, mass,
+                  blur_held: float | None = None) -> tuple[float, float, float, float]:
     """The pore floor's contrast c (relative darkness), the blur s (px), c's standard
     deviation and the fitted ellipse's aspect (major / minor axis, the blur taken out),
-    from a robust fit of a blurred ellipse started from the darkening's moments."""
+    from a robust fit of a blurred ellipse started from the darkening's moments; the
+    blur free in 0.5-3.5 px, or held within 2 % of ``blur_held``."""
     evals, evecs = np.linalg.eigh(cov)
     evals = np.maximum(evals, 0.25)
     # a uniform ellipse of semi-axes a, b has variances a^2/4 and b^2/4 along them
     a0, b0 = 2.0 * np.sqrt(evals[1]), 2.0 * np.sqrt(evals[0])
     th0 = float(np.arctan2(evecs[1, 1], evecs[0, 1]))
     c0 = float(np.clip(mass / (np.pi * a0 * b0), 0.05, 0.95))
-    p0 = np.array([cx, cy, a0, b0, th0, c0, 1.3, 0.0])
-    lo = np.array([cx - 5, cy - 5, 0.5, 0.5, th0 - np.pi, 0.01, 0.5, -0.2])
-    hi = np.array([cx + 5, cy + 5, 4 * a0 + 5, 4 * a0 + 5, th0 + np.pi, 1.2, 3.5, 0.2])
+    p0 = np.array([cx, cy, a0, b0, th0, c0, 1.3 if blur_held is None else blur_held, 0.0])
+    b_lo, b_hi = (0.5, 3.5) if blur_held is None else (0.98 * blur_held, 1.02 * blur_held)
+    lo = np.array([cx - 5, cy - 5, 0.5, 0.5, th0 - np.pi, 0.01, b_lo, -0.2])
+    hi = np.array([cx + 5, cy + 5, 4 * a0 + 5, 4 * a0 + 5, th0 + np.pi, 1.2, b_hi, 0.2])
     x, y, v = xx[use], yy[use], r[use]
     if v.size > 2500:  # every k-th pixel: the fit's speed, the contrast is just as well fixed
         k = int(np.ceil(v.size / 2500))
@@ -759,10 +762,21 @@ def _fit_contrast(r, xx, yy, use, cx, cy, cov, mass) -> tuple[float, float, floa
     return c, s, c_sd, aspect
 
 
-def _measure_pore(patch: _Patch, region: np.ndarray, cfg: DefectConfig, allow_scratch: bool = True):
+def _measure_pore(patch: _Patch, region: np.ndarray, cfg: DefectConfig, allow_scratch: bool = True,
+                  blur_hint: float | None = None):
     """A pore: centroid, outline from the darkening in 32 sectors, greatest Feret
     diameter and the extent across it, with standard uncertainties (px, before the
-    config's factor), the significance and the floor's contrast."""
+    config's factor), the significance and the floor's contrast.
+
+    ``blur_hint``: the camera's blur, if known (the frame's holes, a calibration). The
+    tests (contrast, edge blur, elongation) read the fit with the blur free; the outline
+    reads a fit with the blur held at the camera's, since a pore's rim is a sharp break
+    in the wall's plane. A small pore's contrast, size and edge blur trade off: with the
+    blur free, 11-13 px pores of 46 % contrast on 4 % grain and 8 % grooves fitted a
+    blur of 2.3-2.7 px (1.4 and 0.8 rendered) and their contrast ran to its bound, 1.2,
+    which read them 40 % small (fresh bench seeds 80000, 95000). Without a known blur,
+    a fit whose contrast passes 1 (a floor darker than black) is done again with the
+    blur held at the station's prior (``BLUR_PRIOR_PX``)."""
     r = patch.residual.astype(np.float64)
     h, w = r.shape
     yy, xx = np.mgrid[0:h, 0:w].astype(np.float64)
@@ -784,6 +798,14 @@ def _measure_pore(patch: _Patch, region: np.ndarray, cfg: DefectConfig, allow_sc
         return dict(scratch=True)  # long and thin once the blur is taken out: a short scratch
     if c < cfg.min_pore_contrast or blur > cfg.max_edge_blur_px:
         return None
+    held = blur_hint
+    if held is None and c > 1.0:
+        # no blur known and a floor darker than black: the fit traded size for blur; the
+        # station's blur, as the scratches' prior has it, is the better guess
+        held = BLUR_PRIOR_PX[0]
+    if held is not None:
+        c, blur, c_sd, _ = _fit_contrast(r, xx, yy, fit_area, cx, cy, cov, mass,
+                                         blur_held=float(np.clip(held, 0.5, 3.5)))
     # the outline: the darkening's angular density round the centroid is c r(theta)^2 / 2
     # (the area a direction holds), whatever the blur; as a Fourier series of the
     # pixels' angles (no binning), to the order the blur resolves (k sigma / R < 1)
@@ -1453,12 +1475,11 @@ def _rim_defects(img: np.ndarray, hole, index: int, zone_others: np.ndarray, wal
     thr_f = max(cfg.rim_k * max(_mad_sigma(dev_f[valid]), 0.02), cfg.rim_min_height_px)
     # the area-true deviation, each ray integrated over its own edge and the baseline
     # plus the blur's reach: thin features (a burr lower than the blur) keep their area.
-    # The ends are found on it; the height is read on the same integral over wider bands
-    # (``area``), as far as the deepest ray within the blur's spill along the rim, whose
-    # light the blur carried over (a deep narrow burr's flanks lost it to their own rays'
-    # shallow bands: 7.3 px read 5.2), and as far as whatever is darker than the wall
-    # outside (a chip's lit floor stays below the edge's crossing: 6.5 px read 3.2). The
-    # ends on the wider bands came out 1-3 px long on short defects (dev frames).
+    # The ends are found on it; the height is read on the same integral with the bands
+    # reaching out as far as whatever is darker than the wall (``area``): a chip's lit
+    # floor stays below the edge's crossing, and its rays' bands ended inside it (6.5 px
+    # read 3.2). The ends on the wider bands came out 1-3 px long on short defects (dev
+    # frames).
     margin = 3.0 * blur + 1.0
     edge0 = np.nan_to_num(prof.edge, nan=0.0)
     clean = valid & (np.abs(dev_s) < 2.0 * noise)
@@ -1473,22 +1494,23 @@ def _rim_defects(img: np.ndarray, hole, index: int, zone_others: np.ndarray, wal
     lower, upper = np.minimum(edge0, base) - margin, np.maximum(edge0, base) + margin
     dev_int = integral(lower, upper)
     dev_int_s = gaussian_filter1d(dev_int, 1.0 / step_arc, mode=mode)
-    # the wider bands' extra reach is read against the clean rays' own share at each
-    # radius (inside: the hole's 1; outside: the wall's ~0, which on some rims reads
-    # -0.05 to -0.15 where the wall round the hole is lit above the ring that calibrates it)
+    # out to 1.5 blur + 1 px past the floor's crossing (0.2, already ~0.8-1.5 blur past a
+    # notch's end: 99.5 % of the blurred step; each px further only added noise, and a
+    # shallow chip lost 0.3 px), the deepest within the blur's spill along the rim (its
+    # light reaches the neighbours' rays); the extra reach read against the clean rays'
+    # own share at each radius (the wall's ~0 reads -0.05 to -0.15 round some holes, lit
+    # above the ring that calibrates it). For chips only: reaching inwards as well (a
+    # deep narrow burr's spill) moved burrs' heights by -0.3 to +0.3 px at random, and the
+    # outward reach, where a groove at the rim carries the floor's crossing out, lifted a
+    # dim rim's dent over the significance bar as a false 2 px burr (wide bench)
     spill = 2 * int(np.ceil(margin / step_arc)) + 1
     edge_out = np.maximum(edge0, np.nan_to_num(prof.edge_out, nan=0.0)) if prof.edge_out is not None else edge0
-    lower_w = np.minimum(minimum_filter1d(np.where(valid, np.minimum(edge0, base), base), spill, mode=mode) - margin,
-                         lower)
-    # (the floor's crossing, 0.2, is already ~0.8-1.5 blur past a notch's end: 1.5 blur +
-    # 1 px beyond it holds 99.5 % of the blurred step, and each px further only adds noise)
     upper_w = np.maximum(maximum_filter1d(np.where(valid, np.maximum(edge_out, base), base), spill, mode=mode)
                          + 1.5 * blur + 1.0, upper)
     area = dev_int
     if clean.sum() > 10:
         excess = prof.share - np.median(prof.share[:, clean], axis=1)[:, None]
-        area = dev_int + np.where(valid, _band_sum(prof.rr, excess, lower_w, lower)
-                                  + _band_sum(prof.rr, excess, upper, upper_w), 0.0)
+        area = dev_int + np.where(valid, _band_sum(prof.rr, excess, upper, upper_w), 0.0)
     out: list[Defect] = []
     for sign, kind in ((-1.0, "burr"), (1.0, "chip")):
         sd = sign * dev_s
@@ -1526,7 +1548,8 @@ def _rim_defects(img: np.ndarray, hole, index: int, zone_others: np.ndarray, wal
             # the mean height: the area-true deviation integrated over the defect and the
             # blur's spill along the rim
             inside = (s_arc >= s1 - 2.5 * blur) & (s_arc <= s2 + 2.5 * blur)
-            height = float(np.sum(sign * area[win[ok] % n][inside]) * step_arc) / length
+            prof_h = area if kind == "chip" else dev_int
+            height = float(np.sum(sign * prof_h[win[ok] % n][inside]) * step_arc) / length
             if kind == "chip":
                 # the area counts a chip's floor at the hole's level; it may be lit
                 height /= _chip_floor(prof, win[ok] % n, s_arc, s1, s2, base, edge_out, blur)
@@ -1862,13 +1885,16 @@ def _examine_once(img: np.ndarray, box, seed: np.ndarray, excl: np.ndarray, zone
         return _Examined(None, region, tuple(box)), None, None  # a piece of groove the wall model left
     touches = region[0, :].any() or region[-1, :].any() or region[:, 0].any() or region[:, -1].any()
     at_border = bool(touches and (x0 == 0 or y0 == 0 or x1 == img.shape[1] or y1 == img.shape[0]))
-    m = _measure_scratch(patch, region, blur_hint) if elongated else _measure_pore(patch, region, cfg)
+    if elongated:
+        m = _measure_scratch(patch, region, blur_hint)
+    else:
+        m = _measure_pore(patch, region, cfg, blur_hint=blur_hint)
     if m is not None and m.get("scratch"):
         elongated = True
         m = _measure_scratch(patch, region, blur_hint)
     kind = "scratch" if elongated else "pore"
     if kind == "scratch" and m is not None and m["length"] < cfg.scratch_elongation * m["width"]:
-        kind, m = "pore", _measure_pore(patch, region, cfg, allow_scratch=False)  # short and broad: a mark
+        kind, m = "pore", _measure_pore(patch, region, cfg, allow_scratch=False, blur_hint=blur_hint)  # short, broad
     defect = _accept(m, kind, box, at_border, angles_deg, cfg, max_width_px)
     cover = None
     if defect is not None and kind == "scratch":
