@@ -152,6 +152,28 @@ def test_a_deep_chip_is_as_deep_as_it_is_whatever_its_floors_light(floor_share):
     assert _within(d.length_mm, truth.length_mm), (d.length_mm, truth.length_mm)
 
 
+@pytest.mark.parametrize("reflectance", [0.9, 1.15])
+def test_a_burrs_height_does_not_scale_with_its_brightness(reflectance):
+    """A burr's torn metal is 0.9-1.15 of the wall's level: at a hole of 40 % contrast that
+    is a share of 0.25 to -0.4 of the wall-to-hole step, and a height read from the darkness
+    it takes out of the hole (area-true) scaled with it (0.77-1.4x). Its rays' edges move by
+    a quarter of the blur at most: the height is their mean depth between its ends."""
+    p = FrameParams(wall_level_dn=150.0, hole_level_dn=90.0, groove_depth=0.05, grain=0.02, blotch=0.02,
+                    blur_sigma_px=1.3, gain_e_per_dn=30.0, read_noise_dn=1.5, vignetting=0.1, **SMALL)
+    holes = [HoleSpec(300.4, 256.2, 90.0)]
+    burr = DefectSpec("burr", length_px=20.0, width_px=7.0, angle_deg=215.0, reflectance=reflectance, hole=0,
+                      shape_seed=8)
+    f = render_frame(p, holes, seed=6, defects=[burr])
+    f.defects = [d.with_scale(MM_PER_PX) for d in f.defects]
+    found = detect_defects(f.image, MM_PER_PX)
+    pairs, false = match(f.defects, found, MM_PER_PX)
+    assert not false, [(found[i].kind, found[i].width_px) for i in false]
+    ((truth, d),) = pairs
+    assert d is not None and d.kind == "burr"
+    assert abs(d.width_px - truth.width_px) <= 0.8, (d.width_px, truth.width_px)
+    assert abs(d.width_px - truth.width_px) <= 2 * d.width_u_px
+
+
 def test_small_faint_pores_on_deep_grooves_keep_their_size():
     """A small pore's contrast, size and edge blur trade off: on 4 % grain and 8 % grooves,
     12 px pores of 46 % contrast fitted an edge blur of 2.3-2.7 px with the blur free, their
