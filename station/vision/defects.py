@@ -1475,11 +1475,11 @@ def _rim_defects(img: np.ndarray, hole, index: int, zone_others: np.ndarray, wal
     thr_f = max(cfg.rim_k * max(_mad_sigma(dev_f[valid]), 0.02), cfg.rim_min_height_px)
     # the area-true deviation, each ray integrated over its own edge and the baseline
     # plus the blur's reach: thin features (a burr lower than the blur) keep their area.
-    # The ends are found on it; the height is read on the same integral with the bands
-    # reaching out as far as whatever is darker than the wall (``area``): a chip's lit
-    # floor stays below the edge's crossing, and its rays' bands ended inside it (6.5 px
-    # read 3.2). The ends on the wider bands came out 1-3 px long on short defects (dev
-    # frames).
+    # The ends and the significance are read on it; a chip's depth on the same integral
+    # with the bands reaching out as far as whatever is darker than the wall (``area``):
+    # a chip's lit floor stays below the edge's crossing, and its rays' bands ended
+    # inside it (6.5 px read 3.2). The ends on the wider bands came out 1-3 px long on
+    # short defects (dev frames).
     margin = 3.0 * blur + 1.0
     edge0 = np.nan_to_num(prof.edge, nan=0.0)
     clean = valid & (np.abs(dev_s) < 2.0 * noise)
@@ -1554,7 +1554,7 @@ def _rim_defects(img: np.ndarray, hole, index: int, zone_others: np.ndarray, wal
                 # the area counts a chip's floor at the hole's level; it may be lit
                 height /= _chip_floor(prof, win[ok] % n, s_arc, s1, s2, base, edge_out, blur)
             if height < cfg.rim_min_height_px:
-                continue  # the area-true height is what counts; the crossing only found it
+                continue  # the area-true height decides; the crossing only found it
             partial = not ok.all()
             significance = height * np.sqrt(length) / noise
             if significance < cfg.min_significance:
@@ -1570,8 +1570,9 @@ def _rim_defects(img: np.ndarray, hole, index: int, zone_others: np.ndarray, wal
                 # 99.1 / 100 %, median abs. error 0.46 / 0.49 -> 0.22 / 0.26 px, better at
                 # every height, burrs lower than 1.5 blur included
                 along = (s_arc >= s1) & (s_arc <= s2)
-                if along.any():
-                    height = max(float(np.mean(sd[win[ok] % n][along])), 0.0) or height
+                edge_height = float(np.mean(sd[win[ok] % n][along])) if along.any() else 0.0
+                if edge_height > 0.0:
+                    height = edge_height
             th = 2 * np.pi * ((((s1 + s2) / 2.0) / step_arc) % n) / n
             rc = rad - height / 2.0 if kind == "burr" else rad + height / 2.0
             u_len = float(np.hypot(u1, u2))
@@ -1605,7 +1606,7 @@ def _chip_floor(prof: _RimProfile, rays: np.ndarray, s_arc: np.ndarray, s1: floa
     of 40 % contrast is a share of -0.4 to 0.25, but a burr is ragged (its height varies
     by 30 % over 1.5 px along the rim), its rays' share falls off across any window
     inside its rim, and the same reading over-corrected deep burrs by 30-40 % (dev
-    frames). A burr's level stays in its height's uncertainty."""
+    frames). A burr's height is read from its rays' edges instead (``_rim_defects``)."""
     along = float(np.sqrt(blur**2 + 1.0 / 6.0))  # the camera's blur and the rays' sampling
     cover = ndtr((s_arc - s1) / along) - ndtr((s_arc - s2) / along)
     vals = []
