@@ -155,9 +155,19 @@ class SoakResult:
         renderer = [s["renderer_rss_kb"] for s in rest if s.get("renderer_rss_kb") is not None]
         if len(renderer) >= 3:
             out["renderer_rss_slope_kb_per_inspection"] = float(np.polyfit(np.arange(len(renderer)), renderer, 1)[0])
-        out["ok"] = (not self.failed and not rss_leak and growth_mb < RSS_GROWTH_MB
-                     and max(fds) - min(fds) <= FD_SLACK and not fd_leak and max(threads) - min(threads) <= THREAD_SLACK
-                     and out.get("renderer_rss_slope_kb_per_inspection", 0.0) < RSS_SLOPE_KB)
+        # each bar that failed, by name (a verdict that only says "not ok" left a CI run's
+        # failure unexplained: the test's message shows this list first)
+        reasons = [name for name, bad in (
+            ("failed inspections", bool(self.failed)),
+            ("memory: a slope that keeps rising", rss_leak),
+            ("memory: net growth", growth_mb >= RSS_GROWTH_MB),
+            ("descriptors: range", max(fds) - min(fds) > FD_SLACK),
+            ("descriptors: a slope that keeps rising", fd_leak),
+            ("threads: range", max(threads) - min(threads) > THREAD_SLACK),
+            ("renderer memory: slope", out.get("renderer_rss_slope_kb_per_inspection", 0.0) >= RSS_SLOPE_KB),
+        ) if bad]
+        out["reasons"] = reasons
+        out["ok"] = not reasons
         return out
 
 

@@ -48,6 +48,15 @@ def test_the_verdict_lets_the_heap_step_up_once_but_not_again_and_again():
     assert not big.verdict()["ok"]
 
 
+def test_the_verdict_names_the_bars_that_failed():
+    assert synthetic().verdict()["reasons"] == []
+    assert synthetic(fd_step=1).verdict()["reasons"] == ["descriptors: range", "descriptors: a slope that keeps rising"]
+    threads = synthetic()
+    threads.samples[-1]["threads"] += 3
+    assert threads.verdict()["reasons"] == ["threads: range"]
+    assert "memory: a slope that keeps rising" in synthetic(rss_step_kb=1280.0).verdict()["reasons"]
+
+
 def test_the_verdict_lets_a_pool_step_up_once():
     """+2 descriptors half-way through a 16-inspection soak and flat after (one more
     pooled connection under load; seen in a CI run): a slope of 0.25, one new high."""
@@ -63,4 +72,7 @@ def test_repeated_inspections_leave_no_growth(db_url):
     res = run(inspections=16, pollers=3, time_scale=50.0, db_url=db_url)
     v = res.verdict()
     assert not v["failed"], v["failed"]
-    assert v["ok"], (v, [(s["fds"], s["threads"], s["rss_kb"]) for s in res.samples])
+    # what failed first, then the series (fds, threads, RSS MB): pytest cuts a long repr short
+    assert v["ok"], (f"{v['reasons']}; rss slope {v['rss_slope_kb_per_inspection']:.0f} kB, rises {v['rss_rises']}, "
+                     f"growth {v['rss_growth_mb']:.1f} MB; (fds, threads, rss MB): "
+                     + " ".join(f"({s['fds']},{s['threads']},{s['rss_kb'] / 1024:.1f})" for s in res.samples))
