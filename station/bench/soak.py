@@ -306,6 +306,6 @@ def register(bench_app) -> None:
                 f"descriptors {v['fds_min']}-{v['fds_max']}, threads {v['threads_min']}-{v['threads_max']}"
                 + (f"; renderer slope {v['renderer_rss_slope_kb_per_inspection']:+.1f} kB/inspection"
                    if "renderer_rss_slope_kb_per_inspection" in v else "")
-                + (" -- OK" if v["ok"] else " -- GROWTH or FAILURES"), highlight=False)
+                + (" -- OK" if v["ok"] else " -- " + "; ".join(v["reasons"])), highlight=False)
         if not v["ok"]:
             raise typer.Exit(1)
