@@ -128,6 +128,18 @@ def test_each_kind_is_found_and_measured(one_of_each, kind):
         assert abs(d.width_px - truth.width_px) <= 0.8
 
 
+def _found_as_itself(params: FrameParams, holes: list, spec: DefectSpec, seed: int):
+    """One defect rendered alone, found as its own kind with nothing else: (truth, detection)."""
+    f = render_frame(params, holes, seed=seed, defects=[spec])
+    f.defects = [d.with_scale(MM_PER_PX) for d in f.defects]
+    found = detect_defects(f.image, MM_PER_PX)
+    pairs, false = match(f.defects, found, MM_PER_PX)
+    assert not false, [(found[i].kind, found[i].width_px) for i in false]
+    ((truth, d),) = pairs
+    assert d is not None and d.kind == spec.kind, d
+    return truth, d
+
+
 @pytest.mark.parametrize("floor_share", [1.0, 0.7])
 def test_a_deep_chip_is_as_deep_as_it_is_whatever_its_floors_light(floor_share):
     """A chip's broken face slopes into the hole in shadow, but may be lit above the
@@ -141,13 +153,7 @@ def test_a_deep_chip_is_as_deep_as_it_is_whatever_its_floors_light(floor_share):
     # the chip's level as a share of the wall's: the hole's (50/150) or 70 % of the step
     refl = (150.0 - floor_share * 100.0) / 150.0
     chip = DefectSpec("chip", length_px=10.0, width_px=7.0, angle_deg=35.0, reflectance=refl, hole=0, shape_seed=3)
-    f = render_frame(p, holes, seed=5, defects=[chip])
-    f.defects = [d.with_scale(MM_PER_PX) for d in f.defects]
-    found = detect_defects(f.image, MM_PER_PX)
-    pairs, false = match(f.defects, found, MM_PER_PX)
-    assert not false, [(found[i].kind, found[i].width_px) for i in false]
-    ((truth, d),) = pairs
-    assert d is not None and d.kind == "chip"
+    truth, d = _found_as_itself(p, holes, chip, seed=5)
     assert abs(d.width_px - truth.width_px) <= 1.0, (d.width_px, truth.width_px)
     assert _within(d.length_mm, truth.length_mm), (d.length_mm, truth.length_mm)
 
@@ -163,13 +169,7 @@ def test_a_burrs_height_does_not_scale_with_its_brightness(reflectance):
     holes = [HoleSpec(300.4, 256.2, 90.0)]
     burr = DefectSpec("burr", length_px=20.0, width_px=7.0, angle_deg=215.0, reflectance=reflectance, hole=0,
                       shape_seed=8)
-    f = render_frame(p, holes, seed=6, defects=[burr])
-    f.defects = [d.with_scale(MM_PER_PX) for d in f.defects]
-    found = detect_defects(f.image, MM_PER_PX)
-    pairs, false = match(f.defects, found, MM_PER_PX)
-    assert not false, [(found[i].kind, found[i].width_px) for i in false]
-    ((truth, d),) = pairs
-    assert d is not None and d.kind == "burr"
+    truth, d = _found_as_itself(p, holes, burr, seed=6)
     assert abs(d.width_px - truth.width_px) <= 0.8, (d.width_px, truth.width_px)
     assert abs(d.width_px - truth.width_px) <= 2 * d.width_u_px
 
@@ -187,12 +187,7 @@ def test_small_faint_pores_on_deep_grooves_keep_their_size():
     for k in range(12):
         pore = DefectSpec("pore", 420.3 + 40 * (k % 3), 120.6 + 90 * (k // 3), 12.0, 9.0, 20.0 * k, 0.54,
                           shape_seed=30 + k)
-        f = render_frame(p, holes, seed=40 + k, defects=[pore])
-        f.defects = [d.with_scale(MM_PER_PX) for d in f.defects]
-        found = detect_defects(f.image, MM_PER_PX)
-        pairs, false = match(f.defects, found, MM_PER_PX)
-        ((truth, d),) = pairs
-        assert not false and d is not None and d.kind == "pore", (k, false, d)
+        truth, d = _found_as_itself(p, holes, pore, seed=40 + k)
         assert _within(d.length_mm, truth.length_mm), (k, d.length_px, truth.length_px)
         width_errors.append(abs(d.width_px - truth.width_px))
     assert np.median(width_errors) <= 1.0, width_errors
