@@ -50,6 +50,7 @@ Config file (TOML), every key optional; the embedded default is a simulated stat
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
 import hashlib
 import logging
@@ -259,6 +260,8 @@ async def open_session(config: str | Path | None = None, *, scenario: str | Path
     of the config's."""
     from station.inspection.scan import ScanSettings
     from station.inspection.session import Session, vision_defects, vision_measure
+    from station.monitor.watch import StationWatch
+    from station.stallwatch import StallWatch
     from station.sequencer.engine import Devices, Engine
     from station.store import Store
 
@@ -271,18 +274,33 @@ async def open_session(config: str | Path | None = None, *, scenario: str | Path
         if station_id is not None:
             station.station_id = station_id
         store = Store.open(db_url, data_dir=data_dir, station_id=station.station_id)
+        # seconds of work (the vision kernels loaded or compiled, the control charts'
+        # limits solved) done in threads before the drives connect: once connected,
+        # their heartbeats ride this loop, and a drive's watchdog trips on a stall of 1 s
+        settings = settings or ScanSettings()
+        measure = await asyncio.to_thread(vision_measure, station.mm_per_px)
+        watch = await asyncio.to_thread(StationWatch, gate_um=settings.model_u_um)
         await station.connect()
-        devices = Devices(station.z, station.c, station.encoder, station.camera, measure=vision_measure(station.mm_per_px),
+        devices = Devices(station.z, station.c, station.encoder, station.camera, measure=measure,
                           surface=vision_defects(station.mm_per_px))
-        session = Session(station, store, Engine(devices), settings or ScanSettings())
+        session = Session(station, store, Engine(devices), settings, watch=watch)
         annotator = station.truth_annotator()
         if annotator is not None:
             session.documents.subscribe(annotator)
-        yield session
+        async with StallWatch(stall_limit_s(station)):
+            yield session
     finally:
         await station.close()
         if store is not None:
             store.close()
+
+
+def stall_limit_s(station) -> float:
+    """How long the station's loop may stall before it is logged (``station.stallwatch``):
+    half the shortest watchdog of its drives, 0.5 s with none armed."""
+    timeouts = [ax.watchdog_timeout_ms / 1000.0 for ax in (station.z, station.c)
+                if ax is not None and getattr(ax, "watchdog_timeout_ms", 0)]
+    return 0.5 * min(timeouts) if timeouts else 0.5
 
 
 def load_config(path: str | Path | None) -> tuple[dict[str, Any], str]:

@@ -145,8 +145,13 @@ class RendererProcess:
         try:
             self._pool = concurrent.futures.ProcessPoolExecutor(max_workers=1, mp_context=_context(),
                                                                 initializer=_watch_owner, initargs=(os.getpid(),))
-            await self._call(_ready, timeout=START_TIMEOUT_S)
-        except (OSError, ValueError) as exc:
+            # the pool starts its worker inside its first submit, and starting it waits on
+            # the forkserver (which itself starts and imports numpy and OpenCV the first
+            # time): about a second on a loaded PC, so in a thread, off the event loop that
+            # carries the station's heartbeats
+            first = await asyncio.to_thread(self._pool.submit, _ready)
+            await self._wait(asyncio.wrap_future(first), START_TIMEOUT_S)
+        except (OSError, ValueError, BrokenProcessPool) as exc:
             self.stop()
             raise RendererLost(f"cannot start the renderer process: {exc}") from exc
 
@@ -159,8 +164,11 @@ class RendererProcess:
         if self._pool is None:
             raise RendererLost("the renderer process is stopped")
         loop = asyncio.get_running_loop()
+        return await self._wait(loop.run_in_executor(self._pool, fn, *args), timeout)
+
+    async def _wait(self, future: asyncio.Future, timeout: float):
         try:
-            return await asyncio.wait_for(loop.run_in_executor(self._pool, fn, *args), timeout)
+            return await asyncio.wait_for(future, timeout)
         except (BrokenProcessPool, asyncio.TimeoutError) as exc:
             self.stop()
             what = "did not answer in time" if isinstance(exc, asyncio.TimeoutError) else "died"

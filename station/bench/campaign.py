@@ -41,10 +41,11 @@ async def _campaign(scenario: Path | None, parts: int, master_every: int, data: 
     from station.checks.master import load_master
     from station.runtime import open_session
     from station.parts import load_part
+    from station.sequencer.engine import link_fault
 
     cert = load_master(MASTER)
     family = load_part(cert.part_number)
-    inspections, alarms, checks = [], [], []
+    inspections, alarms, checks, link_faults = [], [], [], []
     t0 = time.perf_counter()
     async with open_session(scenario=scenario, time_scale=time_scale, data_dir=data) as s:
         models = [{"index": 1, "version": s.model_version, "added": []}]
@@ -59,6 +60,11 @@ async def _campaign(scenario: Path | None, parts: int, master_every: int, data: 
 
         for i in range(1, parts + 1):
             out = await s.inspect(family, f"CAMPAIGN-{seed}-{i:04d}")
+            if out.state == "faulted" and link_fault(s.engine):
+                # as the plant's MES does: a part whose inspection a link fault stopped
+                # (a drive's watchdog) is sent again, once; the fault stays in the output
+                link_faults.append({"index": i, "reason": out.reason})
+                out = await s.inspect(family, f"CAMPAIGN-{seed}-{i:04d}")
             inspections.append({"index": i, "state": out.state, "result": out.result, "reason": out.reason,
                                 "worst_error_um": worst_error_um(out), "u_um": largest_u_um(out),
                                 "model_version": s.model_version,
@@ -92,7 +98,7 @@ async def _campaign(scenario: Path | None, parts: int, master_every: int, data: 
     machine = [r["machine_s"] for r in inspections if r["machine_s"] is not None]
     return {"scenario": str(scenario) if scenario else "default", "parts": parts, "master_every": master_every,
             "seed": seed, "time_scale": time_scale, "inspections": inspections, "alarms": alarms,
-            "models": models, "checks": checks, "proposals": proposals, "watch": state,
+            "models": models, "checks": checks, "proposals": proposals, "watch": state, "link_faults": link_faults,
             "cost": {"wall_s_per_inspection": wall / max(1, parts + len(checks)),
                      "machine_s_per_inspection_median": statistics.median(machine) if machine else None}}
 

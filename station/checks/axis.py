@@ -566,7 +566,7 @@ async def run_axis_check(session, family=None, *, settings: AxisCheckSettings | 
     ``<data>/checks/axis/<UTC time>``), and with ``propose`` a proposal in the
     station's book when the report claims a change; every step logged."""
     from station.inspection.service import ensure_ready, motion_limits
-    from station.sequencer.engine import PlanEnded
+    from station.sequencer.engine import PlanEnded, link_fault
 
     settings = settings or AxisCheckSettings()
     st = session.station
@@ -582,15 +582,24 @@ async def run_axis_check(session, family=None, *, settings: AxisCheckSettings | 
     stamp = datetime.now(timezone.utc).strftime("%Y%m%dT%H%M%S")
     out = Path(out_dir) if out_dir is not None else Path(session.store.data_dir) / "checks" / "axis" / stamp
     time_scale = getattr(st, "time_scale", None)
-    try:
-        await ensure_ready(session.engine)
-        plan = axis_check_plan(model, targets, settings, motion_limits(session.engine.devices), time_scale)
-        data: AxisCheckData = await session.engine.run(plan)
-    except PlanEnded as ended:
-        res = AxisCheckOutcome("faulted" if ended.outcome == "faulted" else "aborted", ended.reason,
-                               cycle=_machine_s(session.engine, time_scale), model_version=version)
-        await asyncio.to_thread(session.store.log_event, "check", res.summary())
-        return res
+    for attempt in (1, 2):
+        try:
+            await ensure_ready(session.engine)
+            plan = axis_check_plan(model, targets, settings, motion_limits(session.engine.devices), time_scale)
+            data: AxisCheckData = await session.engine.run(plan)
+            break
+        except PlanEnded as ended:
+            if attempt == 1 and link_fault(session.engine):
+                # the check holds no part and its data are all retaken: once more from
+                # the start, after the reset and homing that ensure_ready does
+                await asyncio.to_thread(session.store.log_event, "alarm",
+                                        f"axis check stopped by a drive's link watchdog ({ended.reason}): "
+                                        "reset, homed and run once more")
+                continue
+            res = AxisCheckOutcome("faulted" if ended.outcome == "faulted" else "aborted", ended.reason,
+                                   cycle=_machine_s(session.engine, time_scale), model_version=version)
+            await asyncio.to_thread(session.store.log_event, "check", res.summary())
+            return res
     cycle = _machine_s(session.engine, time_scale)
     sigma = float(getattr(session.watch, "z_repeatability_um", 0.3))
     d, files = await asyncio.to_thread(run_discovery, data, model, sigma, out, plots)

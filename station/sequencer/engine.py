@@ -192,6 +192,9 @@ class Engine:
         self._sleep = sleep
         self.state = State.IDLE
         self.reason = ""
+        #: the drive's fault code of the last fault (drivers.interfaces.register_map.FaultCode;
+        #: None for a fault without one, and after a reset)
+        self.fault_code: int | None = None
         self.progress: tuple[int, int, str] = (0, 0, "")
         self._listeners: list[Callable[[EngineEvent], None]] = []
         #: the seams (module docstring): hooks see every message before it runs,
@@ -343,6 +346,7 @@ class Engine:
                 self._set(State.FAULTED, f"reset failed on {getattr(ax, 'name', 'axis')}: {exc}")
                 raise PlanEnded("faulted", self.reason) from exc
         self.reason = ""
+        self.fault_code = None
         self._set(State.IDLE, "reset")
 
     # ------------------------------------------------------------------ running plans
@@ -632,8 +636,17 @@ class Engine:
         code = getattr(exc, "code", None)
         estop = code == FaultCode.ESTOP
         reason = f"{type(exc).__name__}: {exc}"  # the driver's message names the device
+        self.fault_code = code
         self._emit("fault", reason, error=type(exc).__name__, code=code)
         self._set(State.ESTOPPED if estop else State.FAULTED, reason)
+
+
+def link_fault(engine: "Engine") -> bool:
+    """Whether the engine's fault is a drive's communication watchdog: the drive stopped
+    its axis because the station's heartbeats paused (a stalled station PC, a dropped
+    link), which says nothing of the axis or the part. A job the station owns may be
+    run once more after a reset; any other fault stands."""
+    return engine.state == State.FAULTED and engine.fault_code == FaultCode.WATCHDOG_EXPIRED
 
 
 def home_plan():

@@ -106,3 +106,36 @@ def test_a_warming_shop_is_caught_named_a_drift_and_the_station_stays_within_its
     last = rows[-10:]
     assert all(r["worst_error_um"] <= 3.0 and r["worst_error_um"] <= r["u_um"] for r in last), \
         [(r["index"], r["worst_error_um"], r["u_um"]) for r in last]
+
+
+def test_a_part_whose_inspection_a_watchdog_stopped_is_sent_again_once(tmp_path, monkeypatch):
+    """The loop held for 1.6 s at the 6th move of the first part: the drives' watchdog
+    stops the scan for real, and the campaign (as the MES would) inspects the part again."""
+    import contextlib
+    import time
+
+    import station.runtime
+    from station.sequencer import messages as m
+
+    opened = station.runtime.open_session
+    moves = [0]
+
+    def hold(msg):
+        if isinstance(msg, m.Move):
+            moves[0] += 1
+            if moves[0] == 6:
+                time.sleep(1.6)
+
+    @contextlib.asynccontextmanager
+    async def with_a_stall(*args, **kwargs):
+        async with opened(*args, **kwargs) as s:
+            s.engine.add_msg_hook(hold)
+            yield s
+
+    monkeypatch.setattr(station.runtime, "open_session", with_a_stall)
+    res = run_campaign(scenario(tmp_path, "matched", matched=True), parts=2, data=tmp_path / "var", time_scale=8.0)
+    assert moves[0] > 6
+    (fault,) = res["link_faults"]
+    assert fault["index"] == 1 and "0x0011" in fault["reason"], res["link_faults"]
+    assert [r["state"] for r in res["inspections"]] == ["complete", "complete"], res["inspections"]
+    assert all(r["worst_error_um"] is not None for r in res["inspections"])

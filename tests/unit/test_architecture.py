@@ -14,7 +14,9 @@ MAY_BUILD = ("station/runtime.py", "station/cli/", "station/bench/")
 #: concrete drivers and the test kit: never imported by the domain
 CONCRETE = ("drivers.modbus_axis", "drivers.encoder", "drivers.camera", "drivers.testing")
 #: private names of the standard library that are its public API
-STDLIB_PRIVATE = {("os", "_exit")}
+#: the standard library's documented functions whose names start with "_": ``os._exit``,
+#: and ``sys._current_frames`` (the one way to read another thread's stack)
+STDLIB_PRIVATE = {("os", "_exit"), ("sys", "_current_frames")}
 
 
 def sources(*packages: str):

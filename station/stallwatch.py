@@ -1,0 +1,108 @@
+"""Catch the station's event loop stalling, and say where it was.
+
+The drives' heartbeats ride the station's event loop (``drivers.modbus_axis``): each
+drive stops its axis with a communication-watchdog fault when no heartbeat came for
+its timeout (1 s). Any synchronous work of a second on the loop (a kernel compiled, a
+chart's limits solved, a process started) therefore faults a healthy scan, and on a
+loaded PC a stall that takes 0.3 s on a quiet one can take three times as long. The
+fault itself says only "watchdog expired"; what held the loop is gone by then.
+
+``StallWatch`` keeps a tick on the loop and a plain thread beside it. When the tick
+is older than ``limit_s`` (half the shortest watchdog), the thread takes the loop
+thread's stack at once, and when the loop turns again the stall is logged once, as a
+warning with its length and that stack, and kept in ``stalls``. It reads only its own
+clock and the interpreter's frames: nothing on the loop waits for it.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import sys
+import threading
+import time
+import traceback
+from dataclasses import dataclass
+
+log = logging.getLogger(__name__)
+
+#: frames of the loop thread's stack kept for a stall (innermost last)
+STACK_FRAMES = 8
+
+
+@dataclass(frozen=True)
+class Stall:
+    """One stall: how long the loop did not turn (s, at least; the watcher's own
+    period rounds it), and where the loop thread was when it was seen."""
+
+    seconds: float
+    where: str
+
+
+class StallWatch:
+    """``async with StallWatch(limit_s) as w:`` watches the running loop while inside."""
+
+    def __init__(self, limit_s: float = 0.5, name: str = "station") -> None:
+        if not limit_s > 0:
+            raise ValueError("limit_s must be positive")
+        self.limit_s = float(limit_s)
+        self.name = name
+        #: the stalls seen so far (also logged as warnings)
+        self.stalls: list[Stall] = []
+        self._period_s = self.limit_s / 5.0
+        self._seen = time.monotonic()
+        self._tid: int | None = None
+        self._ticker: asyncio.Task | None = None
+        self._thread: threading.Thread | None = None
+        self._stop = threading.Event()
+
+    async def __aenter__(self) -> "StallWatch":
+        self._tid = threading.get_ident()
+        self._seen = time.monotonic()
+        self._ticker = asyncio.create_task(self._tick(), name=f"{self.name}-stall-tick")
+        self._stop.clear()
+        self._thread = threading.Thread(target=self._watch, name=f"{self.name}-stallwatch", daemon=True)
+        self._thread.start()
+        return self
+
+    async def __aexit__(self, *exc) -> None:
+        self._stop.set()
+        if self._ticker is not None:
+            self._ticker.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._ticker
+        if self._thread is not None:
+            await asyncio.to_thread(self._thread.join, 5.0)
+
+    async def _tick(self) -> None:
+        while True:
+            self._seen = time.monotonic()
+            await asyncio.sleep(self._period_s)
+
+    def _stack(self) -> str:
+        frame = sys._current_frames().get(self._tid)
+        if frame is None:
+            return "(the loop's thread has ended)"
+        lines = traceback.format_stack(frame)[-STACK_FRAMES:]
+        return "".join(lines).rstrip()
+
+    def _watch(self) -> None:
+        stalled_since: float | None = None
+        where = ""
+        while not self._stop.wait(self._period_s):
+            seen = self._seen
+            age = time.monotonic() - seen
+            if stalled_since is None and age > self.limit_s:
+                stalled_since, where = seen, self._stack()
+            elif stalled_since is not None and seen != stalled_since:
+                self._record(seen - stalled_since, where)
+                stalled_since = None
+        if stalled_since is not None:
+            self._record(time.monotonic() - stalled_since, where)
+
+    def _record(self, seconds: float, where: str) -> None:
+        stall = Stall(seconds, where)
+        self.stalls.append(stall)
+        log.warning("the %s event loop did not turn for %.2f s (the drives' heartbeats ride it, and a drive's "
+                    "watchdog faults the axis after its timeout); it was in:\n%s", self.name, seconds, where)

@@ -1,0 +1,50 @@
+"""The station's loop-stall watch: a stall is caught, timed, and placed."""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import time
+
+from station.stallwatch import StallWatch
+
+
+def _hold_the_loop(seconds: float) -> None:
+    time.sleep(seconds)  # synchronous work on the loop: what faults a drive's watchdog
+
+
+def test_a_stall_is_logged_with_its_length_and_the_code_that_held_the_loop(caplog):
+    async def go():
+        async with StallWatch(limit_s=0.2, name="test") as w:
+            await asyncio.sleep(0.1)
+            _hold_the_loop(0.8)
+            await asyncio.sleep(0.2)
+        return w
+
+    with caplog.at_level(logging.WARNING, logger="station.stallwatch"):
+        w = asyncio.run(go())
+    held = [s for s in w.stalls if "_hold_the_loop" in s.where]
+    assert len(held) == 1, w.stalls
+    # the gap between the loop's ticks: the 0.8 s held, plus at most a tick's period
+    # and whatever a loaded PC adds
+    assert held[0].seconds >= 0.75, held
+    assert any("_hold_the_loop" in r.getMessage() and "did not turn" in r.getMessage() for r in caplog.records)
+
+
+def test_a_loop_that_only_awaits_is_not_reported_and_the_watch_ends_its_thread():
+    async def go():
+        gaps, t = [], time.monotonic()
+        async with StallWatch(limit_s=0.5, name="test") as w:
+            for _ in range(10):
+                await asyncio.sleep(0.03)
+                now = time.monotonic()
+                gaps.append(now - t)
+                t = now
+        return w, max(gaps)
+
+    w, longest = asyncio.run(go())
+    # the loop's own longest turn bounds what the watch may report (a loaded PC can
+    # stall even an idle loop, but never for longer than the loop itself saw)
+    assert not w.stalls or longest > 0.5, (w.stalls, longest)
+    assert all(s.seconds <= longest + 0.2 for s in w.stalls), (w.stalls, longest)
+    assert not w._thread.is_alive()
