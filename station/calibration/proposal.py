@@ -251,12 +251,36 @@ def calibration_proposal(outcome, base_version: str, reason: str | None = None,
                     explanation=explanation)
 
 
+def expected_readings_change_um(model: StationModel, changes, holes: dict[str, tuple[float, float]]) -> dict[str, float]:
+    """Per hole (``holes``: id -> (axial place mm, table angle deg)): how much approving
+    ``changes`` on ``model`` moves the hole's measured place (um), if the machine is as
+    the changed model says (``station.checks.axis.expected_change_um``)."""
+    from station.checks.axis import expected_change_um
+    from station.monitor.proposals import apply_changes
+
+    new = apply_changes(model, changes)
+    return expected_change_um(model, new, {h: mm for h, (mm, _) in holes.items()},
+                              {h: a for h, (_, a) in holes.items()})
+
+
 async def propose_from_calibration(session, outcome, artefact_id: str,
-                                   min_significance: float = MIN_SIGNIFICANCE) -> Proposal:
+                                   min_significance: float = MIN_SIGNIFICANCE,
+                                   holes: dict[str, tuple[float, float]] | None = None) -> Proposal:
     """Build the proposal on the session's present model, keep it in the session's
-    proposal book (its picture written) and log it (the audit trail)."""
+    proposal book (its picture written) and log it (the audit trail). Its
+    ``expected_change_um`` is given at ``holes`` (id -> (axial place mm, table angle
+    deg)), by default at the master's holes of the session's last master check (none
+    without one)."""
     p = calibration_proposal(outcome, session.model_version, artefact_id=artefact_id,
                              min_significance=min_significance)
+    if holes is None and session.history:
+        # the master's holes, as its last check read them: approving moves its history
+        # into the new model's frame by these figures (Session.decide)
+        last = session.history[-1]
+        holes = {h: (mm, last.angle_deg.get(h, 0.0)) for h, mm in last.position_mm.items()}
+    if holes:
+        p.expected_change_um = await asyncio.to_thread(
+            expected_readings_change_um, session.station.model, p.changes, holes)
     await asyncio.to_thread(session.proposals.add, p)
     await asyncio.to_thread(session.store.log_event, "proposal",
                             f"model proposal {p.id} on {p.base_version}: self-calibration on artefact {artefact_id}, "

@@ -420,9 +420,10 @@ def left_out(report: dict) -> list[str]:
 
 
 def expected_change_um(old: StationModel, new: StationModel, holes_mm: Mapping[str, float],
-                       angle_deg: float = 0.0) -> dict[str, float]:
+                       angle_deg: float | Mapping[str, float] = 0.0) -> dict[str, float]:
     """Per hole: how much the change from ``old`` to ``new`` moves the hole's measured
-    position (um), if the machine is as ``new`` says. A scan measures a hole at
+    position (um), if the machine is as ``new`` says (``angle_deg``: where the table
+    stands for it, one angle or one per hole). A scan measures a hole at
     ``target + (grating - predicted carriage) + image offset``; with ``old`` the
     command is ``old``'s and the grating's term carries what ``old`` did not know;
     with ``new`` the command is ``new``'s and the term is nil. Both are computed with
@@ -431,8 +432,9 @@ def expected_change_um(old: StationModel, new: StationModel, holes_mm: Mapping[s
     out = {}
     for hole, a in holes_mm.items():
         errs = []
+        at = float(angle_deg[hole]) if isinstance(angle_deg, Mapping) else float(angle_deg)
         for cmd_model in (old, new):
-            sol = compensate(cmd_model, [a], [angle_deg], direction_z=+1, direction_c=+1)
+            sol = compensate(cmd_model, [a], [at], direction_z=+1, direction_c=+1)
             z, c = float(sol.z_mm[0]), float(sol.c_deg[0])
             point = new.part_coordinates(new.errors([z], [c], direction_z=[1], direction_c=[1]).actual_point_mm)[0][0]
             grating_term = predicted_carriage_mm(new, z, +1) - predicted_carriage_mm(cmd_model, z, +1)
@@ -450,8 +452,9 @@ def grating_residual_change_um(old: StationModel, new: StationModel, holes_mm: M
     out = {}
     for hole, a in holes_mm.items():
         r = []
+        at = float(angle_deg[hole]) if isinstance(angle_deg, Mapping) else float(angle_deg)
         for cmd_model in (old, new):
-            sol = compensate(cmd_model, [a], [angle_deg], direction_z=+1, direction_c=+1)
+            sol = compensate(cmd_model, [a], [at], direction_z=+1, direction_c=+1)
             z = float(sol.z_mm[0])
             r.append(predicted_carriage_mm(new, z, +1) - predicted_carriage_mm(cmd_model, z, +1))
         out[hole] = (r[1] - r[0]) * 1e3

@@ -263,7 +263,8 @@ class Session:
             self.history.append(MasterRecord(
                 self.clock_s(), self.watch.index, {h: c.certified for h, c in zip(holes, positions)},
                 {h: (c.measured - c.certified) * 1e3 - self.applied_um.get(h, 0.0) for h, c in zip(holes, positions)},
-                {h: math.hypot(c.u_station, c.u_certificate) * 1e3 for h, c in zip(holes, positions)}))
+                {h: math.hypot(c.u_station, c.u_certificate) * 1e3 for h, c in zip(holes, positions)},
+                {h.id: h.angle_deg for h in spec.holes if h.id in holes}))
             self.explanation = explain(self.history)
         if out.state != "complete":
             alarms = await self._log_alarms([Alarm(self.watch.index, "master", f"master check {cert.master_id} did "

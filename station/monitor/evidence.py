@@ -54,6 +54,8 @@ class MasterRecord:
     position_mm: dict[str, float]
     error_um: dict[str, float]
     u_um: dict[str, float]
+    #: per hole the table's nominal angle for it (deg; the part family's drawing)
+    angle_deg: dict[str, float] = field(default_factory=dict)
 
     def mean(self) -> tuple[float, float]:
         """The mean error over the holes and its standard uncertainty (um)."""

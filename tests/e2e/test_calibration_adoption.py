@@ -77,7 +77,8 @@ def test_adopting_the_calibration_brings_inspections_to_the_truth(tmp_path: Path
             assert s.station.model.name == load_model().name  # the station keeps its own model
             before = errors_um(await s.inspect(spec, "ADOPT-0"))
             out = await calibrate(s, cert, n_poses=40, seed=SEED, suggestions=False)
-            p = await propose_from_calibration(s, out, cert.artefact_id)
+            p = await propose_from_calibration(s, out, cert.artefact_id,
+                                               holes={h.id: (h.position.nominal, h.angle_deg) for h in spec.holes})
             version = s.model_version
             await s.decide(p.id, True, "engineer", "self-calibration")
             after = errors_um(await s.inspect(spec, "ADOPT-1"))
@@ -99,3 +100,7 @@ def test_adopting_the_calibration_brings_inspections_to_the_truth(tmp_path: Path
     assert worst_after <= 3.0, after  # the acceptance
     assert worst_after <= 1.0, after  # the goal
     assert worst_after < 0.5 * worst_before, (before, after)
+    # what the proposal said approving it would do to the holes' readings is what it did
+    moved = {c.rsplit(".", 1)[0]: after[c] - before[c] for c in before}
+    assert set(p.expected_change_um) == set(moved) == {h.id for h in spec.holes}
+    assert all(abs(p.expected_change_um[h] - moved[h]) < 1.0 for h in moved), (p.expected_change_um, moved)

@@ -96,3 +96,38 @@ def test_node_change_is_the_nodes_hat(outcome):
     assert np.allclose(dc, [0.0, 0.0, 2.0, 4.0, 2.0, 4.0 / 45.0, 0.0], atol=1e-9)
     with pytest.raises(ProposalError):
         apply_node_change(model, Change("node.Z.EZZ(at=42.5)", 1.0))
+
+
+def test_the_expected_change_is_given_at_the_last_master_checks_holes(outcome, tmp_path, monkeypatch):
+    """Without holes named, the proposal's expected change is at the master's holes of
+    the session's last check (what approving moves its history by), at their angles;
+    without a master check there is none. (That the figure predicts what approval does
+    to the readings: tests/e2e/test_calibration_adoption.py.)"""
+    import asyncio
+
+    import station.checks.axis
+    from station.calibration.proposal import propose_from_calibration
+    from station.monitor.evidence import MasterRecord
+
+    out, model = outcome
+    events, asked = [], []
+    real = station.checks.axis.expected_change_um
+
+    def spy(old, new, holes_mm, angle_deg=0.0):
+        asked.append((dict(holes_mm), dict(angle_deg)))
+        return real(old, new, holes_mm, angle_deg)
+
+    monkeypatch.setattr(station.checks.axis, "expected_change_um", spy)
+    session = SimpleNamespace(station=SimpleNamespace(model=model), model_version="base@0", history=[],
+                              proposals=ProposalBook(tmp_path), store=SimpleNamespace(log_event=lambda *a: events.append(a)))
+    none = asyncio.run(propose_from_calibration(session, out, "CA-22.2-5x8"))
+    assert none.expected_change_um == {} and asked == []
+    session.history.append(MasterRecord(0.0, 1, {"hole_1": 71.03, "hole_2": 74.98}, {"hole_1": 0.1, "hole_2": -0.2},
+                                        {"hole_1": 0.4, "hole_2": 0.4}, {"hole_1": 0.0, "hole_2": 90.0}))
+    p = asyncio.run(propose_from_calibration(session, out, "CA-22.2-5x8"))
+    assert asked == [({"hole_1": 71.03, "hole_2": 74.98}, {"hole_1": 0.0, "hole_2": 90.0})]
+    assert set(p.expected_change_um) == {"hole_1", "hole_2"}
+    # this world's contradicted parameters are Z's positioning (EZZ), which the grating
+    # reads: the holes' readings do not move (as an axis check's backlash proposal)
+    assert all(abs(v) < 0.01 for v in p.expected_change_um.values()), p.expected_change_um
+    assert [e[0] for e in events] == ["proposal", "proposal"]
