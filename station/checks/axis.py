@@ -445,10 +445,11 @@ def expected_change_um(old: StationModel, new: StationModel, holes_mm: Mapping[s
 
 
 def grating_residual_change_um(old: StationModel, new: StationModel, holes_mm: Mapping[str, float],
-                               angle_deg: float = 0.0) -> dict[str, float]:
+                               angle_deg: float | Mapping[str, float] = 0.0) -> dict[str, float]:
     """Per hole: how much the change moves what the grating chart watches there, the
     grating's reading minus the carriage prediction (um), if the machine is as ``new``
-    says (the chart starts again from a new baseline when a model is approved)."""
+    says (the chart starts again from a new baseline when a model is approved);
+    ``angle_deg`` as ``expected_change_um`` takes it."""
     out = {}
     for hole, a in holes_mm.items():
         r = []

@@ -343,6 +343,7 @@ class Engine:
                 # a link that dropped with the fault reconnects here: retried like any step
                 await self._with_retries(ax.reset_fault, f"reset {getattr(ax, 'name', 'axis')}")
             except DriverError as exc:
+                self.fault_code = getattr(exc, "code", None)  # the reset's own failure, not the fault it met
                 self._set(State.FAULTED, f"reset failed on {getattr(ax, 'name', 'axis')}: {exc}")
                 raise PlanEnded("faulted", self.reason) from exc
         self.reason = ""

@@ -211,3 +211,28 @@ def test_a_fault_latched_while_ready_is_an_axes_problem_and_reset_leaves_the_axi
 
     ok, tripped, reset = asyncio.run(go())
     assert ok is None and tripped == "Z reports fault 0x0020" and reset == "Z is not enabled"
+
+
+def test_a_watchdog_fault_is_a_link_fault_until_reset_and_no_other_fault_is():
+    from station.sequencer.engine import link_fault
+
+    async def go():
+        eng, z, c, _ = make_engine()
+        await eng.home()
+        seen = []
+        # a drive fault is not retried (one failure); a timeout is, until the budget ends
+        for fault, times in ((DriveFault(0x11, "communication watchdog expired", "Z"), 1),
+                             (DriveFault(0x20, "overcurrent", "Z"), 1), (DeviceTimeout("no reply", "Z"), 4)):
+            z.fail("move_to", fault, times=times)
+            with pytest.raises(PlanEnded):
+                await eng.run(scan_plan(2))
+            seen.append((eng.state, link_fault(eng)))
+            await eng.reset()
+            seen.append((eng.state, link_fault(eng)))
+            await eng.home()
+        return seen
+
+    seen = asyncio.run(go())
+    assert seen == [(State.FAULTED, True), (State.IDLE, False),
+                    (State.FAULTED, False), (State.IDLE, False),
+                    (State.FAULTED, False), (State.IDLE, False)]
