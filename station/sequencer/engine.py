@@ -365,7 +365,7 @@ class Engine:
         self._at = {}
         self._pending = {}
         self._set(State.RUNNING)
-        self._task = asyncio.create_task(self._drive(plan, done_reason="plan complete"))
+        self._task = asyncio.create_task(self._drive(plan, done_reason="plan complete", abortable=True))
         try:
             return await self._task
         except asyncio.CancelledError:
@@ -380,9 +380,15 @@ class Engine:
         finally:
             self._task = None
 
-    async def _drive(self, plan, *, done_reason: str) -> Any:
+    async def _drive(self, plan, *, done_reason: str, abortable: bool = False) -> Any:
         result: Any = None
         while True:
+            if abortable and self._abort_requested is not None:
+                # an abort cancels the plan's task, and a cancellation can be lost: before
+                # Python 3.12, asyncio.wait_for returns the result of a future that completed
+                # as it was cancelled (a driver's request, a render). The request itself
+                # then ends the plan here, before its next step
+                raise asyncio.CancelledError(self._abort_requested)
             t0 = time.perf_counter()
             try:
                 msg = plan.send(result)

@@ -236,3 +236,36 @@ def test_a_watchdog_fault_is_a_link_fault_until_reset_and_no_other_fault_is():
     assert seen == [(State.FAULTED, True), (State.IDLE, False),
                     (State.FAULTED, False), (State.IDLE, False),
                     (State.FAULTED, False), (State.IDLE, False)]
+
+
+def test_an_abort_whose_cancellation_a_step_swallowed_still_ends_the_plan_at_the_next_step():
+    """asyncio.wait_for before Python 3.12 returns the result of a future that completed
+    as its task was cancelled: the abort's cancellation is then lost inside the step. The
+    abort request itself must still end the plan, before the next step."""
+
+    async def go():
+        eng, z, c, _ = make_engine()
+        await eng.home()
+        inside = asyncio.Event()
+
+        async def swallowing_step(msg):
+            if isinstance(msg, m.Checkpoint) and msg.label == "point 1":
+                inside.set()
+                try:
+                    await asyncio.sleep(1.0)
+                except asyncio.CancelledError:
+                    pass  # the step's result came back as the task was cancelled
+
+        eng.add_msg_hook(swallowing_step)
+        log = []
+        task = asyncio.create_task(eng.run(scan_plan(5, log)))
+        await inside.wait()
+        eng.abort("operator pressed abort")
+        with pytest.raises(PlanEnded) as exc:
+            await task
+        return eng, exc.value, log, z
+
+    eng, ended, log, z = asyncio.run(go())
+    assert ended.outcome == "aborted" and "operator" in ended.reason
+    assert log == [0.0]  # point 1's read and everything after it never ran
+    assert z.count("stop") == 1 and eng.state == State.READY
