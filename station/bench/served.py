@@ -46,9 +46,10 @@ class Served:
 
 
 def start(data: Path, *, time_scale: float, extra: list[str] | None = None,
-          ready_timeout_s: float = READY_TIMEOUT_S) -> Served:
+          ready_timeout_s: float = READY_TIMEOUT_S, env: dict[str, str] | None = None) -> Served:
     """Start `station serve` on a free port with its log in ``data/server.log``; return
-    once ``/readyz`` answers 200 (RuntimeError with the log's tail if it never does)."""
+    once ``/readyz`` answers 200 (RuntimeError with the log's tail if it never does).
+    ``env``: variables added to the server's environment."""
     import httpx
 
     port = free_port()
@@ -56,7 +57,7 @@ def start(data: Path, *, time_scale: float, extra: list[str] | None = None,
                                "--time-scale", str(time_scale)] + list(extra or [])
     with open(data / "server.log", "w") as log:
         proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, cwd=data,
-                                env={**os.environ, "PYTHONUNBUFFERED": "1"})
+                                env={**os.environ, "PYTHONUNBUFFERED": "1", **(env or {})})
     served = Served(proc, f"http://127.0.0.1:{port}", data)
     deadline = time.monotonic() + ready_timeout_s
     try:
@@ -90,8 +91,9 @@ def stop(proc: subprocess.Popen) -> None:
 
 
 @contextlib.contextmanager
-def served(data: Path, *, time_scale: float, extra: list[str] | None = None) -> Iterator[Served]:
-    s = start(data, time_scale=time_scale, extra=extra)
+def served(data: Path, *, time_scale: float, extra: list[str] | None = None,
+           env: dict[str, str] | None = None) -> Iterator[Served]:
+    s = start(data, time_scale=time_scale, extra=extra, env=env)
     try:
         yield s
     finally:
