@@ -15,7 +15,6 @@ rightly reports as a direction signature on the matched world.
 from __future__ import annotations
 
 import asyncio
-import time
 import json
 import subprocess
 import sys
@@ -26,6 +25,7 @@ from station.runtime import open_session
 from station.parts import load_part
 from station.recording import read_recording
 from station.store import Store
+from tests.loop_hold import LoopHold
 
 REPO = Path(__file__).resolve().parents[2]
 DEFAULT = REPO / "sim" / "scenarios" / "default.toml"
@@ -127,22 +127,6 @@ def test_a_world_that_agrees_with_its_model_shows_no_mismatch_and_proposes_nothi
     assert not list((tmp_path / "var" / "models" / "proposals").glob("*.json"))
 
 
-def _hold_the_loop_at_moves(engine, moves: set[int], seconds: float = 1.6):
-    """Hold the station's event loop (synchronous work on it, as a compile or a solve
-    would) before the given Move messages of the engine: the drives' heartbeats pause
-    and their watchdog (1 s) stops the axes, for real, in the twins."""
-    from station.sequencer import messages as m
-
-    count = [0]
-
-    def hook(msg):
-        if isinstance(msg, m.Move):
-            count[0] += 1
-            if count[0] in moves:
-                time.sleep(seconds)
-
-    return engine.add_msg_hook(hook)
-
 
 def test_a_check_stopped_by_a_watchdog_is_run_once_more_and_a_second_stop_stands(tmp_path):
     scen = scenario(tmp_path, "matched", None)
@@ -150,13 +134,13 @@ def test_a_check_stopped_by_a_watchdog_is_run_once_more_and_a_second_stop_stands
 
     async def go():
         async with open_session(scenario=scen, time_scale=20.0, data_dir=tmp_path / "var") as s:
-            remove = _hold_the_loop_at_moves(s.engine, {6})
+            hold = LoopHold(s.engine, {6})
             once = await s.check_axis(fam, out_dir=tmp_path / "once", plots=False)
-            remove()
+            hold.remove()
             # held in the first run and again in the repeat (the repeat's 6th move is the 6+n-th)
-            remove = _hold_the_loop_at_moves(s.engine, set(range(6, 400, 5)))
+            hold = LoopHold(s.engine, set(range(6, 400, 5)))
             twice = await s.check_axis(fam, out_dir=tmp_path / "twice", plots=False)
-            remove()
+            hold.remove()
             return once, twice
 
     once, twice = asyncio.run(asyncio.wait_for(go(), 240))

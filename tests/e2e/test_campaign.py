@@ -112,29 +112,22 @@ def test_a_part_whose_inspection_a_watchdog_stopped_is_sent_again_once(tmp_path,
     """The loop held for 1.6 s at the 6th move of the first part: the drives' watchdog
     stops the scan for real, and the campaign (as the MES would) inspects the part again."""
     import contextlib
-    import time
 
     import station.runtime
-    from station.sequencer import messages as m
+    from tests.loop_hold import LoopHold
 
     opened = station.runtime.open_session
-    moves = [0]
-
-    def hold(msg):
-        if isinstance(msg, m.Move):
-            moves[0] += 1
-            if moves[0] == 6:
-                time.sleep(1.6)
+    holds = []
 
     @contextlib.asynccontextmanager
     async def with_a_stall(*args, **kwargs):
         async with opened(*args, **kwargs) as s:
-            s.engine.add_msg_hook(hold)
+            holds.append(LoopHold(s.engine, {6}))
             yield s
 
     monkeypatch.setattr(station.runtime, "open_session", with_a_stall)
     res = run_campaign(scenario(tmp_path, "matched", matched=True), parts=2, data=tmp_path / "var", time_scale=8.0)
-    assert moves[0] > 6
+    assert holds[0].moves_seen > 6
     (fault,) = res["link_faults"]
     assert fault["index"] == 1 and "0x0011" in fault["reason"], res["link_faults"]
     assert [r["state"] for r in res["inspections"]] == ["complete", "complete"], res["inspections"]
