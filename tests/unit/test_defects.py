@@ -429,3 +429,48 @@ def test_a_groove_that_fades_along_its_length_is_read_on_each_side_of_the_hole()
     for this, want in ((v > 0, 0.12), (v <= 0, 0.04)):
         assert np.median(sides[near & this]) == pytest.approx(want, rel=0.05)
         assert np.median(both[near & this]) == pytest.approx(0.08, rel=0.1)
+
+
+def _dark_lines(shape, segments, width_px=2.0, depth=0.3, blur_px=1.2, noise=0.01, seed=0):
+    """A residual (darkness) of dark straight segments ((x0, y0, x1, y1), ...) under a
+    blur, with white noise."""
+    yy, xx = np.mgrid[0:shape[0], 0:shape[1]].astype(np.float32)
+    d = np.zeros(shape, np.float32)
+    for x0, y0, x1, y1 in segments:
+        ux, uy = x1 - x0, y1 - y0
+        n = np.hypot(ux, uy)
+        t = np.clip(((xx - x0) * ux + (yy - y0) * uy) / (n * n), 0.0, 1.0)
+        dist = np.hypot(xx - (x0 + t * ux), yy - (y0 + t * uy))
+        d = np.maximum(d, np.where(dist <= width_px / 2, depth, 0.0).astype(np.float32))
+    d = cv2.GaussianBlur(d, (0, 0), blur_px)
+    return d + np.random.default_rng(seed).normal(0.0, noise, shape).astype(np.float32)
+
+
+def test_a_straight_furrow_runs_along_itself_and_crossing_grooves_residue_does_not():
+    """``_along_share``: one straight furrow 70 deg off the x axis puts ~all its oriented
+    energy along itself; the V and the X that deep crossing grooves leave (arms along the
+    30 / 150 deg hatch) put almost none along their long axis, the hatch's bisector."""
+    from station.vision.defects import _along_share
+
+    hatch = (30.0, 150.0)
+    c, s = np.cos(np.deg2rad(70.0)), np.sin(np.deg2rad(70.0))
+    furrow = _dark_lines((120, 120), [(60 - 45 * c, 60 - 45 * s, 60 + 45 * c, 60 + 45 * s)])
+    region = cv2.GaussianBlur(furrow, (0, 0), 1.0) > 0.1
+    assert _along_share(cv2.GaussianBlur(furrow, (0, 0), 1.0), region, 70.0, hatch) > 0.8
+    c30, s30 = np.cos(np.deg2rad(30.0)), np.sin(np.deg2rad(30.0))
+    v = _dark_lines((120, 160), [(80, 90, 80 - 60 * c30, 90 - 60 * s30), (80, 90, 80 + 60 * c30, 90 - 60 * s30)])
+    x = _dark_lines((120, 160), [(80 - 60 * c30, 60 - 60 * s30, 80 + 60 * c30, 60 + 60 * s30),
+                                 (80 - 60 * c30, 60 + 60 * s30, 80 + 60 * c30, 60 - 60 * s30)])
+    for residue, bisector in ((v, 0.0), (x, 0.0), (x, 90.0)):
+        rs = cv2.GaussianBlur(residue, (0, 0), 1.0)
+        assert _along_share(rs, rs > 0.1, bisector, hatch) < 0.2
+
+
+def test_deep_grooves_crossing_on_a_clean_wall_are_not_a_scratch():
+    """Clean frames of the wide envelope's bench (seed 82000's clean set) where two deep
+    grooves crossing left a V or an X of residue 6-25 deg off the hatch, taken for
+    scratches of 0.17-1.27 mm before the along-share test: none now."""
+    for seed in (1082022, 1082069, 1082078, 1082095):
+        f = random_defect_frame(seed, {}, mm_per_px=MM_PER_PX, envelope="wide")
+        found = detect_defects(f.image, MM_PER_PX)
+        assert [d for d in found if d.kind == "scratch"] == [], seed
