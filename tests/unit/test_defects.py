@@ -474,3 +474,16 @@ def test_deep_grooves_crossing_on_a_clean_wall_are_not_a_scratch():
         f = random_defect_frame(seed, {}, mm_per_px=MM_PER_PX, envelope="wide")
         found = detect_defects(f.image, MM_PER_PX)
         assert [d for d in found if d.kind == "scratch"] == [], seed
+
+
+def test_a_deep_groove_running_into_a_rim_is_not_a_chip():
+    """Wide-envelope frames where a deep groove (or two crossing) ran into a hole's rim and
+    read as a chip of 0.11-0.20 mm; beyond a true chip the wall comes back, along these
+    the darkness runs on (0.6-0.9 of the hole's). The true chip of the frame with defects
+    is still found."""
+    for seed, clean in ((1082040, True), (82018, False), (85061, False)):
+        f = random_defect_frame(seed, {} if clean else None, mm_per_px=MM_PER_PX, envelope="wide")
+        found = detect_defects(f.image, MM_PER_PX)
+        pairs, false = match(f.defects, found, MM_PER_PX)
+        assert [found[k].kind for k in false if found[k].kind == "chip"] == [], seed
+        assert all(d is not None and d.kind == "chip" for t, d in pairs if t.kind == "chip"), seed
