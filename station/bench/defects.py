@@ -270,6 +270,9 @@ def register(bench_app: typer.Typer) -> None:
         twin_frames: int = typer.Option(50, "--twin-frames", min=0,
                                         help="frames of the camera twin's optics with one 1.1-2 mm scratch and no "
                                              "hole (0: none; 50: ~30 s)"),
+        mm_per_px: float = typer.Option(0.010, "--mm-per-px", min=0.002, max=0.05,
+                                        help="the frames' scale at the wall (the station's camera: 0.010); defects' "
+                                             "and holes' sizes are drawn in mm, the wall's texture stays in px"),
         as_json: bool = typer.Option(False, "--json", help="one JSON object on stdout"),
     ) -> None:
         """Surface defects: recall above the limit per kind, false defects on clean walls, size errors, CPU time."""
@@ -280,12 +283,13 @@ def register(bench_app: typer.Typer) -> None:
 
         with Progress(console=out_console, transient=True, disable=as_json) as bar:
             task = bar.add_task("rendering and inspecting frames", total=2 * frames + twin_frames)
-            r = run(frames, seed, envelope, progress=lambda: bar.advance(task), twin_frames=twin_frames)
+            r = run(frames, seed, envelope, mm_per_px=mm_per_px, progress=lambda: bar.advance(task),
+                    twin_frames=twin_frames)
         if as_json:
             print_json(r)
             return
         t = Table(title=f"defects: {r['frames_with_defects']} frames with defects + {r['clean_frames']} clean, "
-                        f"seed {r['seed']}, {r['holes']} holes (one core)")
+                        f"seed {r['seed']}, {r['mm_per_px']} mm/px, {r['holes']} holes (one core)")
         for c in ("kind", "seeded", "limit mm", "above", "recall", "below: recall", "other kind",
                   "L med mm", "L p90 mm", "L in tol", "W med mm", "W p90 mm", "W in tol", "L in 2u"):
             t.add_column(c, justify="right")

@@ -69,7 +69,7 @@ from __future__ import annotations
 import warnings
 
 import functools
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 
 import cv2
 import numpy as np
@@ -1763,12 +1763,13 @@ def _measure_holes_for_rims(img: np.ndarray, mm_per_px: float, cfg: DefectConfig
     for a 0.7 mm pore (dev frames: a hole with two burrs of 0.2-0.3 mm). Those are
     measured by their rays alone (robust circle, Tukey weights: the defects are its
     outliers), which is all the rim analysis needs."""
-    from station.vision.detect import detect_candidates
+    from station.vision.detect import detect_candidates, for_scale
     from station.vision.measure import MeasureConfig, measure_candidate, measure_holes
 
     # the rims need no grain-aware step: the weighted fit places them well within a px
     holes = list(measure_holes(img, mm_per_px, cfg=MeasureConfig(gls_steps=0)))
     rays_only = MeasureConfig(photometric=None)
+    rays_only = replace(rays_only, detect=for_scale(rays_only.detect, mm_per_px))
     for cand in detect_candidates(img, rays_only.detect):
         if 2.0 * cand.radius_px * mm_per_px < 0.8 * cfg.min_hole_diameter_mm:
             continue  # the coarse radius is good to ~1 coarse px: 20 % slack

@@ -51,6 +51,26 @@ class DetectConfig:
     split_max: float = 0.95
 
 
+#: the largest hole (mm) the coarse stage looks for when the frame's scale is known: its
+#: 120 px at the station's camera (0.010 mm/px); a finer camera's frames show the same
+#: holes larger in px (``for_scale``)
+MAX_HOLE_MM = 1.2
+
+
+def for_scale(cfg: DetectConfig, mm_per_px: float | None) -> DetectConfig:
+    """``cfg`` with its largest diameter widened to ``MAX_HOLE_MM`` at this scale (never
+    narrowed: the px range is also what the fine stage can measure).  At 0.007 mm/px the
+    bench's 0.6-1.0 mm holes are 86-143 px, and those over 120 px were taken for pores."""
+    if not mm_per_px or mm_per_px <= 0:
+        return cfg
+    widest = MAX_HOLE_MM / mm_per_px
+    if widest <= cfg.max_diameter_px:
+        return cfg
+    from dataclasses import replace
+
+    return replace(cfg, max_diameter_px=float(widest))
+
+
 @dataclass(frozen=True)
 class Candidate:
     x_px: float

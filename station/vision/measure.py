@@ -26,7 +26,7 @@ from numba import njit
 from scipy.special import chdtrc
 
 from station.vision.calibration import CameraCalibration
-from station.vision.detect import Candidate, DetectConfig, detect_candidates
+from station.vision.detect import Candidate, DetectConfig, detect_candidates, for_scale
 from station.vision.edges import KERNEL_RADIUS_PX, deblurred_radius, gradient, profile_width2, psf_variance, ray_edges
 from station.vision.edges import SMOOTH_SIGMA_PX
 from station.vision.fit import fit_ellipse_direct, gradient_1d, median, ransac_circle, robust_circle, taubin_circle
@@ -545,6 +545,9 @@ def measure_holes(
         mm_per_px = calibration.mm_per_px
     rng = np.random.default_rng(0)  # fixed: the same frame always gives the same result
     found: list[HoleMeasurement] = []
+    # a finer camera shows the same holes larger in px: the detector's and the acceptance's
+    # largest diameter follow the scale when it is known (``detect.for_scale``)
+    cfg = replace(cfg, detect=for_scale(cfg.detect, mm_per_px))
     candidates = detect_candidates(image, cfg.detect)
     illumination = (estimate_illumination(image)
                     if candidates and cfg.flat_field and cfg.photometric is not None else None)

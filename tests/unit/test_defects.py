@@ -487,3 +487,28 @@ def test_a_deep_groove_running_into_a_rim_is_not_a_chip():
         pairs, false = match(f.defects, found, MM_PER_PX)
         assert [found[k].kind for k in false if found[k].kind == "chip"] == [], seed
         assert all(d is not None and d.kind == "chip" for t, d in pairs if t.kind == "chip"), seed
+
+
+def test_a_finer_cameras_large_hole_is_a_hole_and_its_rim_is_judged():
+    """At 0.007 mm/px a 0.95 mm hole is 136 px across, past the coarse detector's 120 px
+    for the station's 0.010 mm/px: it was reported as a 0.95 mm pore and its burr and chip
+    were not looked for. With the scale known the hole is measured (its diameter within
+    0.3 px, the burr and chip on its rim included) and its rim judged; without it the px
+    range stays the station's."""
+    from station.vision.measure import measure_holes
+
+    mm = 0.007
+    p = FrameParams(wall_level_dn=150.0, hole_level_dn=50.0, groove_depth=0.06, grain=0.02, blotch=0.03,
+                    blur_sigma_px=1.4, gain_e_per_dn=30.0, read_noise_dn=1.5, vignetting=0.2, **SMALL)
+    defects = [DefectSpec("burr", length_px=18.0, width_px=6.0, angle_deg=300.0, reflectance=1.0, hole=0,
+                          shape_seed=13),
+               DefectSpec("chip", length_px=16.0, width_px=5.0, angle_deg=120.0, hole=0, shape_seed=14)]
+    f = render_frame(p, [HoleSpec(300.4, 250.2, 0.95 / mm)], seed=21, defects=defects)
+    f.defects = [d.with_scale(mm) for d in f.defects]
+    (hole,) = measure_holes(f.image, mm)
+    assert hole.diameter_px == pytest.approx(0.95 / mm, abs=0.3)
+    assert measure_holes(f.image) == []
+    found = detect_defects(f.image, mm)
+    pairs, false = match(f.defects, found, mm)
+    assert [found[k].kind for k in false] == []
+    assert sorted((t.kind, d.kind if d else None) for t, d in pairs) == [("burr", "burr"), ("chip", "chip")]
