@@ -349,7 +349,8 @@ def _hole_zone(shape: tuple[int, int], holes, reach_px: float, scale: float = 1.
     return zone.astype(bool)
 
 
-def model_wall(image: np.ndarray, holes, reach_px: float, cfg: DefectConfig) -> _Wall:
+def model_wall(image: np.ndarray, holes, reach_px: float, cfg: DefectConfig,
+               largest_mark_px: float | None = None) -> _Wall:
     """The wall's level and cross-hatch over the whole frame (half resolution).
 
     Two levels: a coarse one (a median over ~100 px at 1/8 scale, the holes inpainted
@@ -360,6 +361,9 @@ def model_wall(image: np.ndarray, holes, reach_px: float, cfg: DefectConfig) -> 
     blobs and streaks of the size of a large pore (dev frames: most of the first
     version's false pores). The grooves are then removed from the half-resolution
     darkness under the finer level, the dark marks weighted out of their means.
+    ``largest_mark_px``: the largest dark mark that is no hole (px; a pore): the coarse
+    median and the coarse grooves' means reach past it (at the station's 0.010 mm/px
+    their own ~100 and ~84 px already do).
     """
     small = _half(image)
     h, w = small.shape
@@ -373,7 +377,13 @@ def model_wall(image: np.ndarray, holes, reach_px: float, cfg: DefectConfig) -> 
     t8 = np.clip(np.rint(tiny), 0, 255).astype(np.uint8)
     if tiny_zone.any():
         t8 = cv2.inpaint(t8, cv2.dilate(tiny_zone.astype(np.uint8), np.ones((3, 3), np.uint8)), 3, cv2.INPAINT_TELEA)
-    coarse8 = cv2.GaussianBlur(cv2.medianBlur(t8, 13).astype(np.float32), (0, 0), 2.0, borderType=cv2.BORDER_REPLICATE)
+    # the median's window (1/8 scale): 13 px (104 full px), or 1.8x the largest dark mark
+    # that is no hole if more (a finer camera's pores are larger in px: a 0.42 mm pore at
+    # 0.005 mm/px, 84 px, pulled a 104 px median down to its own level, was never marked
+    # dark, and read 15 % narrow)
+    k_med = 13 if not largest_mark_px else max(13, int(np.ceil(1.8 * largest_mark_px / 8.0)) | 1)
+    coarse8 = cv2.GaussianBlur(cv2.medianBlur(t8, k_med).astype(np.float32), (0, 0), 2.0,
+                               borderType=cv2.BORDER_REPLICATE)
     # what is clearly dark, at quarter resolution (grooves removed as below, coarsely)
     h4, w4 = h // 2, w // 2
     quarter = cv2.resize(small[: h4 * 2, : w4 * 2], (w4, h4), interpolation=cv2.INTER_AREA)
@@ -386,8 +396,12 @@ def model_wall(image: np.ndarray, holes, reach_px: float, cfg: DefectConfig) -> 
         coarse = cv2.resize(coarse8, (w, h), interpolation=cv2.INTER_LINEAR)
         darkness = 1.0 - small / np.maximum(coarse, 1.0)
         angles = honing_directions(darkness, valid, cfg.default_honing_angle_deg)
-    res4 = cv2.GaussianBlur(_remove_grooves(dark4, valid4.astype(np.float32), angles,
-                                            cfg.groove_window_half_px // 2 | 1, valid4), (0, 0), 0.7)
+    # the grooves' means along their lines here take in the dark marks too: over no less
+    # than 1.5x the largest mark (a finer camera's pores), lest a pore be its line's mean
+    win4 = cfg.groove_window_half_px // 2 | 1
+    if largest_mark_px:
+        win4 = max(win4, int(np.ceil(1.5 * largest_mark_px / 4.0)) | 1)
+    res4 = cv2.GaussianBlur(_remove_grooves(dark4, valid4.astype(np.float32), angles, win4, valid4), (0, 0), 0.7)
     noise4 = _mad_sigma(res4[valid4])
     dark = (res4 > max(cfg.dark_floor, cfg.seed_k * noise4)).astype(np.uint8)
     dark = cv2.resize(cv2.dilate(dark, np.ones((3, 3), np.uint8)), (w, h), interpolation=cv2.INTER_NEAREST)
@@ -1805,7 +1819,7 @@ def detect_defects(image: np.ndarray, mm_per_px: float, *, holes=None, blur_px: 
     holes = [h for h in holes if h.diameter_px * mm_per_px >= cfg.min_hole_diameter_mm]
     # the wall model leaves out each hole and the band its rim defects may occupy
     reach_px = cfg.rim_reach_mm / mm_per_px + 6.0
-    wall = model_wall(img, holes, reach_px, cfg)
+    wall = model_wall(img, holes, reach_px, cfg, largest_mark_px=cfg.min_hole_diameter_mm / mm_per_px)
     zone = _hole_zone(img.shape, holes, reach_px)
     hh, ww = img.shape
     level_full = cv2.resize(wall.level, (ww // 2 * 2, hh // 2 * 2), interpolation=cv2.INTER_LINEAR)
