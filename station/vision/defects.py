@@ -1586,8 +1586,8 @@ def _rim_defects(img: np.ndarray, hole, index: int, zone_others: np.ndarray, wal
                 height /= _chip_floor(prof, win[ok] % n, s_arc, s1, s2, base, edge_out, blur)
             if height < cfg.rim_min_height_px:
                 continue  # the area-true height decides; the crossing only found it
-            if kind == "chip" and _groove_run_on(img, wall_level, hole, ((s1 + s2) / 2.0) / rad, length, height,
-                                                 angles_deg, blur) > cfg.chip_groove_share:
+            if kind == "chip" and _groove_run_on(img, wall_level, zone_others, hole, ((s1 + s2) / 2.0) / rad, length,
+                                                 height, angles_deg, blur) > cfg.chip_groove_share:
                 continue  # a deep groove running into the rim
             partial = not ok.all()
             significance = height * np.sqrt(length) / noise
@@ -1623,8 +1623,8 @@ def _rim_defects(img: np.ndarray, hole, index: int, zone_others: np.ndarray, wal
     return out
 
 
-def _groove_run_on(img: np.ndarray, wall_level: np.ndarray, hole, theta: float, length: float, height: float,
-                   angles_deg, blur: float) -> float:
+def _groove_run_on(img: np.ndarray, wall_level: np.ndarray, others: np.ndarray, hole, theta: float, length: float,
+                   height: float, angles_deg, blur: float) -> float:
     """How dark the wall stays beyond a chip found at angle ``theta`` (rad) of ``hole``'s
     rim (``length`` px of arc, ``height`` px deep), along the hatch's directions, as a
     share of the hole's own darkness (both 1 - I / W, W the frame's level ``wall_level``).
@@ -1636,22 +1636,31 @@ def _groove_run_on(img: np.ndarray, wall_level: np.ndarray, hole, theta: float, 
     along; each line's median darkness, and the darkest line's.  A chip's notch ends and
     the wall beyond is the wall (a groove's depth, ~0.05 of the hole's darkness at the
     median); a deep groove that runs into the rim carries its darkness on (0.6-0.9).
-    0 when no direction leaves the rim outwards."""
+    Points off the frame or in another hole's zone (``others``) are not read, nor a line
+    with fewer than 8 points left.  0 when no direction leaves the rim outwards."""
     hh, ww = img.shape
     radial = np.array([np.cos(theta), np.sin(theta)])
     tang = np.array([-radial[1], radial[0]])
     centre = np.array([hole.x_px, hole.y_px])
     rad = hole.diameter_px / 2.0
+    level = np.asarray(wall_level, np.float32)
 
     def darkness(pts: np.ndarray) -> np.ndarray:
-        x = np.clip(pts[..., 0], 0, ww - 1).astype(np.float32)
-        y = np.clip(pts[..., 1], 0, hh - 1).astype(np.float32)
+        """1 - I / W at the points (..., 2); NaN off the frame and in other holes' zones."""
+        x = pts[..., 0].astype(np.float32)
+        y = pts[..., 1].astype(np.float32)
         v = cv2.remap(img, x, y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).astype(np.float32)
-        w = cv2.remap(wall_level.astype(np.float32), x, y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-        return 1.0 - v / np.maximum(w, 1.0)
+        w = cv2.remap(level, x, y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        ix, iy = np.rint(x).astype(int), np.rint(y).astype(int)
+        inside = (ix >= 0) & (iy >= 0) & (ix < ww) & (iy < hh)
+        inside[inside] = ~others[iy[inside], ix[inside]]
+        return np.where(inside, 1.0 - v / np.maximum(w, 1.0), np.nan)
 
     inner = centre + 0.6 * rad * radial + np.linspace(-5.0, 5.0, 11)[:, None] * tang
-    hole_dark = float(np.median(darkness(inner[None])))
+    dark_in = darkness(inner[None])
+    if np.isfinite(dark_in).sum() < 3:
+        return 0.0
+    hole_dark = float(np.nanmedian(dark_in))
     if hole_dark <= 0.05:
         return 0.0
     outer = centre + (rad + height) * radial
@@ -1665,8 +1674,10 @@ def _groove_run_on(img: np.ndarray, wall_level: np.ndarray, hole, theta: float, 
             continue
         t0 = max(6.0, (3.0 * blur + 2.0) / float(u @ radial))
         t = np.arange(t0, t0 + 24.0, 1.0)
-        pts = outer[None, None, :] + offsets[:, None, None] * tang + t[None, :, None] * u
-        best = max(best, float(np.max(np.median(darkness(pts), axis=1))))
+        d = darkness(outer[None, None, :] + offsets[:, None, None] * tang + t[None, :, None] * u)
+        read = np.isfinite(d).sum(axis=1) >= 8
+        if read.any():
+            best = max(best, float(np.max(np.nanmedian(d[read], axis=1))))
     return best / hole_dark
 
 
