@@ -164,7 +164,14 @@ class RendererProcess:
         if self._pool is None:
             raise RendererLost("the renderer process is stopped")
         loop = asyncio.get_running_loop()
-        return await self._wait(loop.run_in_executor(self._pool, fn, *args), timeout)
+        try:
+            # the submit itself raises once the pool has seen its worker die (its manager
+            # thread marks it broken), or after a shutdown: a loss as much as a failed future
+            future = loop.run_in_executor(self._pool, fn, *args)
+        except (BrokenProcessPool, RuntimeError) as exc:
+            self.stop()
+            raise RendererLost("the renderer process died") from exc
+        return await self._wait(future, timeout)
 
     async def _wait(self, future: asyncio.Future, timeout: float):
         try:

@@ -162,3 +162,30 @@ def test_render_here_stops_the_worker_and_keeps_the_pixels(rig):
     pid, frame, renderer = with_worker_twin(rig, body)
     assert pid is not None and renderer is None
     assert frame.image.shape == (256, 320) and frame.image.std() > 1.0  # a rendered wall, not a blank
+
+
+def test_a_renderer_whose_pool_already_knows_its_worker_died_is_lost_not_broken():
+    """After its worker dies the pool's manager thread marks it broken, and from then on
+    the submit itself raises BrokenProcessPool, before any future exists to fail. That
+    raise escaped the renderer's handling, and the camera twin, which renders in a thread
+    from a ``RendererLost`` on, passed it up to the grab (one CI run: the twin test above
+    failed so). Here the pool is let see the death first: the call is a ``RendererLost``
+    and the renderer is stopped."""
+    import time
+
+    from sim.camera.renderer import RendererLost, RendererProcess
+
+    async def go():
+        r = RendererProcess()
+        await r.start()
+        pool = r._pool
+        os.kill(r.pid, signal.SIGKILL)
+        t0 = time.monotonic()
+        while not pool._broken and time.monotonic() - t0 < 10.0:
+            await asyncio.sleep(0.05)
+        assert pool._broken, "the pool did not see its worker die within 10 s"
+        with pytest.raises(RendererLost):
+            await r._call(len, (), timeout=5.0)
+        return r._pool
+
+    assert asyncio.run(go()) is None
