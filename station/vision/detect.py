@@ -13,7 +13,7 @@ fails (a hole merged with dark grooves) is searched again at rising thresholds.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
@@ -66,8 +66,6 @@ def for_scale(cfg: DetectConfig, mm_per_px: float | None) -> DetectConfig:
     widest = MAX_HOLE_MM / mm_per_px
     if widest <= cfg.max_diameter_px:
         return cfg
-    from dataclasses import replace
-
     return replace(cfg, max_diameter_px=float(widest))
 
 
