@@ -177,7 +177,7 @@ class DefectConfig:
     #: an X of residue whose long axis is the hatch's bisector, 30 deg off either family,
     #: so the alignment test above passes it (wide bench seeds 82000 / 1082000, 100 + 100
     #: frames: 7 of the 14 false defects, one a 1.27 mm "scratch"); their arms lie along
-    #: the grooves.  True scratches 0.36-0.98 (median 0.90-0.93; 507 on station and wide
+    #: the grooves.  True scratches 0.36-0.99 (median 0.90-0.93; 502 on station and wide
     #: seeds 81000, 82000, 83000), such residue 0.06-0.25 (9)
     min_scratch_along_share: float = 0.3
     #: length/width at which a dark mark is a scratch rather than a pore (pores of the
