@@ -29,6 +29,13 @@ log = logging.getLogger(__name__)
 
 #: frames of the loop thread's stack kept for a stall (innermost last)
 STACK_FRAMES = 8
+#: ... and of each other thread's, when the loop's was only waiting
+OTHER_FRAMES = 4
+#: the loop thread's innermost function when it waits for I/O or a timer (not working)
+WAITING = frozenset({"select", "poll", "epoll", "_run_once"})
+#: other threads idle in these are left out of a stall's report
+WAITING_ELSEWHERE = frozenset({"wait", "select", "poll", "accept", "recv", "recv_into", "read", "readinto",
+                               "_wait_for_tstate_lock", "get", "_worker", "sleep", "serve_forever"})
 
 
 @dataclass(frozen=True)
@@ -81,11 +88,27 @@ class StallWatch:
             await asyncio.sleep(self._period_s)
 
     def _stack(self) -> str:
-        frame = sys._current_frames().get(self._tid)
+        frames = sys._current_frames()
+        frame = frames.get(self._tid)
         if frame is None:
             return "(the loop's thread has ended)"
         lines = traceback.format_stack(frame)[-STACK_FRAMES:]
-        return "".join(lines).rstrip()
+        where = "".join(lines).rstrip()
+        if frame.f_code.co_name in WAITING:
+            # the loop was waiting, not working: it could not take the interpreter back
+            # from another thread (a compiled kernel that keeps the GIL, say), or the
+            # process was not scheduled at all. The other threads say which
+            names = {t.ident: t.name for t in threading.enumerate()}
+            others = []
+            for tid, f in frames.items():
+                if tid in (self._tid, threading.get_ident()) or f.f_code.co_name in WAITING_ELSEWHERE:
+                    continue
+                stack = "".join(traceback.format_stack(f)[-OTHER_FRAMES:]).rstrip()
+                others.append(f"thread {names.get(tid, tid)!r}:\n{stack}")
+            where += ("\nthe loop's thread was waiting; the other threads that were not:\n" + "\n".join(others)
+                      if others else "\nthe loop's thread was waiting, and so was every other thread (the process "
+                                     "was not scheduled: a loaded machine)")
+        return where
 
     def _watch(self) -> None:
         stalled_since: float | None = None

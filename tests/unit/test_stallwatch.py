@@ -48,3 +48,38 @@ def test_a_loop_that_only_awaits_is_not_reported_and_the_watch_ends_its_thread()
     assert not w.stalls or longest > 0.5, (w.stalls, longest)
     assert all(s.seconds <= longest + 0.2 for s in w.stalls), (w.stalls, longest)
     assert not w._thread.is_alive()
+
+
+def test_a_loop_waiting_for_the_interpreter_names_the_threads_that_were_busy():
+    """A stall with the loop's thread in its selector is no work of the loop's: another
+    thread kept the interpreter (a compiled kernel holding the GIL) or the process was not
+    scheduled. The stack then lists the other threads that were not idle (a CI run's
+    watchdog fault logged only the loop's ``select``)."""
+    import threading
+
+    stop = threading.Event()
+
+    def _busy_elsewhere() -> None:
+        while not stop.is_set():
+            sum(range(1000))
+
+    async def go():
+        async with StallWatch(limit_s=0.5, name="test") as w:
+            worker = threading.Thread(target=_busy_elsewhere, name="busy-worker", daemon=True)
+            worker.start()
+            try:
+                await asyncio.sleep(0.3)
+                # read from another thread, as the watch does, while the loop's thread sits
+                # in its selector awaiting that thread
+                def later() -> str:
+                    time.sleep(0.2)  # the loop's thread back in its selector meanwhile
+                    return w._stack()
+
+                return await asyncio.to_thread(later)
+            finally:
+                stop.set()
+                worker.join(5.0)
+
+    where = asyncio.run(go())
+    assert "the loop's thread was waiting" in where, where
+    assert "busy-worker" in where and "_busy_elsewhere" in where, where
