@@ -2040,13 +2040,9 @@ def _along_share(rs: np.ndarray, region: np.ndarray, angle_deg: float, angles_de
         return 0.0
     line = (0.5 * np.degrees(np.arctan2(dxy, dd)) + 90.0) % 180.0  # the gradient's normal
 
-    def diff(a: np.ndarray, b: float) -> np.ndarray:
-        d = np.abs(a - b) % 180.0
-        return np.minimum(d, 180.0 - d)
-
-    to_groove = np.min([diff(line, float(g)) for g in angles_deg], axis=0) if len(angles_deg) else np.full(line.shape,
-                                                                                                           180.0)
-    along = diff(line, float(angle_deg)) < np.minimum(to_groove, 10.0)
+    to_groove = (np.min([_circ_diff_deg(line, float(g)) for g in angles_deg], axis=0) if len(angles_deg)
+                 else np.full(line.shape, 180.0))
+    along = _circ_diff_deg(line, float(angle_deg)) < np.minimum(to_groove, 10.0)
     return float(weight[along].sum()) / total
 
 

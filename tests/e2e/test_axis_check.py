@@ -127,7 +127,6 @@ def test_a_world_that_agrees_with_its_model_shows_no_mismatch_and_proposes_nothi
     assert not list((tmp_path / "var" / "models" / "proposals").glob("*.json"))
 
 
-
 def test_a_check_stopped_by_a_watchdog_is_run_once_more_and_a_second_stop_stands(tmp_path):
     scen = scenario(tmp_path, "matched", None)
     fam = load_part(FAMILY)
