@@ -141,7 +141,7 @@ def ray_edges(
     return RayEdges(pts[ok], u[ok], peak[ok], sigma2[ok], win[ok], step_px, n_rays, int(valid.sum()), cut)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _ray_peaks(g2: np.ndarray, u: np.ndarray, half: int, step_px: float):
     """Each ray's rim: the discrete peak index k, whether it is usable, the log-parabola's
     sub-sample offset (px) and squared width, the peak value and the +/-``half`` window.

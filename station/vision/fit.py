@@ -176,7 +176,7 @@ def fit_ellipse_direct(pts: np.ndarray) -> tuple[float, float, float, float, flo
     return (float(cx * s + m[0]), float(cy * s + m[1]), float(major * s), float(minor * s), float(np.rad2deg(angle) % 180))
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def gradient_1d(p: np.ndarray) -> np.ndarray:
     """``np.gradient`` of a 1-D array with unit spacing (central differences inside,
     one-sided at the ends), for the compiled kernels (numba has no np.gradient)."""
@@ -189,7 +189,7 @@ def gradient_1d(p: np.ndarray) -> np.ndarray:
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def solve_small(m: np.ndarray, v: np.ndarray):
     """Gaussian elimination with partial pivoting for the fits' 3x3 / 5x5 normal
     equations; (solution, False) when the matrix is singular."""
@@ -221,7 +221,7 @@ def solve_small(m: np.ndarray, v: np.ndarray):
     return x, True
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _irls_circle(px, py, prior, cx, cy, r, min_scale_px, iterations, oval):
     """The IRLS loop of ``robust_circle`` (Gauss-Newton steps on the orthogonal distances
     with Tukey's biweight times the prior weights; the robust scale re-estimated in the

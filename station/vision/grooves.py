@@ -166,7 +166,7 @@ def _upsample(small: np.ndarray, shape: tuple[int, int], x: np.ndarray, y: np.nd
     return out.ravel()[:n].reshape(x.shape)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _profiles(rel, ok, xs, ys, angles, step, sweeps):
     """Backfitted bin means of ``rel`` (rows at ``ys``, pixels where ``ok``) across each
     family's direction; after the first pass, pixels beyond ``_CLIP`` robust standard

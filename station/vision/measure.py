@@ -233,7 +233,7 @@ def _profile_weights(sigma2: np.ndarray, profiles: np.ndarray, peak: np.ndarray)
                                    np.ascontiguousarray(peak, dtype=np.float64))
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _profile_weights_kernel(sigma2, profiles, peak):
     n, m = profiles.shape
     med = np.median(sigma2[np.isfinite(sigma2)])

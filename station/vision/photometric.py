@@ -364,7 +364,7 @@ def _groove_field(
                           cfg.groove_backfit, cfg.groove_sides, float(cfg.groove_pseudo_count))
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _groove_kernel(xw, yw, vw, xt, yt, angles, step, n_backfit=3, sides=1, pseudo=2.0):
     """``_groove_field``'s work on the wall pixels (xw, yw, vw) and the targets (xt, yt).
     (Compiled: about twenty numpy calls on a few thousand pixels each.)"""
