@@ -11,13 +11,17 @@ fault itself says only "watchdog expired"; what held the loop is gone by then.
 is older than ``limit_s`` (half the shortest watchdog), the thread takes the loop
 thread's stack at once, and when the loop turns again the stall is logged once, as a
 warning with its length and that stack, and kept in ``stalls``. It reads only its own
-clock and the interpreter's frames: nothing on the loop waits for it.
+clock and the interpreter's frames: nothing on the loop waits for it. A stall that a
+long cyclic garbage collection fell in says so (``gc.callbacks``): a full collection in
+a long-lived process holds every thread, and leaves the loop's stack in its selector.
 """
 
 from __future__ import annotations
 
 import asyncio
+import collections
 import contextlib
+import gc
 import logging
 import sys
 import threading
@@ -36,6 +40,41 @@ WAITING = frozenset({"select", "poll", "epoll", "_run_once"})
 #: other threads idle in these are left out of a stall's report
 WAITING_ELSEWHERE = frozenset({"wait", "select", "poll", "accept", "recv", "recv_into", "read", "readinto",
                                "_wait_for_tstate_lock", "get", "_worker", "sleep", "serve_forever"})
+
+
+#: a cyclic garbage collection this long is kept, to be named in a stall it falls in
+LONG_COLLECTION_S = 0.05
+
+
+class _Collections:
+    """The interpreter's cyclic garbage collections, timed through ``gc.callbacks``: a
+    full collection holds the interpreter (every thread, the loop's among them) for as
+    long as it takes to walk every tracked object, which in a long-lived process can be a
+    second. The long ones are kept, as (start, end, generation, objects freed)."""
+
+    def __init__(self, keep_s: float = LONG_COLLECTION_S) -> None:
+        self.keep_s = keep_s
+        self.long: collections.deque[tuple[float, float, int, int]] = collections.deque(maxlen=32)
+        self._start: float | None = None
+
+    def __call__(self, phase: str, info: dict) -> None:
+        if phase == "start":
+            self._start = time.monotonic()
+        elif self._start is not None:
+            end = time.monotonic()
+            if end - self._start >= self.keep_s:
+                self.long.append((self._start, end, int(info.get("generation", -1)),
+                                  int(info.get("collected", 0))))
+            self._start = None
+
+    def within(self, t0: float, t1: float) -> str:
+        """The long collections that overlapped [t0, t1], said in a line (empty if none)."""
+        hit = [c for c in list(self.long) if c[1] > t0 and c[0] < t1]
+        if not hit:
+            return ""
+        held = sum(min(e, t1) - max(s, t0) for s, e, _, _ in hit)
+        kinds = ", ".join(f"generation {g} for {e - s:.2f} s ({n} objects freed)" for s, e, g, n in hit)
+        return f"the interpreter's garbage collector held every thread for {held:.2f} s of it: {kinds}"
 
 
 @dataclass(frozen=True)
@@ -63,18 +102,22 @@ class StallWatch:
         self._ticker: asyncio.Task | None = None
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
+        self._collections = _Collections()
 
     async def __aenter__(self) -> "StallWatch":
         self._tid = threading.get_ident()
         self._seen = time.monotonic()
         self._ticker = asyncio.create_task(self._tick(), name=f"{self.name}-stall-tick")
         self._stop.clear()
+        gc.callbacks.append(self._collections)
         self._thread = threading.Thread(target=self._watch, name=f"{self.name}-stallwatch", daemon=True)
         self._thread.start()
         return self
 
     async def __aexit__(self, *exc) -> None:
         self._stop.set()
+        with contextlib.suppress(ValueError):
+            gc.callbacks.remove(self._collections)
         if self._ticker is not None:
             self._ticker.cancel()
             with contextlib.suppress(asyncio.CancelledError):
@@ -119,12 +162,16 @@ class StallWatch:
             if stalled_since is None and age > self.limit_s:
                 stalled_since, where = seen, self._stack()
             elif stalled_since is not None and seen != stalled_since:
-                self._record(seen - stalled_since, where)
+                self._record(stalled_since, seen, where)
                 stalled_since = None
         if stalled_since is not None:
-            self._record(time.monotonic() - stalled_since, where)
+            self._record(stalled_since, time.monotonic(), where)
 
-    def _record(self, seconds: float, where: str) -> None:
+    def _record(self, since: float, until: float, where: str) -> None:
+        seconds = until - since
+        collector = self._collections.within(since, until)
+        if collector:
+            where += "\n" + collector
         stall = Stall(seconds, where)
         self.stalls.append(stall)
         log.warning("the %s event loop did not turn for %.2f s (the drives' heartbeats ride it, and a drive's "

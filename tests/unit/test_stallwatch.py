@@ -83,3 +83,44 @@ def test_a_loop_waiting_for_the_interpreter_names_the_threads_that_were_busy():
     where = asyncio.run(go())
     assert "the loop's thread was waiting" in where, where
     assert "busy-worker" in where and "_busy_elsewhere" in where, where
+
+
+def test_a_stall_that_a_garbage_collection_fell_in_names_the_collector():
+    """A full cyclic collection holds every thread of the process: in a long-lived one
+    (the station's, or a test run's after a thousand tests) it can outlast a drive's
+    watchdog, and the loop's stack then shows only its selector. The stall says so."""
+    import gc
+
+    async def go():
+        async with StallWatch(limit_s=0.1, name="test") as w:
+            w._collections.keep_s = 0.0  # keep every collection, however short, for the test
+            await asyncio.sleep(0.05)
+            gc.collect()  # a full collection, inside the stall the sleep below makes
+            _hold_the_loop(0.3)
+            await asyncio.sleep(0.1)
+        assert w._collections not in gc.callbacks  # the watch takes its hook away
+        return w
+
+    w = asyncio.run(go())
+    named = [s for s in w.stalls if "garbage collector held every thread" in s.where]
+    assert len(named) == 1, w.stalls
+    assert "generation 2" in named[0].where
+
+
+def test_a_stall_with_no_collection_in_it_does_not_blame_the_collector():
+    async def go():
+        async with StallWatch(limit_s=0.1, name="test") as w:
+            await asyncio.sleep(0.05)
+            _hold_the_loop(0.3)
+            await asyncio.sleep(0.1)
+        return w
+
+    import gc
+
+    gc.disable()  # no collection may fall in the stall (its absence is what is tested)
+    try:
+        w = asyncio.run(go())
+    finally:
+        gc.enable()
+    assert [s for s in w.stalls if "_hold_the_loop" in s.where], w.stalls
+    assert not any("garbage collector" in s.where for s in w.stalls)
