@@ -124,3 +124,37 @@ def test_a_stall_with_no_collection_in_it_does_not_blame_the_collector():
         gc.enable()
     assert [s for s in w.stalls if "_hold_the_loop" in s.where], w.stalls
     assert not any("garbage collector" in s.where for s in w.stalls)
+
+
+def test_a_sessions_heap_is_left_out_of_collections_while_open_and_handed_back_after_the_last():
+    """``heap_frozen``: the objects alive when a session opens are not walked by the
+    collections of its life (a full one over a test run's or a station's heap held the
+    loop for 0.4-0.75 s); overlapping sessions hand the heap back only when the last ends,
+    and then a cycle made unreachable meanwhile is collected as usual."""
+    import gc
+    import weakref
+
+    from station.stallwatch import heap_frozen
+
+    class Node:
+        pass
+
+    assert gc.get_freeze_count() == 0
+    before = Node()
+    before.me = before  # a cycle alive on entry
+    alive = weakref.ref(before)
+    first = heap_frozen()
+    first.__enter__()
+    assert gc.get_freeze_count() > 0
+    with heap_frozen():  # a second session, overlapping the first
+        inner = Node()
+        inner.me = inner
+    # the second's end must not hand the heap back while the first is open
+    assert gc.get_freeze_count() > 0
+    del before
+    gc.collect()
+    assert alive() is not None, "a frozen object was walked by a collection"
+    first.__exit__(None, None, None)
+    assert gc.get_freeze_count() == 0
+    gc.collect()
+    assert alive() is None, "the heap was not handed back: its garbage is kept for good"
