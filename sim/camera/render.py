@@ -107,6 +107,12 @@ class FrameParams:
     read_noise_dn: float = 1.5
     vignetting: float = 0.35  # relative fall-off at the frame corner (r^2 law)
     lens: BrownLens | None = None
+    #: the cross-hatch's half-angle (deg from the frame's x axis, both signs)
+    hatch_deg: float = HONING_ANGLE_DEG
+    #: the wall's texture (grooves' widths and spacing, the grain's and the blotches'
+    #: sizes) in px is this times its size at the station's 0.010 mm/px: a camera of
+    #: s mm/px sees it 0.010 / s as large (the sensor's noise stays per pixel)
+    texture_scale: float = 1.0
 
 
 @dataclass
@@ -126,8 +132,9 @@ def _groove_profile(rng: np.random.Generator, length_px: float, params: FramePar
     """1-D darkening profile across one groove family: Poisson-placed Gaussian grooves."""
     n = int(length_px / step_px) + 8
     profile = np.zeros(n)
-    for sigma_px in (0.8, 1.5, 3.0):  # fine, medium and coarse stones of a honing tool
-        count = rng.poisson(length_px / params.groove_spacing_px / 3.0)
+    k = params.texture_scale
+    for sigma_px in (0.8 * k, 1.5 * k, 3.0 * k):  # fine, medium and coarse stones of a honing tool
+        count = rng.poisson(length_px / (params.groove_spacing_px * k) / 3.0)
         idx = rng.integers(0, n, count)
         depth = np.minimum(rng.exponential(params.groove_depth, count), 3 * params.groove_depth)
         impulses = np.zeros(n)
@@ -149,22 +156,25 @@ def wall_radiance(rng: np.random.Generator, xu: np.ndarray, yu: np.ndarray, para
     """Honed wall reflectance (DN) at ideal coordinates ``xu``, ``yu``; ``parts``, if
     given, receives ``"grooves"``: the grooves' share of it (relative, a copy)."""
     h, w = xu.shape
+    k = params.texture_scale
+    if not k > 0:
+        raise ValueError(f"texture_scale must be positive, not {k}")
     rel = np.zeros((h, w), np.float32)
     for sign in (+1.0, -1.0):
-        phi = np.deg2rad(sign * HONING_ANGLE_DEG)
+        phi = np.deg2rad(sign * params.hatch_deg)
         u = (-np.sin(phi) * xu + np.cos(phi) * yu).astype(np.float32)
         u0 = float(u.min()) - 4.0
         profile = _groove_profile(rng, float(u.max()) - u0 + 8.0, params)
         grid = u0 + 0.25 * np.arange(profile.size)
         grooves = np.interp(u, grid, profile).astype(np.float32)
         # grooves fade in and out along their length (worn stones, plateau honing)
-        rel -= grooves * (0.6 + 0.4 * np.tanh(_lowfreq(rng, w, h, 96)))
+        rel -= grooves * (0.6 + 0.4 * np.tanh(_lowfreq(rng, w, h, max(2, round(96 * k)))))
     if parts is not None:
         parts["grooves"] = rel.copy()
     grain = rng.standard_normal((h, w), dtype=np.float32)
-    grain = cv2.GaussianBlur(grain, (0, 0), 0.7)
+    grain = cv2.GaussianBlur(grain, (0, 0), 0.7 * k)
     rel += params.grain * grain / max(float(grain.std()), 1e-6)
-    rel += params.blotch * _lowfreq(rng, w, h, 64)
+    rel += params.blotch * _lowfreq(rng, w, h, max(2, round(64 * k)))
     return params.wall_level_dn * (1.0 + rel)
 
 

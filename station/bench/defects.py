@@ -55,6 +55,8 @@ TWIN_SCRATCH_MM = dict(length=(1.1, 2.0), width=(0.015, 0.06))
 TWIN_OFFSET_MM = 1.0
 #: a scratch this long (mm) in a frame without a hole is reported apart in the random frames
 LONG_SCRATCH_MM = 1.0
+#: the scale the twin's wall texture is drawn for (``--texture-in-mm`` scales it from here)
+STATION_MM_PER_PX = 0.010
 
 
 def match(truths, found, mm_per_px: float) -> tuple[list[tuple], list[int]]:
@@ -174,10 +176,13 @@ def _twin_scratches(frames: int, seed: int, mm_per_px: float, tick) -> dict:
 
 
 def run(frames: int = 100, seed: int = 50000, envelope: str = "station", mm_per_px: float = 0.010,
-        progress=None, twin_frames: int = 0) -> dict:
+        progress=None, twin_frames: int = 0, hatch_deg: float | None = None, texture_in_mm: bool = False) -> dict:
     """``frames`` frames with defects and ``frames`` clean ones, and ``twin_frames``
     frames of the camera twin with a long scratch (``twin_scratch_frame``, seeds from
-    ``seed + 2,000,000``); ``progress()`` after each."""
+    ``seed + 2,000,000``); ``progress()`` after each. ``hatch_deg``: the cross-hatch's
+    half-angle (None: the renderer's 30 deg); ``texture_in_mm``: the wall's texture
+    drawn at the frames' scale (grooves, grain and blotches as large in mm as at the
+    station's 0.010 mm/px), not in px."""
     import cv2
 
     from sim.camera.defects import random_defect_frame  # the CLI side may import sim
@@ -186,6 +191,11 @@ def run(frames: int = 100, seed: int = 50000, envelope: str = "station", mm_per_
 
     cv2.setNumThreads(1)
     tick = progress or (lambda: None)
+    wall = {}
+    if hatch_deg is not None:
+        wall["hatch_deg"] = float(hatch_deg)
+    if texture_in_mm:
+        wall["texture_scale"] = STATION_MM_PER_PX / mm_per_px
     warm_up()
     per_kind: dict[str, list[tuple]] = defaultdict(list)
     long_no_hole: list[tuple] = []
@@ -195,7 +205,7 @@ def run(frames: int = 100, seed: int = 50000, envelope: str = "station", mm_per_
         for i in range(frames):
             # clean frames from their own seeds: other walls than the defect frames'
             s = seed + i + (1_000_000 if clean else 0)
-            f = random_defect_frame(s, {} if clean else None, mm_per_px=mm_per_px, envelope=envelope)
+            f = random_defect_frame(s, {} if clean else None, mm_per_px=mm_per_px, envelope=envelope, **wall)
             n_holes += len(f.holes)
             c0 = time.process_time()
             found = detect_defects(f.image, mm_per_px)
@@ -238,6 +248,8 @@ def run(frames: int = 100, seed: int = 50000, envelope: str = "station", mm_per_
         "seed": seed,
         "envelope": envelope,
         "mm_per_px": mm_per_px,
+        "hatch_deg": hatch_deg if hatch_deg is not None else 30.0,
+        "texture": "mm" if texture_in_mm else "px",
         "holes": n_holes,
         "kinds": kinds,
         "false_per_100_clean_frames": 100.0 * len(false_clean) / frames,
@@ -272,7 +284,13 @@ def register(bench_app: typer.Typer) -> None:
                                              "hole (0: none; 50: ~30 s)"),
         mm_per_px: float = typer.Option(0.010, "--mm-per-px", min=0.002, max=0.05,
                                         help="the frames' scale at the wall (the station's camera: 0.010); defects' "
-                                             "and holes' sizes are drawn in mm, the wall's texture stays in px"),
+                                             "and holes' sizes are drawn in mm, the wall's texture in px unless "
+                                             "--texture-in-mm"),
+        hatch_deg: float = typer.Option(30.0, "--hatch-deg", min=10.0, max=60.0,
+                                        help="the honing cross-hatch's half-angle (plateau honing: 20-35 deg)"),
+        texture_in_mm: bool = typer.Option(False, "--texture-in-mm",
+                                           help="draw the wall's grooves, grain and blotches at the frames' scale (as "
+                                                "a finer or coarser camera sees them), not in px"),
         as_json: bool = typer.Option(False, "--json", help="one JSON object on stdout"),
     ) -> None:
         """Surface defects: recall above the limit per kind, false defects on clean walls, size errors, CPU time."""
@@ -284,12 +302,13 @@ def register(bench_app: typer.Typer) -> None:
         with Progress(console=out_console, transient=True, disable=as_json) as bar:
             task = bar.add_task("rendering and inspecting frames", total=2 * frames + twin_frames)
             r = run(frames, seed, envelope, mm_per_px=mm_per_px, progress=lambda: bar.advance(task),
-                    twin_frames=twin_frames)
+                    twin_frames=twin_frames, hatch_deg=hatch_deg, texture_in_mm=texture_in_mm)
         if as_json:
             print_json(r)
             return
         t = Table(title=f"defects: {r['frames_with_defects']} frames with defects + {r['clean_frames']} clean, "
-                        f"seed {r['seed']}, {r['mm_per_px']} mm/px, {r['holes']} holes (one core)")
+                        f"seed {r['seed']}, {r['mm_per_px']} mm/px, hatch +/-{r['hatch_deg']:g} deg, texture in "
+                        f"{r['texture']}, {r['holes']} holes (one core)")
         for c in ("kind", "seeded", "limit mm", "above", "recall", "below: recall", "other kind",
                   "L med mm", "L p90 mm", "L in tol", "W med mm", "W p90 mm", "W in tol", "L in 2u"):
             t.add_column(c, justify="right")

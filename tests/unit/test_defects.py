@@ -280,14 +280,11 @@ def test_the_honing_directions_are_read_from_the_frame():
     assert a1 == pytest.approx(30.0, abs=0.3) and a2 == pytest.approx(150.0, abs=0.3)
 
 
-def test_a_hatch_of_another_angle_whose_families_differ_in_strength_is_read(monkeypatch):
+def test_a_hatch_of_another_angle_whose_families_differ_in_strength_is_read():
     """A part honed at 22 deg (plateau honing specifies 20-35 deg) whose two families'
     power differs 5x (the grooves fade along their lengths): both are read, not the
     +/-30 deg fallback, and the clean wall gives no defect (it gave seven "scratches")."""
-    import sim.camera.render as render
-
-    monkeypatch.setattr(render, "HONING_ANGLE_DEG", 22.0)
-    f = random_defect_frame(1063018, {}, mm_per_px=MM_PER_PX)
+    f = random_defect_frame(1063018, {}, mm_per_px=MM_PER_PX, hatch_deg=22.0)
     small = cv2.resize(f.image.astype(np.float32), (640, 512), interpolation=cv2.INTER_AREA)
     darkness = 1.0 - small / cv2.GaussianBlur(small, (0, 0), 8.0)
     a1, a2 = honing_directions(darkness, np.ones(darkness.shape, bool))

@@ -503,14 +503,12 @@ def test_a_centre_that_ran_off_the_frame_gives_no_edges_not_an_opencv_error():
 
 # ---------------------------------------------------------------- the hatch's angle
 @pytest.mark.parametrize("angle", [22.0, 25.0, 35.0])
-def test_the_frames_hatch_directions_are_read_to_a_tenth_of_a_degree(monkeypatch, angle):
+def test_the_frames_hatch_directions_are_read_to_a_tenth_of_a_degree(angle):
     """The honing angle is the part's (plateau honing: 20-35 deg), not the station's."""
-    import sim.camera.render as render
     from station.vision.grooves import frame_hatch
 
-    monkeypatch.setattr(render, "HONING_ANGLE_DEG", angle)
     for seed in (3000, 3001):
-        f = random_frame(seed)
+        f = random_frame(seed, hatch_deg=angle)
         a1, a2 = frame_hatch(f.image, [(h.x_px, h.y_px, 1.3 * h.diameter_px / 2 + 4.0) for h in f.holes])
         assert a1 == pytest.approx(angle, abs=0.1) and a2 == pytest.approx(-angle, abs=0.1)
 
@@ -523,17 +521,15 @@ def test_a_frame_without_a_hatch_keeps_the_nominal_directions():
     assert frame_hatch(f.image, [(320.3, 256.6, 50.0)], (28.0, -31.0)) == (28.0, -31.0)
 
 
-def test_holes_on_a_25_degree_hatch_are_measured_with_the_hatch_the_frame_shows(monkeypatch):
+def test_holes_on_a_25_degree_hatch_are_measured_with_the_hatch_the_frame_shows():
     """A 25 deg hatch (8 % grooves) read as the nominal 30 deg leaves the grooves in the
     rim's pixels; read from the frame it is modelled (dev seeds: diameter z^2 +0.33 to
     +0.50 with the nominal, +0.003 to +0.006 against the true angle read)."""
-    import sim.camera.render as render
     from station.vision.scoring import match_whole_holes
 
-    monkeypatch.setattr(render, "HONING_ANGLE_DEG", 25.0)
     errors = {True: [], False: []}
     for seed in range(7100, 7112):
-        f = random_frame(seed, groove_depth=0.08)
+        f = random_frame(seed, groove_depth=0.08, hatch_deg=25.0)
         truths = [(h.x_px, h.y_px, h.diameter_px, h.partial) for h in f.holes]
         whole = [t for t in truths if not t[3]]
         for read in (True, False):
