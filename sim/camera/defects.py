@@ -427,7 +427,7 @@ def random_defects(rng: np.random.Generator, params, holes: list, kinds: dict[st
                     length = rng.uniform(*sizes["length"]) / mm_per_px
                     # a furrow is long and thin: at least SCRATCH_MIN_ELONGATION times its width
                     width = min(rng.uniform(*sizes["width"]) / mm_per_px, length / SCRATCH_MIN_ELONGATION)
-                    angle = random_scratch_angle(rng)
+                    angle = random_scratch_angle(rng, params.hatch_deg)
                 else:
                     length = rng.uniform(*sizes["length"]) / mm_per_px
                     width = rng.uniform(*sizes["width"]) / mm_per_px
