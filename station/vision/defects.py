@@ -793,6 +793,42 @@ def _fit_contrast(r, xx, yy, use, cx, cy, cov, mass,
     return c, s, c_sd, aspect
 
 
+def _outline(r, xx, yy, omega, cx, cy, mass: float, c: float, blur: float, with_order: bool = False):
+    """A dark mark's outline, radius against angle (360 angles over -pi..pi), from the
+    darkening ``r`` over ``omega``: its angular density round the centroid is
+    c r(theta)^2 / 2 (the area a direction holds), whatever the blur; as a Fourier series
+    of the pixels' angles (no binning), to the order the blur resolves (k sigma / R < 1)."""
+    dx, dy = xx[omega] - cx, yy[omega] - cy
+    phi = np.arctan2(dy, dx)
+    mv = r[omega]
+    r_eq = np.sqrt(max(mass / c, 1.0) / np.pi)
+    order = int(np.clip(np.floor(r_eq / max(blur, 0.7)), 2, 8))
+    ks = np.arange(1, order + 1)
+    cos_k, sin_k = np.cos(ks[:, None] * phi[None, :]), np.sin(ks[:, None] * phi[None, :])
+    a_k, b_k = cos_k @ mv, sin_k @ mv
+    th = np.linspace(-np.pi, np.pi, 360, endpoint=False)
+    harmonics = a_k @ np.cos(ks[:, None] * th[None, :]) + b_k @ np.sin(ks[:, None] * th[None, :])
+    density = (mass + 2.0 * harmonics) / (2 * np.pi)
+    rr = np.sqrt(np.clip(2.0 * density / c, 0.0, None))
+    return (th, rr, order) if with_order else (th, rr)
+
+
+def _outline_roughness(th: np.ndarray, rr: np.ndarray) -> float:
+    """The RMS of an outline's radius about its ellipse (px): how far the outline departs
+    from what the blurred-ellipse model can follow. An ellipse centred on the origin has
+    1 / r^2 = A + B cos 2 theta + C sin 2 theta exactly; the first harmonic is let in for
+    a centroid that is not the ellipse's centre (least squares on 1 / r^2)."""
+    ok = rr > 0.5
+    if ok.sum() < 12:
+        return 0.0
+    t = th[ok]
+    basis = np.column_stack([np.ones_like(t), np.cos(2 * t), np.sin(2 * t), np.cos(t), np.sin(t)])
+    coef, *_ = np.linalg.lstsq(basis, 1.0 / rr[ok] ** 2, rcond=None)
+    q = np.column_stack([np.ones_like(th), np.cos(2 * th), np.sin(2 * th), np.cos(th), np.sin(th)]) @ coef
+    fitted = 1.0 / np.sqrt(np.maximum(q, 1e-12))
+    return float(np.sqrt(np.mean((rr - fitted) ** 2)))
+
+
 def _measure_pore(patch: _Patch, region: np.ndarray, cfg: DefectConfig, allow_scratch: bool = True,
                   blur_hint: float | None = None):
     """A pore: centroid, outline from the darkening in 32 sectors, greatest Feret
@@ -827,8 +863,17 @@ def _measure_pore(patch: _Patch, region: np.ndarray, cfg: DefectConfig, allow_sc
     c, blur, c_sd, aspect = _fit_contrast(r, xx, yy, fit_area, cx, cy, cov, mass)
     if allow_scratch and aspect >= cfg.scratch_elongation:
         return dict(scratch=True)  # long and thin once the blur is taken out: a short scratch
-    if c < cfg.min_pore_contrast or blur > cfg.max_edge_blur_px:
+    if c < cfg.min_pore_contrast:
         return None
+    if blur > cfg.max_edge_blur_px:
+        # the blurred ellipse takes a ragged outline's departure from an ellipse for blur
+        # (a radial scatter rho widens the mean edge to sqrt(s^2 + rho^2)): what the
+        # outline's own harmonics beyond the ellipse's say of it comes off first. A soft
+        # shading of the wall has a smooth outline and keeps its blur
+        th, rr = _outline(r, xx, yy, omega, cx, cy, mass, c, blur)
+        rough = _outline_roughness(th, rr)
+        if np.sqrt(max(blur * blur - rough * rough, 0.0)) > cfg.max_edge_blur_px:
+            return None
     held = blur_hint
     if held is None and c > 1.0:
         # no blur known and a floor darker than black: the fit traded size for blur; the
@@ -837,21 +882,8 @@ def _measure_pore(patch: _Patch, region: np.ndarray, cfg: DefectConfig, allow_sc
     if held is not None:
         c, blur, c_sd, _ = _fit_contrast(r, xx, yy, fit_area, cx, cy, cov, mass,
                                          blur_held=float(np.clip(held, 0.5, 3.5)))
-    # the outline: the darkening's angular density round the centroid is c r(theta)^2 / 2
-    # (the area a direction holds), whatever the blur; as a Fourier series of the
-    # pixels' angles (no binning), to the order the blur resolves (k sigma / R < 1)
-    dx, dy = xx[omega] - cx, yy[omega] - cy
-    phi = np.arctan2(dy, dx)
-    mv = r[omega]
+    th, rr, order = _outline(r, xx, yy, omega, cx, cy, mass, c, blur, with_order=True)
     r_eq = np.sqrt(max(mass / c, 1.0) / np.pi)
-    order = int(np.clip(np.floor(r_eq / max(blur, 0.7)), 2, 8))
-    ks = np.arange(1, order + 1)
-    cos_k, sin_k = np.cos(ks[:, None] * phi[None, :]), np.sin(ks[:, None] * phi[None, :])
-    a_k, b_k = cos_k @ mv, sin_k @ mv
-    th = np.linspace(-np.pi, np.pi, 360, endpoint=False)
-    harmonics = a_k @ np.cos(ks[:, None] * th[None, :]) + b_k @ np.sin(ks[:, None] * th[None, :])
-    density = (mass + 2.0 * harmonics) / (2 * np.pi)
-    rr = np.sqrt(np.clip(2.0 * density / c, 0.0, None))
     length, direction, width = feret(rr * np.cos(th), rr * np.sin(th))
     # noise of a sum over n px: the 5x5 box mean's spread x 25 per 25 px (correlated
     # grain); each coefficient sums the pixels with weights of RMS 1/sqrt(2); r^2 = 2 D / c
@@ -1488,7 +1520,11 @@ def _rim_defects(img: np.ndarray, hole, index: int, zone_others: np.ndarray, wal
     theta, valid = prof.theta, prof.valid
     rad = hole.diameter_px / 2.0
     n = theta.size
-    whole = bool(valid.all())
+    # the rays run on across theta = 0 when both ends are read: an arc left out elsewhere
+    # (another hole's zone, a pore claimed beside the rim) does not cut the rim there, and
+    # a defect across that point is one run (a burr at 0 deg on a rim with a pore's arc
+    # left out was reported twice, as its two halves' runs)
+    whole = bool(valid[0] and valid[-1])
     # the rim's baseline is a circle (the first harmonic: the measured centre's offset):
     # a second harmonic (ovality) bent round the arcs the defects take out of the fit
     # and read the clean rim between two burrs as a 3 px "chip" (dev: a quarter of a rim

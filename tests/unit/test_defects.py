@@ -534,3 +534,45 @@ def test_a_finer_cameras_large_pores_keep_their_size():
                 assert _within(d.width_mm, t.width_mm), (seed, d.width_mm, t.width_mm)
                 checked += 1
     assert checked == 3  # one such pore in each frame
+
+
+def test_a_large_pore_with_a_ragged_outline_is_not_taken_for_a_soft_shading():
+    """At 0.005 mm/px, with the wall's texture drawn at that scale, a 0.31 x 0.22 mm pore
+    (62 x 43 px) of ragged outline fitted a blurred ellipse whose edge blur was 2.9 px (1.4
+    rendered): the outline's departure from an ellipse read as blur, and the mark was
+    dropped as a soft shading of the wall (max 2.8 px). The outline's own roughness beyond
+    the ellipse's harmonics (2.5 px RMS here) comes off the blur first."""
+    mm = 0.005
+    f = random_defect_frame(88030, mm_per_px=mm, texture_scale=0.010 / mm)
+    found = detect_defects(f.image, mm)
+    pairs, false = match(f.defects, found, mm)
+    big = [(t, d) for t, d in pairs if t.kind == "pore" and np.hypot(t.image_x_px - 1176, t.image_y_px - 387) < 5]
+    assert len(big) == 1 and big[0][0].length_mm > 0.3
+    t, d = big[0]
+    assert d is not None and d.kind == "pore"
+    assert _within(d.length_mm, t.length_mm) and _within(d.width_mm, t.width_mm), (d.length_mm, d.width_mm)
+    assert [found[k].kind for k in false] == []
+
+
+def test_an_outlines_roughness_is_its_departure_from_an_ellipse():
+    from station.vision.defects import _outline_roughness
+
+    th = np.linspace(-np.pi, np.pi, 360, endpoint=False)
+    for aspect in (1.0, 1.3, 2.5):  # an ellipse has none, however elongated
+        ellipse = 20.0 / np.sqrt((np.cos(th - 0.4) / aspect) ** 2 + (np.sin(th - 0.4)) ** 2)
+        assert _outline_roughness(th, ellipse) < 1e-6, aspect
+    ragged = 20.0 + 2.0 * np.cos(5 * th) + 1.0 * np.sin(7 * th)  # 1.58 px RMS beyond the circle
+    assert _outline_roughness(th, ragged) == pytest.approx(np.sqrt((4.0 + 1.0) / 2.0), rel=0.05)
+
+
+def test_a_burr_across_the_rims_zero_angle_is_one_burr_when_an_arc_elsewhere_is_left_out():
+    """A rim whose rays are not all read (a pore claimed beside it leaves an arc out at
+    the top) still runs on across 0 deg: a 0.17 mm burr there was reported twice, as the
+    two runs either side of the wrap (22 deg hatch, bench seed 89058)."""
+    f = random_defect_frame(89058, mm_per_px=MM_PER_PX, hatch_deg=22.0)
+    found = detect_defects(f.image, MM_PER_PX)
+    pairs, false = match(f.defects, found, MM_PER_PX)
+    assert [(found[k].kind, round(found[k].x_px)) for k in false] == []
+    burrs = [(t, d) for t, d in pairs if t.kind == "burr"]
+    assert len(burrs) == 2 and all(d is not None and d.kind == "burr" for _, d in burrs)
+    assert all(_within(d.length_mm, t.length_mm) for t, d in burrs), [(t.length_mm, d.length_mm) for t, d in burrs]
