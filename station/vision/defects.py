@@ -1507,10 +1507,26 @@ def _hole_blur(hole) -> float:
     return float(np.sqrt(max(hole.edge_sigma_px**2 - 1.0 - 1.0 / 6.0, 0.25)))
 
 
+def _marks_mask(shape: tuple[int, int], found, blur: float) -> np.ndarray:
+    """The frame's pores and scratches found, each as its measured ellipse (length by
+    width along its direction) grown by its blurred skirt (3 blur + 2 px): whole, where
+    their claimed regions stop at a hole's zone (``_groove_run_on`` must not read a pore
+    beside a rim as a groove's darkness running on)."""
+    mask = np.zeros(shape, np.uint8)
+    pad = 3.0 * blur + 2.0
+    for d in found:
+        if d.kind not in ("pore", "scratch"):
+            continue
+        axes = (int(np.ceil(d.length_px / 2.0 + pad)), int(np.ceil(d.width_px / 2.0 + pad)))
+        cv2.ellipse(mask, (int(round(d.x_px)), int(round(d.y_px))), axes, float(d.angle_deg), 0.0, 360.0, 1, -1)
+    return mask.astype(bool)
+
+
 def _rim_defects(img: np.ndarray, hole, index: int, zone_others: np.ndarray, wall_level: np.ndarray, angles_deg,
-                 cfg: DefectConfig, mm_per_px: float) -> list[Defect]:
+                 cfg: DefectConfig, mm_per_px: float, marks: np.ndarray | None = None) -> list[Defect]:
     """Burrs and chips on one hole's rim: where the rim's edge stands out of its own
-    low harmonics, inwards (burr) or outwards (chip)."""
+    low harmonics, inwards (burr) or outwards (chip). ``marks``: the frame's pores and
+    scratches found (``_marks_mask``), which a chip's run-on test does not read."""
     blur = _hole_blur(hole) if getattr(hole, "edge_sigma_px", None) else 1.3
     reach = cfg.rim_reach_mm / mm_per_px + 2.5 * blur + 2.0
     prof = _rim_profile(img, hole, zone_others, reach, wall_level, angles_deg, blur, cfg.rim_crossing,
@@ -1622,8 +1638,9 @@ def _rim_defects(img: np.ndarray, hole, index: int, zone_others: np.ndarray, wal
                 height /= _chip_floor(prof, win[ok] % n, s_arc, s1, s2, base, edge_out, blur)
             if height < cfg.rim_min_height_px:
                 continue  # the area-true height decides; the crossing only found it
-            if kind == "chip" and _groove_run_on(img, wall_level, zone_others, hole, ((s1 + s2) / 2.0) / rad, length,
-                                                 height, angles_deg, blur) > cfg.chip_groove_share:
+            if kind == "chip" and _groove_run_on(img, wall_level, zone_others if marks is None else zone_others | marks,
+                                                 hole, ((s1 + s2) / 2.0) / rad, length, height, angles_deg,
+                                                 blur) > cfg.chip_groove_share:
                 continue  # a deep groove running into the rim
             partial = not ok.all()
             significance = height * np.sqrt(length) / noise
@@ -1908,9 +1925,10 @@ def detect_defects(image: np.ndarray, mm_per_px: float, *, holes=None, blur_px: 
         examined.append(ex)
     found: list[Defect] = [ex.defect for ex in examined if ex.defect is not None]
     others = [_hole_zone(img.shape, [h for j, h in enumerate(holes) if j != i], reach_px) for i in range(len(holes))]
+    marks = _marks_mask(img.shape, found, blur_hint if blur_hint is not None else BLUR_PRIOR_PX[0])
     for i, hole in enumerate(holes):
         found += _rim_defects(img, hole, i, others[i] | (claimed_regions & ~_hole_zone(img.shape, [hole], reach_px)),
-                              level_full, wall.angles_deg, cfg, mm_per_px)
+                              level_full, wall.angles_deg, cfg, mm_per_px, marks=marks)
     out = []
     model = {k: (a, b) for k, a, b in cfg.model_u_px}
     for d in found:
