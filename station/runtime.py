@@ -280,16 +280,17 @@ async def open_session(config: str | Path | None = None, *, scenario: str | Path
         settings = settings or ScanSettings()
         measure = await asyncio.to_thread(vision_measure, station.mm_per_px)
         watch = await asyncio.to_thread(StationWatch, gate_um=settings.model_u_um)
-        await station.connect()
-        devices = Devices(station.z, station.c, station.encoder, station.camera, measure=measure,
-                          surface=vision_defects(station.mm_per_px))
-        session = Session(station, store, Engine(devices), settings, watch=watch)
-        annotator = station.truth_annotator()
-        if annotator is not None:
-            session.documents.subscribe(annotator)
         # the heap built so far (kernels, store, app) is left out of the collections the
-        # session's life brings: a full one over it holds the loop for 0.4-0.75 s
+        # session's life brings: a full one over it held the loop for 0.4-0.75 s. Its
+        # garbage is collected first, here, before the drives' heartbeats ride the loop
         with heap_frozen():
+            await station.connect()
+            devices = Devices(station.z, station.c, station.encoder, station.camera, measure=measure,
+                              surface=vision_defects(station.mm_per_px))
+            session = Session(station, store, Engine(devices), settings, watch=watch)
+            annotator = station.truth_annotator()
+            if annotator is not None:
+                session.documents.subscribe(annotator)
             async with StallWatch(stall_limit_s(station)):
                 yield session
     finally:

@@ -186,16 +186,21 @@ _frozen_sessions = 0
 def heap_frozen():
     """While inside, the objects that existed on entry are left out of the interpreter's
     cyclic collections (``gc.freeze``); on the way out of the last such block they are
-    handed back (``gc.unfreeze``), so nothing is kept for good.
+    handed back (``gc.unfreeze``).
 
     A full collection walks every tracked object and holds every thread while it does:
     in a process that has loaded the vision's kernels, the store, the web app and (in a
     test run) a thousand tests' leftovers, that is 0.4-0.75 s on this two-core PC, and on
     a loaded one it outlasts a drive's watchdog. What a session makes while it is open is
-    what its collections need to walk. Blocks may nest or overlap (several sessions in
-    one process): the heap is handed back when the last one ends."""
+    what its collections need to walk. The garbage of the moment is collected first, so
+    that none is kept for the block's life: enter before the drives connect, since that
+    collection is the long one (it walks only what is not frozen already). Blocks may
+    nest or overlap (several sessions in one process: a web app's, a test's): the heap
+    is handed back when the last one ends, and each one's entry freezes what has come
+    since."""
     global _frozen_sessions
     with _frozen_lock:
+        gc.collect()
         gc.freeze()
         _frozen_sessions += 1
     try:

@@ -126,35 +126,53 @@ def test_a_stall_with_no_collection_in_it_does_not_blame_the_collector():
     assert not any("garbage collector" in s.where for s in w.stalls)
 
 
+_FREEZE_PROBE = r"""
+import gc, json, weakref
+from station.stallwatch import heap_frozen
+
+class Node:
+    pass
+
+out = {"before": gc.get_freeze_count()}
+garbage = Node(); garbage.me = garbage; gone = weakref.ref(garbage); del garbage  # a cycle already unreachable
+kept = Node(); kept.me = kept; alive = weakref.ref(kept)  # a cycle alive on entry
+first = heap_frozen()
+first.__enter__()
+out["garbage_of_the_moment_collected"] = gone() is None
+out["frozen_inside"] = gc.get_freeze_count()
+with heap_frozen():  # a second session, overlapping the first
+    inner = Node(); inner.me = inner
+out["frozen_after_the_second_left"] = gc.get_freeze_count()
+del kept
+gc.collect()
+out["frozen_cycle_walked"] = alive() is None
+first.__exit__(None, None, None)
+out["frozen_after_the_last_left"] = gc.get_freeze_count()
+gc.collect()
+out["handed_back_and_collected"] = alive() is None
+print(json.dumps(out))
+"""
+
+
 def test_a_sessions_heap_is_left_out_of_collections_while_open_and_handed_back_after_the_last():
-    """``heap_frozen``: the objects alive when a session opens are not walked by the
-    collections of its life (a full one over a test run's or a station's heap held the
-    loop for 0.4-0.75 s); overlapping sessions hand the heap back only when the last ends,
-    and then a cycle made unreachable meanwhile is collected as usual."""
-    import gc
-    import weakref
+    """``heap_frozen``: the garbage of the moment is collected on entry (none is kept for
+    the session's life); the objects alive then are not walked by the collections of its
+    life (a full one over a test run's or a station's heap held the loop for 0.4-0.75 s);
+    overlapping sessions hand the heap back only when the last ends, and a cycle made
+    unreachable meanwhile is then collected as usual. In an interpreter of its own: a
+    test run holds sessions open for its whole length (the API tests' server)."""
+    import json
+    import subprocess
+    import sys
 
-    from station.stallwatch import heap_frozen
-
-    class Node:
-        pass
-
-    assert gc.get_freeze_count() == 0
-    before = Node()
-    before.me = before  # a cycle alive on entry
-    alive = weakref.ref(before)
-    first = heap_frozen()
-    first.__enter__()
-    assert gc.get_freeze_count() > 0
-    with heap_frozen():  # a second session, overlapping the first
-        inner = Node()
-        inner.me = inner
+    done = subprocess.run([sys.executable, "-c", _FREEZE_PROBE], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr[-2000:]
+    out = json.loads(done.stdout.strip().splitlines()[-1])
+    assert out["before"] == 0
+    assert out["garbage_of_the_moment_collected"], "garbage of the moment was frozen with the heap"
+    assert out["frozen_inside"] > 0
     # the second's end must not hand the heap back while the first is open
-    assert gc.get_freeze_count() > 0
-    del before
-    gc.collect()
-    assert alive() is not None, "a frozen object was walked by a collection"
-    first.__exit__(None, None, None)
-    assert gc.get_freeze_count() == 0
-    gc.collect()
-    assert alive() is None, "the heap was not handed back: its garbage is kept for good"
+    assert out["frozen_after_the_second_left"] >= out["frozen_inside"]
+    assert not out["frozen_cycle_walked"], "a frozen object was walked by a collection"
+    assert out["frozen_after_the_last_left"] == 0
+    assert out["handed_back_and_collected"], "the heap was not handed back: its garbage is kept for good"
