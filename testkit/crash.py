@@ -114,15 +114,15 @@ def crash_trials(n: int, data_dir: str | Path, *, seed: int = 0, max_delay_s: fl
     """``n`` times: start the child, SIGKILL it after a random delay, recover and check
     (``db_url``: the database, default SQLite in ``data_dir``).
 
-    One kill in four lands in the child's start-up (0.3-3 s after it was started: imports,
-    the store's migration and recovery, the twins); the others a random 0.3 s to
+    About one kill in four lands in the child's start-up (0.3-3 s after it was started:
+    imports, the store's migration and recovery, the twins); the others a random 0.3 s to
     ``max_delay_s`` after the child said it was ready, among its homing, scans and
     commits. Timed from "ready", the kills hit inspections however long a loaded
-    machine takes to start a Python process. Every fourth trial (the third, seventh, ...)
-    is timed from the child's first commit instead (its first ``done``): whatever pace a
-    loaded machine sets, some results are acknowledged before a kill, and that kill lands
-    in the next inspection (a CI run on two busy cores took over 8.8 s an inspection, and
-    no kill timed from "ready" came after a commit)."""
+    machine takes to start a Python process. Every fourth trial (the third, seventh,
+    ...; never in start-up) is timed from the child's first commit instead (its first
+    ``done``): whatever pace a loaded machine sets, some results are acknowledged before
+    a kill, and that kill lands in the next inspection (a CI run on two busy cores took
+    over 8.8 s an inspection, and no kill timed from "ready" came after a commit)."""
     rng = random.Random(seed)
     data_dir = Path(data_dir)
     rep = CrashReport()
@@ -181,8 +181,8 @@ def crash_trials(n: int, data_dir: str | Path, *, seed: int = 0, max_delay_s: fl
         rep.lost = lost
         rep.problems += [f"kill {trial}: {p}" for p in problems]
         if log is not None:
-            log(f"kill {trial + 1}/{n} {delay:.2f} s after {'its first commit' if after_commit else 'start-up' if in_startup else 'ready'}: "
-                f"{len(acknowledged)} acknowledged, {counts}")
+            since = "its first commit" if after_commit else "start-up" if in_startup else "ready"
+            log(f"kill {trial + 1}/{n} {delay:.2f} s after {since}: {len(acknowledged)} acknowledged, {counts}")
     rep.acknowledged = len(acknowledged)
     rep.inspections = counts["inspections"]
     rep.complete = counts.get("complete", 0)
