@@ -1925,7 +1925,7 @@ def detect_defects(image: np.ndarray, mm_per_px: float, *, holes=None, blur_px: 
         examined.append(ex)
     found: list[Defect] = [ex.defect for ex in examined if ex.defect is not None]
     others = [_hole_zone(img.shape, [h for j, h in enumerate(holes) if j != i], reach_px) for i in range(len(holes))]
-    marks = _marks_mask(img.shape, found, blur_hint if blur_hint is not None else BLUR_PRIOR_PX[0])
+    marks = _marks_mask(img.shape, found, blur_hint if blur_hint is not None else BLUR_PRIOR_PX[0]) if holes else None
     for i, hole in enumerate(holes):
         found += _rim_defects(img, hole, i, others[i] | (claimed_regions & ~_hole_zone(img.shape, [hole], reach_px)),
                               level_full, wall.angles_deg, cfg, mm_per_px, marks=marks)

@@ -13,16 +13,25 @@ def _hold_the_loop(seconds: float) -> None:
     time.sleep(seconds)  # synchronous work on the loop: what faults a drive's watchdog
 
 
-def test_a_stall_is_logged_with_its_length_and_the_code_that_held_the_loop(caplog):
+def _watch_a_held_loop(limit_s: float, lead_s: float, hold_s: float, tail_s: float, before_hold=None) -> StallWatch:
+    """A loop under a ``StallWatch(limit_s)``: it awaits ``lead_s``, calls
+    ``before_hold(watch)`` if given, holds the loop for ``hold_s``, awaits ``tail_s``."""
+
     async def go():
-        async with StallWatch(limit_s=0.2, name="test") as w:
-            await asyncio.sleep(0.1)
-            _hold_the_loop(0.8)
-            await asyncio.sleep(0.2)
+        async with StallWatch(limit_s=limit_s, name="test") as w:
+            await asyncio.sleep(lead_s)
+            if before_hold is not None:
+                before_hold(w)
+            _hold_the_loop(hold_s)
+            await asyncio.sleep(tail_s)
         return w
 
+    return asyncio.run(go())
+
+
+def test_a_stall_is_logged_with_its_length_and_the_code_that_held_the_loop(caplog):
     with caplog.at_level(logging.WARNING, logger="station.stallwatch"):
-        w = asyncio.run(go())
+        w = _watch_a_held_loop(0.2, 0.1, 0.8, 0.2)
     held = [s for s in w.stalls if "_hold_the_loop" in s.where]
     assert len(held) == 1, w.stalls
     # the gap between the loop's ticks: the 0.8 s held, plus at most a tick's period
@@ -91,35 +100,23 @@ def test_a_stall_that_a_garbage_collection_fell_in_names_the_collector():
     watchdog, and the loop's stack then shows only its selector. The stall says so."""
     import gc
 
-    async def go():
-        async with StallWatch(limit_s=0.1, name="test") as w:
-            w._collections.keep_s = 0.0  # keep every collection, however short, for the test
-            await asyncio.sleep(0.05)
-            gc.collect()  # a full collection, inside the stall the sleep below makes
-            _hold_the_loop(0.3)
-            await asyncio.sleep(0.1)
-        assert w._collections not in gc.callbacks  # the watch takes its hook away
-        return w
+    def collect(w: StallWatch) -> None:
+        w._collections.keep_s = 0.0  # keep every collection, however short, for the test
+        gc.collect()  # a full collection, inside the stall the hold that follows makes
 
-    w = asyncio.run(go())
+    w = _watch_a_held_loop(0.1, 0.05, 0.3, 0.1, before_hold=collect)
+    assert w._collections not in gc.callbacks  # the watch takes its hook away
     named = [s for s in w.stalls if "garbage collector held every thread" in s.where]
     assert len(named) == 1, w.stalls
     assert "generation 2" in named[0].where
 
 
 def test_a_stall_with_no_collection_in_it_does_not_blame_the_collector():
-    async def go():
-        async with StallWatch(limit_s=0.1, name="test") as w:
-            await asyncio.sleep(0.05)
-            _hold_the_loop(0.3)
-            await asyncio.sleep(0.1)
-        return w
-
     import gc
 
     gc.disable()  # no collection may fall in the stall (its absence is what is tested)
     try:
-        w = asyncio.run(go())
+        w = _watch_a_held_loop(0.1, 0.05, 0.3, 0.1)
     finally:
         gc.enable()
     assert [s for s in w.stalls if "_hold_the_loop" in s.where], w.stalls
