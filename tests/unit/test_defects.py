@@ -408,6 +408,40 @@ def test_clean_rims_on_dim_frames_with_deep_grooves_give_no_burr_or_chip():
     assert rims == []
 
 
+def test_a_rim_defect_must_stand_out_of_the_rim_either_side_of_it():
+    """Two clean wide frames where the wall's model is off along an arc of a rim (a groove
+    tangent to it, a dark blotch beyond it): the whole arc's edge sits 0.3-0.7 px in, and
+    noise on it crossed the 1 px bar as a 0.05 mm and a 0.13 mm "burr" (wide bench seed
+    82000's clean frames 26 and 49). Measured against the rim either side of them, they
+    are 0.8-0.9 px and dropped."""
+    for seed in (1082026, 1082049):
+        f = random_defect_frame(seed, {}, mm_per_px=MM_PER_PX, envelope="wide")
+        found = detect_defects(f.image, MM_PER_PX)
+        assert [(d.kind, round(d.x_px), round(d.y_px)) for d in found] == [], seed
+
+
+def test_the_rims_level_either_side_of_a_defect():
+    """``_flank_level``: the lower of the two flanks' medians past the blur's spill, never
+    below 0; a flank cut off by an unread arc gives 0 (nothing to compare with)."""
+    from station.vision.defects import _flank_level
+
+    n, step = 400, 0.5
+    v = np.zeros(n)
+    v[180:220] = 2.0  # the defect: 20 px of arc
+    v[130:175] = 0.4  # one flank displaced...
+    v[225:270] = 0.6  # ... and the other more
+    valid = np.ones(n, bool)
+    assert _flank_level(v, valid, True, 90.0, 110.0, 1.0, step) == pytest.approx(0.4)
+    v[225:270] = -0.3  # a flank the other way: the rim is not displaced both sides
+    assert _flank_level(v, valid, True, 90.0, 110.0, 1.0, step) == 0.0
+    v[225:270] = 0.6
+    valid[222:400] = False  # the right flank unread
+    assert _flank_level(v, valid, False, 90.0, 110.0, 1.0, step) == 0.0
+    # across theta = 0 on a whole rim: the left flank wraps round
+    w = np.roll(v, -190)
+    assert _flank_level(w, np.ones(n, bool), True, -5.0, 15.0, 1.0, step) == pytest.approx(0.4)
+
+
 def test_a_groove_that_fades_along_its_length_is_read_on_each_side_of_the_hole():
     """One groove family at 30 deg, 12 % deep on one side of a point along its lines and
     4 % on the other: profiles per side give each side its own depth; one profile over
