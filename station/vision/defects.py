@@ -1969,16 +1969,26 @@ def detect_defects(image: np.ndarray, mm_per_px: float, *, holes=None, blur_px: 
     found: list[Defect] = [ex.defect for ex in examined if ex.defect is not None]
     others = [_hole_zone(img.shape, [h for j, h in enumerate(holes) if j != i], reach_px) for i in range(len(holes))]
     marks = _marks_mask(img.shape, found, blur_hint if blur_hint is not None else BLUR_PRIOR_PX[0]) if holes else None
+    grown, labels = None, None
     if holes and claimed_regions.any():
-        # each mark with its blurred skirt (2.5 blur + 1 px): a scratch that ends at a rim
-        # darkens the wall beside its region too, read as a 0.07 mm "chip" next to it (wide
-        # bench seed 82083)
+        # a mark that reaches a rim's band, with its blurred skirt (2.5 blur + 1 px): a
+        # scratch that ends at a rim darkens the wall beside its region too, read as a
+        # 0.07 mm "chip" next to it (wide bench seed 82083). Only those: a pore 30 px out
+        # whose skirt reached the ring that calibrates the wall cut a true chip between it
+        # and the rim in two (hatch 22 deg, seed 89000)
         skirt = int(np.ceil(2.5 * (blur_hint if blur_hint is not None else BLUR_PRIOR_PX[0]) + 1.0))
-        claimed_regions = cv2.dilate(claimed_regions.astype(np.uint8),
-                                     cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * skirt + 1, 2 * skirt + 1))
-                                     ).astype(bool)
+        grown = cv2.dilate(claimed_regions.astype(np.uint8),
+                           cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * skirt + 1, 2 * skirt + 1)))
+        labels = cv2.connectedComponents(grown)[1]
     for i, hole in enumerate(holes):
-        found += _rim_defects(img, hole, i, others[i] | (claimed_regions & ~_hole_zone(img.shape, [hole], reach_px)),
+        own = _hole_zone(img.shape, [hole], reach_px)
+        marks_i = claimed_regions
+        if labels is not None:
+            near = np.unique(labels[own & (grown > 0)])
+            near = near[near > 0]
+            if near.size:
+                marks_i = claimed_regions | np.isin(labels, near)
+        found += _rim_defects(img, hole, i, others[i] | (marks_i & ~own),
                               level_full, wall.angles_deg, cfg, mm_per_px, marks=marks)
     out = []
     model = {k: (a, b) for k, a, b in cfg.model_u_px}

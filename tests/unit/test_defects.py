@@ -461,6 +461,19 @@ def test_a_groove_tangent_to_a_rim_or_a_scratch_ending_at_it_is_no_chip():
     assert abs(chips[0].length_mm - truth.length_mm) <= max(0.1 * truth.length_mm, 0.02)
 
 
+def test_a_pore_beyond_a_rim_leaves_the_chip_between_them_whole():
+    """Hatch 22 deg, bench seed 89000: a 0.26 mm chip points at a 0.41 mm pore 30 px
+    beyond the rim. The marks' blurred skirt is left out of a rim only for marks that
+    reach its band: the pore's reached the ring that calibrates the wall, left the rays
+    through it out, and cut the chip in two (0.07 and 0.11 mm)."""
+    f = random_defect_frame(89000, None, mm_per_px=MM_PER_PX, hatch_deg=22.0)
+    (truth,) = [t for t in f.defects if t.kind == "chip" and abs(t.image_x_px - 296.7) < 1.0]
+    near = [d for d in detect_defects(f.image, MM_PER_PX)
+            if np.hypot(d.x_px - truth.image_x_px, d.y_px - truth.image_y_px) < 30.0]
+    assert [d.kind for d in near] == ["chip"]
+    assert abs(near[0].length_mm - truth.length_mm) <= max(0.1 * truth.length_mm, 0.02)
+
+
 def test_a_groove_that_fades_along_its_length_is_read_on_each_side_of_the_hole():
     """One groove family at 30 deg whose depth fades along its lines, 8 % at a hole's
     centre and 0.08 % more per px (1-16 % over the patch): the two sides' profiles,
