@@ -601,6 +601,16 @@ def _groove_profiles(d: np.ndarray, xx: np.ndarray, yy: np.ndarray, use: np.ndar
         parts.append([idx, np.zeros_like(d), side])
     nb = [int(p[0].max()) + 1 for p in parts]
     centres = [np.arange(n) for n in nb]
+    # per family and side (below the point, above it): each bin's pixels' mean place along
+    # the lines, where that side's reading stands (fixed over the backfit's rounds)
+    places = []
+    for k, (idx, _, side) in enumerate(parts):
+        if side is None:
+            places.append(None)
+            continue
+        plus, v = side
+        places.append([np.bincount(idx[sel], weights=v[sel], minlength=nb[k])
+                       / np.maximum(np.bincount(idx[sel], minlength=nb[k]), 1) for sel in (use & ~plus, use & plus)])
 
     def profile(k: int, idx: np.ndarray, vals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         cnt = np.bincount(idx, minlength=nb[k]).astype(np.float64)
@@ -624,9 +634,9 @@ def _groove_profiles(d: np.ndarray, xx: np.ndarray, yy: np.ndarray, use: np.ndar
                     prof, have = profile(k, idx[sel], rest[sel])
                     prof = np.where(have, prof, both)
                     new = np.where(this, prof[idx], new)
-                    cnt = np.bincount(idx[sel], minlength=nb[k])
-                    got.append((prof, have, np.bincount(idx[sel], weights=v[sel], minlength=nb[k]) / np.maximum(cnt, 1)))
-                (p0, h0, v0), (p1, h1, v1) = got
+                    got.append((prof, have))
+                (p0, h0), (p1, h1) = got
+                v0, v1 = places[k]
                 span = v1 - v0
                 pair = (h0 & h1 & (span > 1.0))[idx]
                 w = np.clip((v - v0[idx]) / np.where(pair, span[idx], 1.0), 0.0, 1.0)
@@ -1968,7 +1978,8 @@ def detect_defects(image: np.ndarray, mm_per_px: float, *, holes=None, blur_px: 
         examined.append(ex)
     found: list[Defect] = [ex.defect for ex in examined if ex.defect is not None]
     others = [_hole_zone(img.shape, [h for j, h in enumerate(holes) if j != i], reach_px) for i in range(len(holes))]
-    marks = _marks_mask(img.shape, found, blur_hint if blur_hint is not None else BLUR_PRIOR_PX[0]) if holes else None
+    blur_rim = blur_hint if blur_hint is not None else BLUR_PRIOR_PX[0]
+    marks = _marks_mask(img.shape, found, blur_rim) if holes else None
     grown, labels = None, None
     if holes and claimed_regions.any():
         # a mark that reaches a rim's band, with its blurred skirt (2.5 blur + 1 px): a
@@ -1976,7 +1987,7 @@ def detect_defects(image: np.ndarray, mm_per_px: float, *, holes=None, blur_px: 
         # 0.07 mm "chip" next to it (wide bench seed 82083). Only those: a pore 30 px out
         # whose skirt reached the ring that calibrates the wall cut a true chip between it
         # and the rim in two (hatch 22 deg, seed 89000)
-        skirt = int(np.ceil(2.5 * (blur_hint if blur_hint is not None else BLUR_PRIOR_PX[0]) + 1.0))
+        skirt = int(np.ceil(2.5 * blur_rim + 1.0))
         grown = cv2.dilate(claimed_regions.astype(np.uint8),
                            cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * skirt + 1, 2 * skirt + 1)))
         labels = cv2.connectedComponents(grown)[1]
