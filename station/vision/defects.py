@@ -1426,6 +1426,7 @@ def _rim_profile(img: np.ndarray, hole, zone_others: np.ndarray, reach_px: float
     share = (wall_b - polar[band]) / np.maximum(wall_b - hole_s[None, :], 1.0)
     share[:, ~valid] = 0.0
     rb = rr[band]
+    share = _lift_wall(share, rb, valid, rad + 2.5 * blur_px + 1.0, smooth)
 
     def first_crossing(sh: np.ndarray, crossing: float = crossing) -> np.ndarray:
         # the first fall below ``crossing``, going out (a ray already below it at the
@@ -1458,6 +1459,37 @@ def _rim_profile(img: np.ndarray, hole, zone_others: np.ndarray, reach_px: float
     edge_out = first_crossing(sh, RIM_FLOOR_CROSSING)
     edge_out[~(sh < RIM_FLOOR_CROSSING).any(axis=0)] = np.nan  # never left it within the band: not read
     return _RimProfile(theta, rb, share, valid, edge, edge_find, edge_out)
+
+
+def _lift_wall(share: np.ndarray, rb: np.ndarray, valid: np.ndarray, beyond: float, smooth) -> np.ndarray:
+    """The share with the wall's level raised, ray by ray, where the wall just beyond
+    the rim (radii from ``beyond`` to the band's end, past the blurred step) reads
+    brighter than the level it was calibrated to: its median share there ``e`` < 0,
+    averaged along the rim (``smooth``, 4 px of arc) and taken where it exceeds twice its
+    own spread round the rim. With the level W' = W - e (W - H) the share is (s - e) /
+    (1 - e): the blurred step 1 - (1 - e) Phi, the edge's crossing moved in by the
+    mis-read wall, becomes 1 - Phi again, and the hole's side (s = 1) is unchanged.
+
+    Why: the wall's level is calibrated on a ring beyond the band and the grooves put back
+    from a model fitted there; where a groove that is deep on that ring fades beside the
+    rim, or a dark spot lies on the ring, the wall at the rim is brighter than its level
+    (a share of -1.2 over 40 deg of arc), and the edge's crossing moved in by 1.1 px over
+    21 px: a false 0.21 mm "burr" at significance 157 on a clean frame (wide bench seed
+    86000, frame 25). Only brighter: a wall darker than its level is what a chip is, and
+    nothing on the wall beyond a rim is brighter than the wall."""
+    outer = rb >= beyond
+    if outer.sum() < 3 or valid.sum() < 16:
+        return share
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        e = np.median(share[outer], axis=0)
+    e_s = smooth(e, 4.0)
+    spread = _mad_sigma(e_s[valid])
+    lift = np.minimum(e_s + 2.0 * spread, 0.0)
+    lift[~valid] = 0.0
+    if not (lift < 0).any():
+        return share
+    return (share - lift[None, :]) / (1.0 - lift[None, :])
 
 
 def _rim_integral(prof: _RimProfile, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:

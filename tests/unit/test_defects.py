@@ -662,3 +662,55 @@ def test_a_chip_beside_a_pore_is_not_taken_for_a_groove_running_on():
     assert _within(d.length_mm, t.length_mm), (d.length_mm, t.length_mm)
     assert [p for p in pairs if p[0].kind == "pore" and (p[1] is None or p[1].kind != "pore")] == []
     assert [found[k].kind for k in false] == []
+
+
+def test_a_wall_brighter_than_its_level_beside_a_rim_is_no_burr():
+    """Two clean wide frames where the wall beside a rim reads brighter than the level
+    calibrated on the ring beyond it (a deep groove on that ring fading beside the rim,
+    whose model was put back there; a dark spot on the ring): the edge's crossing moved
+    in by ~1 px over 13-32 px of arc, read as 0.13-0.32 mm "burrs" at significance 47-157
+    (wide bench seeds 86000 and 84000: clean frames 25, 84 and 18). With the wall's
+    level raised where it reads brighter beyond the blurred step, none is left."""
+    for seed in (1086025, 1086084, 1084018):
+        f = random_defect_frame(seed, {}, mm_per_px=MM_PER_PX, envelope="wide")
+        found = detect_defects(f.image, MM_PER_PX)
+        assert [(d.kind, round(d.x_px), round(d.y_px)) for d in found if d.kind in ("burr", "chip")] == [], seed
+
+
+def test_the_walls_level_is_raised_only_where_it_reads_brighter_beyond_the_rim():
+    """``_lift_wall`` on a synthetic rim: a blurred step 1 - (1 - e) Phi whose wall reads
+    e = -1 over an arc (brighter than its level) is brought back to 1 - Phi there, with its
+    0.75 crossing where the rest of the rim has it; a chip's darker wall (e > 0) and the
+    hole's side are left as they were."""
+    from scipy.special import ndtr
+
+    from station.vision.defects import _lift_wall
+
+    rb = np.arange(20.0, 50.0, 0.5)
+    n = 400
+    rad, blur = 35.0, 1.5
+    phi = ndtr((rb - rad) / blur)[:, None] * np.ones(n)[None, :]
+    e = np.zeros(n)
+    e[100:160] = -1.0  # the wall brighter than its level over 30 px of arc
+    e[250:300] = 0.5  # a chip: darker than the level beyond the rim
+    share = 1.0 - (1.0 - e)[None, :] * phi
+    share[:, 250:300] = np.where(rb[:, None] < rad + 6.0, 1.0 - phi[:, 250:300], 0.5)
+    valid = np.ones(n, bool)
+
+    def smooth(v, px):
+        return v  # the rays here are noise-free: no averaging along the rim needed
+
+    lifted = _lift_wall(share, rb, valid, rad + 2.5 * blur + 1.0, smooth)
+    assert np.allclose(lifted[:, 100:160], 1.0 - phi[:, 100:160], atol=1e-9)
+    assert np.array_equal(lifted[:, 250:300], share[:, 250:300])
+    assert np.array_equal(lifted[:, :90], share[:, :90])
+    inner = rb < rad - 4.0 * blur
+    assert np.allclose(lifted[inner], 1.0, atol=1e-3)
+
+    def crossing(col):
+        k = int(np.argmax(col < 0.75))
+        return rb[k - 1] + (col[k - 1] - 0.75) / (col[k - 1] - col[k]) * (rb[k] - rb[k - 1])
+
+    before, after, clean = crossing(share[:, 130]), crossing(lifted[:, 130]), crossing(share[:, 20])
+    assert clean - before > 0.5  # the brighter wall moved the crossing in
+    assert after == pytest.approx(clean, abs=0.02)
