@@ -151,6 +151,16 @@ class DefectConfig:
     #: the holes' range); half the lowest leaves room for the fit's error on small blurred
     #: pores, and stays far above the cross-hatch's residue (dev frames: 0.05-0.1)
     min_pore_contrast: float = 0.2
+    #: ... and a pore this long (px) or more at least this dark in the mean over its
+    #: region: a cavity larger than a few blurs holds its floor's darkness over most of its
+    #: area (dev frames 7000-7099 and wide 81000-81099, 147 true pores 0.12-0.5 mm long:
+    #: 0.22 and more, 5th percentile 0.29), where the cross-hatch's residue at a crossing
+    #: of two deep grooves, fitted to a steep blurred ellipse, is faint over a broad
+    #: region (0.06-0.16, 0.15-0.34 mm long, most at the frame's border where the grooves'
+    #: means end): 8 of the 15 false defects on wide seeds 81000-87000 (1,200 frames),
+    #: and no true pore lost there nor on station seeds 60000 and 93000
+    broad_pore_px: float = 12.0
+    min_broad_pore_darkness: float = 0.17
     #: a pore's rim is a sharp edge blurred by the camera alone: a fitted edge blur beyond
     #: this (px) is a soft shading of the wall, not a cavity (the renderer's and the
     #: endoscope's envelope is 0.8-2 px; dev frames' texture blobs fit 3-3.5 px)
@@ -2216,6 +2226,8 @@ def _accept(m: dict | None, kind: str, box, at_border: bool, angles_deg, cfg: De
         return None
     if m["mean_darkness"] < cfg.min_mean_darkness:
         return None
+    if kind == "pore" and m["length"] >= cfg.broad_pore_px and m["mean_darkness"] < cfg.min_broad_pore_darkness:
+        return None  # broad and faint: the cross-hatch's residue, not a cavity
     if kind == "scratch" and (m["contrast"] < cfg.min_scratch_contrast or m["blur"] > cfg.max_edge_blur_px
                               or m["width"] > max_width_px or m["length"] < cfg.scratch_elongation * m["width"]
                               or any(_circ_diff_deg(m["angle"], g) < cfg.groove_alignment_deg for g in angles_deg)
