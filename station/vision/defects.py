@@ -157,8 +157,8 @@ class DefectConfig:
     #: 0.22 and more, 5th percentile 0.29), where the cross-hatch's residue at a crossing
     #: of two deep grooves, fitted to a steep blurred ellipse, is faint over a broad
     #: region (0.06-0.16, 0.15-0.34 mm long, most at the frame's border where the grooves'
-    #: means end): 8 of the 15 false defects on wide seeds 81000-87000 (1,200 frames),
-    #: and no true pore lost there nor on station seeds 60000 and 93000
+    #: means end): 8 false defects on wide seeds 81000-87000 (1,200 frames), 6 of them cut by
+    #: the border, and no true pore lost there nor on station seeds 60000 and 93000
     broad_pore_px: float = 12.0
     min_broad_pore_darkness: float = 0.17
     #: a pore's rim is a sharp edge blurred by the camera alone: a fitted edge blur beyond
