@@ -735,3 +735,20 @@ def test_a_broad_faint_mark_at_a_crossing_of_deep_grooves_is_no_pore():
         d = min(found, key=lambda d: np.hypot(d.x_px - t.x_px, d.y_px - t.y_px))
         assert np.hypot(d.x_px - t.x_px, d.y_px - t.y_px) < 3.0
         assert abs(d.length_mm - t.length_mm) <= max(0.1 * t.length_mm, 0.02)
+
+
+def test_a_deep_groove_crossing_a_chips_arc_does_not_make_it_a_groove():
+    """Two true chips on 30 %-contrast holes of the wide envelope at a 22 deg hatch, each
+    with a deep groove running out of part of its arc (seed 78000, frames 7 and 54): the
+    darkest line beyond the notch was as dark as the hole (0.65 and 0.88 of it), and the
+    run-on test took both for grooves running into the rim. Read by the upper quartile of
+    the lines through the notch (0.23 and 0.19), both are chips; a groove that makes a
+    notch covers the notch's lines (0.48-0.77)."""
+    for seed in (78007, 78054):
+        f = random_defect_frame(seed, None, mm_per_px=MM_PER_PX, envelope="wide", hatch_deg=22.0)
+        found = detect_defects(f.image, MM_PER_PX)
+        chips = [t for t in f.defects if t.kind == "chip"]
+        assert chips, seed
+        for t in chips:
+            near = [d for d in found if d.kind == "chip" and np.hypot(d.x_px - t.x_px, d.y_px - t.y_px) < 0.5 * t.length_px]
+            assert near, (seed, t.x_px, t.y_px)
