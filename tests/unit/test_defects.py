@@ -665,7 +665,7 @@ def test_a_chip_beside_a_pore_is_not_taken_for_a_groove_running_on():
 
 
 def test_a_wall_brighter_than_its_level_beside_a_rim_is_no_burr():
-    """Two clean wide frames where the wall beside a rim reads brighter than the level
+    """Three clean wide frames where the wall beside a rim reads brighter than the level
     calibrated on the ring beyond it (a deep groove on that ring fading beside the rim,
     whose model was put back there; a dark spot on the ring): the edge's crossing moved
     in by ~1 px over 13-32 px of arc, read as 0.13-0.32 mm "burrs" at significance 47-157
