@@ -1493,9 +1493,7 @@ def _lift_wall(share: np.ndarray, rb: np.ndarray, valid: np.ndarray, beyond: flo
     outer = rb >= beyond
     if outer.sum() < 3 or valid.sum() < 16:
         return share
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)
-        e = np.median(share[outer], axis=0)
+    e = np.median(share[outer], axis=0)  # every column finite: unread rays are 0
     e_s = smooth(e, 4.0)
     spread = _mad_sigma(e_s[valid])
     lift = np.minimum(e_s + 2.0 * spread, 0.0)
