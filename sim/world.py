@@ -78,6 +78,10 @@ class PartTruth:
     bore_diameter_mm: float = 22.2
     holes: tuple[HoleTruth, ...] = ()
     defects: tuple[SurfaceDefect, ...] = ()
+    #: which casting this is: the camera twin draws the honed wall's texture from it and
+    #: the place in view, so two parts differ in their grooves, grain and blotches where
+    #: they are drawn alike (0: the scenario's one part, as before parts had one)
+    texture_seed: int = 0
 
 
 #: the paper's standard sample (Table 4): both holes 0.7 mm, at 71.03 and 85.19 mm.
@@ -299,7 +303,8 @@ def world_from_dict(data: dict[str, Any], source: str = "<dict>", base: Path | N
     tau_s), ``[world.repeatability]`` (z_um, c_arcsec, seed), the drift physics
     (``[world.screw_heating]``, ``[world.ambient]``, ``[world.wear]``,
     ``[world.collision]``: sim.drift), ``[[world.holes]]`` (name, axial_mm,
-    angle_deg, diameter_mm) and ``[[world.defects]]`` (``SurfaceDefect``'s fields)."""
+    angle_deg, diameter_mm), ``[[world.defects]]`` (``SurfaceDefect``'s fields) and
+    ``texture_seed`` (``PartTruth.texture_seed``)."""
     model_path = data.get("model")
     if model_path is not None:
         p = Path(model_path)
@@ -355,8 +360,12 @@ def world_from_dict(data: dict[str, Any], source: str = "<dict>", base: Path | N
         if defect.hole is not None and defect.hole not in names:
             raise ValueError(f"{source}: world.defects[{i}]: no hole named {defect.hole!r}")
         defects.append(defect)
+    texture_seed = data.get("texture_seed", 0)
+    if isinstance(texture_seed, bool) or not isinstance(texture_seed, int) or texture_seed < 0:
+        raise ValueError(f"{source}: world.texture_seed must be a whole number >= 0, not {texture_seed!r}")
     part = PartTruth(str(data.get("part_number", STANDARD_SAMPLE.part_number)),
-                     float(data.get("bore_diameter_mm", STANDARD_SAMPLE.bore_diameter_mm)), holes, tuple(defects))
+                     float(data.get("bore_diameter_mm", STANDARD_SAMPLE.bore_diameter_mm)), holes, tuple(defects),
+                     texture_seed)
     try:
         return World(model, part, temperature, repeatability, drift_from_dict(data, source))
     except ValueError as exc:

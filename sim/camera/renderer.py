@@ -49,7 +49,7 @@ class RendererLost(RuntimeError):
     """The renderer process died, did not start or did not answer in time."""
 
 
-def render_image(params: FrameParams, specs: list[HoleSpec], seed: int, wall_key: tuple[int, int],
+def render_image(params: FrameParams, specs: list[HoleSpec], seed: int, wall_key: tuple[int, ...],
                  wall_seed: int, walls: OrderedDict, defects=()) -> np.ndarray:
     """Render one frame over the wall patch of ``wall_key`` (kept in ``walls``), with the
     surface defects in view (``sim.camera.defects.DefectSpec``)."""
@@ -156,7 +156,7 @@ class RendererProcess:
             raise RendererLost(f"cannot start the renderer process: {exc}") from exc
 
     async def render(self, params: FrameParams, specs: list[HoleSpec], seed: int,
-                     wall_key: tuple[int, int], wall_seed: int, defects=()) -> np.ndarray:
+                     wall_key: tuple[int, ...], wall_seed: int, defects=()) -> np.ndarray:
         return await self._call(_render_in_worker, params, specs, seed, wall_key, wall_seed, tuple(defects),
                                 timeout=RENDER_TIMEOUT_S)
 

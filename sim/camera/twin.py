@@ -14,8 +14,9 @@ Faults: dropped connection, delay, black frames, frozen frames (``sim.faults``).
 
 The wall: a camera that stays put sees the same patch of wall again (only the
 sensor's noise changes from frame to frame), as a real one does; the patch is kept
-per view position (rounded to the pixel) and drawn from a seed of that position, so
-a return to a place shows the same texture. Known simplification: a camera that
+per view position (rounded to the pixel) and drawn from a seed of that position and
+of the part (``PartTruth.texture_seed``), so a return to a place shows the same
+texture and another part at that place its own. Known simplification: a camera that
 moves sees a new patch (its statistics are the wall's, but its grooves do not
 travel with the move); the holes and their positions, which are what is measured,
 are exact.
@@ -92,7 +93,7 @@ class CameraTwin(Camera):
         self.grab_timeout_s = grab_timeout_s
         self._rng = np.random.default_rng(seed)
         self._seed = seed
-        self._walls: OrderedDict[tuple[int, int], np.ndarray] = OrderedDict()
+        self._walls: OrderedDict[tuple[int, ...], np.ndarray] = OrderedDict()
         self._render_process = render_process
         self._renderer: RendererProcess | None = None
         self._sequence = 0
@@ -228,10 +229,15 @@ class CameraTwin(Camera):
         self._render_process = False
         self._stop_renderer()
 
-    def _wall_key(self, truth: ViewTruth) -> tuple[int, int]:
+    def _wall_key(self, truth: ViewTruth) -> tuple[int, ...]:
+        """The patch of wall in view: its place (px, rounded), and on another part than
+        the scenario's first (``PartTruth.texture_seed``) that part too: a part put on
+        the table shows its own honing where another was scanned alike."""
         s = self.optics.mm_per_px
-        return (round(truth.axial_mm / s),
-                round(np.deg2rad(truth.angle_deg) * self.world.part.bore_diameter_mm / 2.0 / s))
+        place = (round(truth.axial_mm / s),
+                 round(np.deg2rad(truth.angle_deg) * self.world.part.bore_diameter_mm / 2.0 / s))
+        texture = int(getattr(self.world.part, "texture_seed", 0))
+        return place if texture == 0 else (texture, *place)
 
     async def _render(self, p: FrameParams, specs: list[HoleSpec], seed: int, truth: ViewTruth,
                       defects: list[DefectSpec] = ()) -> np.ndarray:

@@ -109,8 +109,9 @@ def run(parts: int = 3, seed: int = 23000, n_wall: int = 8, n_rim: int = 2, time
     for k in range(parts):
         rng = np.random.default_rng(seed + k)
         truth = PartTruth(holes=STANDARD_SAMPLE.holes, bore_diameter_mm=STANDARD_SAMPLE.bore_diameter_mm)
+        # each part its own casting: its own defects and its own honed wall
         truth = PartTruth(truth.part_number, truth.bore_diameter_mm, truth.holes,
-                          random_defects(rng, truth, band, n_wall, n_rim))
+                          random_defects(rng, truth, band, n_wall, n_rim), texture_seed=seed + k + 1)
 
         async def one():
             with tempfile.TemporaryDirectory() as tmp:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import asyncio
 import os
 import signal
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -13,7 +14,7 @@ from drivers.interfaces import CommunicationLost, DeviceTimeout
 from sim.camera.twin import CameraTwin, small_optics
 from sim.faults import FaultKind
 from sim.twins import TwinStation, load_scenario
-from sim.world import World
+from sim.world import World, world_from_dict
 from station.kinematics.inverse import compensate
 
 
@@ -124,6 +125,35 @@ def test_a_camera_that_stays_put_sees_the_same_wall_and_new_noise(rig):
     move(clock, z, 40.0)  # back again: the same texture as before
     e = grab(cam).image.astype(float)
     assert np.std(a - e) < 1.1 * noise
+
+
+def test_another_part_on_the_table_shows_its_own_wall_at_the_same_place(rig):
+    """Two castings honed alike are not alike grain for grain: a part of another
+    ``texture_seed`` shows another wall where the first was seen, and the first part,
+    put back, its own again."""
+    clock, world, z, c, cam = rig
+    first = world.part
+    move(clock, z, 40.0)  # plain wall, no hole in view
+    a = grab(cam).image.astype(float)
+    p = cam.optics.params
+    noise = np.sqrt(2.0 * (p.wall_level_dn / p.gain_e_per_dn + p.read_noise_dn**2))
+    world.part = replace(first, texture_seed=7)
+    b = grab(cam).image.astype(float)
+    world.part = replace(first, texture_seed=8)
+    d = grab(cam).image.astype(float)
+    # a new wall differs by its texture (~5 % of the wall's level: grooves, grain and
+    # blotches), far beyond the sensor's noise
+    assert np.std(a - b) > 2.0 * noise and np.std(b - d) > 2.0 * noise
+    world.part = first
+    assert np.std(a - grab(cam).image.astype(float)) < 1.1 * noise
+
+
+def test_a_scenario_names_its_parts_texture():
+    assert world_from_dict({"texture_seed": 12}).part.texture_seed == 12
+    assert world_from_dict({}).part.texture_seed == 0
+    for bad in (-1, 1.5, "7", True):
+        with pytest.raises(ValueError, match="scenario.toml: world.texture_seed"):
+            world_from_dict({"texture_seed": bad}, "scenario.toml")
 
 
 def with_worker_twin(rig, body):
