@@ -52,6 +52,15 @@ class Illumination:
         c = self.coef
         return c[0] + c[1] * u + c[2] * v + c[3] * u * u + c[4] * u * v + c[5] * v * v
 
+    def relative_curvature(self, x: float, y: float) -> tuple[float, float, float]:
+        """(qxx, qxy, qyy): the field's second-order part about pixel (x, y) relative to its
+        value there, per px^2: P(x + dx, y + dy) / P(x, y) = 1 + g . d + qxx dx^2 + qxy dx dy
+        + qyy dy^2 exactly (P is a quadratic)."""
+        c = self.coef
+        p = max(self.value(x, y), 1e-6)
+        hx, hy = self.half
+        return c[3] / (hx * hx) / p, c[4] / (hx * hy) / p, c[5] / (hy * hy) / p
+
     def relative_gradient(self, x: float, y: float) -> tuple[float, float]:
         """(dP/dx, dP/dy) / P at pixel (x, y), per px: the local tilt of the illumination."""
         u, v = self._scaled(x, y)

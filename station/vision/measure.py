@@ -421,6 +421,7 @@ def _measure_candidate(
         # the image's own blur: the rays' width less our smoothing and bilinear sampling
         blur = float(np.sqrt(max(psf2 - SMOOTH_SIGMA_PX**2 - 1.0 / 6.0, 0.09)))
         grad = illumination.relative_gradient(cx, cy) if illumination is not None else None
+        curv = illumination.relative_curvature(cx, cy) if illumination is not None else None
         pcfg = cfg.photometric
         roi_blur = blur
         if frame_blur is not None:
@@ -428,7 +429,7 @@ def _measure_candidate(
         if callable(frame_grooves):
             frame_grooves = frame_grooves()
         ph = refine_hole(image, cx, cy, r_true, blur, pcfg, illumination_grad=grad, frame_grooves=frame_grooves,
-                         roi_blur_px=roi_blur, cache=fit_cache)
+                         roi_blur_px=roi_blur, cache=fit_cache, illumination_curv=curv)
         if ph is not None and not ph.converged and cfg.reject_unfitted_whole:
             return None, ph, rays  # the pixels around this whole rim are no blurred disc
         if ph is not None and ph.converged:

@@ -371,6 +371,35 @@ def test_the_walls_radial_slope_is_read_from_the_ring(slope_dn_per_px):
     assert 0.1 * sign * none < sign * default < 0.4 * sign * none
 
 
+def test_the_holes_level_follows_the_illuminations_curvature():
+    """Vignetting multiplies the hole's dark far side as it does the wall: on a 640 x 480
+    frame at 50 % vignetting the far side of a 100 px hole is ~0.5 % darker at its rim
+    than at its centre.  A hole level that is constant over the inside (flat-fielded by
+    the illumination's local gradient only) reads the darker rim as more hole: the
+    diameter +0.024 px over these 12 frames (noise 0.008 px each).  With the hole's level
+    following the frame illumination's quadratic (``PhotometricConfig.
+    hole_illumination_curvature``) +0.005 px.  The wall's own curvature is the ring's
+    (its reflectance varies; the hole's far side does not)."""
+    from station.vision.photometric import PhotometricConfig
+
+    p = FrameParams(width_px=640, height_px=480, groove_depth=0.0, grain=0.0, blotch=0.0, vignetting=0.5,
+                    blur_sigma_px=1.0, wall_level_dn=150.0, hole_level_dn=90.0, gain_e_per_dn=40.0)
+    frames = [render_frame(p, [HoleSpec(150.3 + 0.1 * k, 140.7 - 0.07 * k, 100.0)], seed=k) for k in range(12)]
+
+    def bias(on: bool) -> float:
+        cfg = MeasureConfig(photometric=PhotometricConfig(hole_illumination_curvature=on))
+        errs = []
+        for f in frames:
+            (m,) = measure_holes(f.image, cfg=cfg)
+            errs.append(m.diameter_px - f.holes[0].diameter_px)
+        return float(np.mean(errs))
+
+    flat, curved = bias(False), bias(True)
+    assert flat > 0.015
+    assert abs(curved) < 0.4 * flat
+    assert PhotometricConfig().hole_illumination_curvature
+
+
 # ---------------------------------------------------------------- blur correction, fits, helpers
 
 

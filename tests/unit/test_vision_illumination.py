@@ -62,3 +62,19 @@ def test_a_flat_frame_has_no_gradient_and_a_tiny_one_no_field():
         gx, gy = ill.relative_gradient(x, y)
         assert abs(gx) < 1e-4 and abs(gy) < 1e-4, (x, y, gx, gy)
     assert estimate_illumination(np.full((60, 80), 120, np.uint8)) is None
+
+
+def test_the_fields_relative_curvature_completes_its_expansion_about_a_pixel():
+    """P is a quadratic, so P(x + dx, y + dy) / P(x, y) = 1 + g . d + qxx dx^2 + qxy dx dy
+    + qyy dy^2 with no remainder: the hole's level takes its curvature from it."""
+    from station.vision.illumination import Illumination
+
+    ill = Illumination((120.0, 3.0, -2.0, -30.0, 4.0, -25.0), (639.5, 511.5), (640.0, 512.0))
+    x, y = 300.0, 700.0
+    gx, gy = ill.relative_gradient(x, y)
+    qxx, qxy, qyy = ill.relative_curvature(x, y)
+    for dx, dy in ((50.0, 0.0), (0.0, -40.0), (35.0, 28.0), (-60.0, 45.0)):
+        expect = ill.value(x + dx, y + dy) / ill.value(x, y)
+        got = 1 + gx * dx + gy * dy + qxx * dx * dx + qxy * dx * dy + qyy * dy * dy
+        assert got == pytest.approx(expect, abs=1e-12)
+    assert qxx < 0 and qyy < 0  # a field that falls off from the centre
