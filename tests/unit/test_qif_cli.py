@@ -74,8 +74,10 @@ def test_cli_out_file_holds_the_same_bytes(stored, tmp_path):
 def test_cli_and_rest_route_give_the_same_bytes_and_refuse_alike(stored, db_url):
     """The route on a bare app over the same store: 200 with the CLI's bytes, 409 for
     the running inspection, 404 for an unknown id."""
+    import asyncio
+
+    import httpx
     from fastapi import FastAPI
-    from fastapi.testclient import TestClient
 
     from api import auth
     from api.routes.inspections import router
@@ -89,13 +91,19 @@ def test_cli_and_rest_route_give_the_same_bytes_and_refuse_alike(stored, db_url)
     web.include_router(router)
     web.state.runtime = SimpleNamespace(records=SimpleNamespace(get=get))
     web.dependency_overrides[auth.reader] = lambda: None
+    async def ask(path: str) -> httpx.Response:
+        # the app in process over httpx's ASGI transport (starlette's TestClient warns
+        # that its use of httpx is deprecated)
+        async with httpx.AsyncClient(transport=httpx.ASGITransport(app=web), base_url="http://station",
+                                     timeout=30.0) as c:
+            return await c.get(path)
+
     try:
-        with TestClient(web) as c:
-            q = c.get(f"/api/v1/inspections/{stored.done}/qif")
-            assert q.status_code == 200, q.text
-            assert q.content == _cli(stored.done, "--data", str(stored.data)).stdout_bytes
-            assert c.get(f"/api/v1/inspections/{stored.running}/qif").status_code == 409
-            assert c.get("/api/v1/inspections/no-such-id/qif").status_code == 404
+        q = asyncio.run(ask(f"/api/v1/inspections/{stored.done}/qif"))
+        assert q.status_code == 200, q.text
+        assert q.content == _cli(stored.done, "--data", str(stored.data)).stdout_bytes
+        assert asyncio.run(ask(f"/api/v1/inspections/{stored.running}/qif")).status_code == 409
+        assert asyncio.run(ask("/api/v1/inspections/no-such-id/qif")).status_code == 404
     finally:
         store.close()
 
