@@ -341,7 +341,11 @@ def test_the_walls_radial_slope_is_read_from_the_ring(slope_dn_per_px):
     gone (+0.000 / +0.002), shrunk by half (round 14's default) half of it is left.  The
     default since round 15, a 2-D polynomial of the ring carried in to the rim, leaves
     about a quarter (+0.026 / -0.027 px): a quadratic's radial slope grows with the
-    radius, a cone's does not, and blotches are smooth fields, not cones."""
+    radius, a cone's does not, and blotches are smooth fields, not cones.  Since session
+    41 the hole's level follows the frame illumination's curvature, and this frame-wide
+    cone is what its quadratic then reads as illumination: every variant reads 0.017-0.019
+    px further out (none +0.125, full +0.016, half +0.071, the default +0.044 px), the
+    price of a world whose wall reflectance, not its light, shapes the whole frame."""
     from station.vision.photometric import PhotometricConfig
 
     p = FrameParams(width_px=320, height_px=256, groove_depth=0.0, grain=0.0, blotch=0.0, vignetting=0.0,
