@@ -377,7 +377,7 @@ def test_the_walls_radial_slope_is_read_from_the_ring(slope_dn_per_px):
 
 def test_the_holes_level_follows_the_illuminations_curvature():
     """Vignetting multiplies the hole's dark far side as it does the wall: on a 640 x 480
-    frame at 50 % vignetting the far side of a 100 px hole is ~0.5 % darker at its rim
+    frame at 50 % vignetting the far side of a 100 px hole is ~0.9 % darker at its rim
     than at its centre.  A hole level that is constant over the inside (flat-fielded by
     the illumination's local gradient only) reads the darker rim as more hole: the
     diameter +0.024 px over these 12 frames (noise 0.008 px each).  With the hole's level
