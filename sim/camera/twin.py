@@ -236,7 +236,7 @@ class CameraTwin(Camera):
         s = self.optics.mm_per_px
         place = (round(truth.axial_mm / s),
                  round(np.deg2rad(truth.angle_deg) * self.world.part.bore_diameter_mm / 2.0 / s))
-        texture = int(getattr(self.world.part, "texture_seed", 0))
+        texture = self.world.part.texture_seed
         return place if texture == 0 else (texture, *place)
 
     async def _render(self, p: FrameParams, specs: list[HoleSpec], seed: int, truth: ViewTruth,

@@ -534,6 +534,9 @@ def refine_hole(
     ``illumination_grad``: the frame illumination's relative gradient (per px) at the
     hole (``illumination.Illumination.relative_gradient``); the hole's pixels are divided
     by 1 + g . (x - (cx, cy)) first, so that the model sees reflectance only.
+    ``illumination_curv``: its second-order part there (``Illumination.
+    relative_curvature``: qxx, qxy, qyy per px^2), which the hole's level follows
+    (``PhotometricConfig.hole_illumination_curvature``).
     ``frame_grooves``: the grooves' profiles over the hole's wide neighbourhood
     (``grooves.FrameGrooves``; None: from the ring alone).  ``roi_blur_px``: the blur
     that sizes the annulus and the ring (default ``blur_px``); ``cache``: a dict that
