@@ -76,20 +76,22 @@ postgres:
 # PostgreSQL run takes the cells where a fault meets the database (the storing column,
 # the store's own failures, the vision error that ends in a commit); its other cells
 # test the drivers and the engine, which do not depend on the backend (docs/plant.md).
-# The two runs go at once: the suite mostly waits (twins' motion, settles, timeouts;
-# a third of its wall time is CPU), so two streams on two cores take about as long as
-# the longer one. Each has its own temporary folder; the PostgreSQL run's output
-# follows the SQLite run's; make fails when either fails. The SQLite run lists its 25
-# slowest tests (CI must stay well under an hour).
+# The runs go at once: the suite mostly waits (twins' motion, settles, timeouts; a
+# third of its wall time is CPU), so the SQLite run is split over SQLITE_WORKERS
+# pytest-xdist workers, a test file to a worker (a file's tests share its fixtures and
+# order), beside the PostgreSQL run. Each has its own temporary folder; the PostgreSQL
+# run's output follows the SQLite run's; make fails when either fails. The SQLite run
+# lists its 25 slowest tests (CI must stay well under an hour).
 PG_TESTS := tests/unit/test_store.py tests/unit/test_store_surface.py tests/unit/test_record_cache.py tests/api tests/reliability
 PG_SELECT := not test_cell or storing or store_ or vision_error
 TEST_TMP ?= $(or $(TMPDIR),/tmp)/bore-station-tests
+SQLITE_WORKERS ?= 2
 test: $(STAMP) chromium postgres
 	@mkdir -p $(TEST_TMP); \
 	$(BIN)/python -m pytest -q --basetemp=$(TEST_TMP)/postgresql --db postgresql $(PG_TESTS) -k "$(PG_SELECT)" \
 	  > $(TEST_TMP)/postgresql.log 2>&1 & pg=$$!; \
 	echo "== every test on SQLite (the PostgreSQL run goes beside it: $(TEST_TMP)/postgresql.log)"; \
-	$(BIN)/python -m pytest -q --durations=25 --basetemp=$(TEST_TMP)/sqlite; sqlite=$$?; \
+	$(BIN)/python -m pytest -q --durations=25 -n $(SQLITE_WORKERS) --dist loadfile --basetemp=$(TEST_TMP)/sqlite; sqlite=$$?; \
 	wait $$pg; postgresql=$$?; \
 	echo; echo "== the store, API and reliability tests on PostgreSQL"; cat $(TEST_TMP)/postgresql.log; \
 	echo; echo "== SQLite run: exit $$sqlite; PostgreSQL run: exit $$postgresql"; \
