@@ -110,21 +110,27 @@ class Probe:
     kwargs: dict = field(default_factory=dict, hash=False, compare=False)
 
 
+def _absent_id(what: str) -> uuid.UUID:
+    """An id no record has, the same in every process that collects the tests (the
+    probes name the tests, and pytest-xdist's workers must collect the same ones)."""
+    return uuid.uuid5(uuid.NAMESPACE_URL, f"bore-station-tests/absent/{what}")
+
+
 #: concrete requests for routes with path parameters or bodies (the rest: the path itself)
 PROBES: dict[tuple[str, str], list[Probe]] = {
     ("GET", "/panel"): [Probe("/panel/"), Probe("/panel/login.html"), Probe("/panel/js/api.js")],
     ("POST", "/api/v1/session"): [Probe("/api/v1/session", {"json": {}})],  # 422: no token in the body
-    ("GET", "/api/v1/inspections/{inspection_id}"): [Probe(f"/api/v1/inspections/{uuid.uuid4()}")],
-    ("GET", "/api/v1/inspections/{inspection_id}/qif"): [Probe(f"/api/v1/inspections/{uuid.uuid4()}/qif")],
-    ("GET", "/api/v1/inspections/{inspection_id}/surface.png"): [Probe(f"/api/v1/inspections/{uuid.uuid4()}/surface.png")],
+    ("GET", "/api/v1/inspections/{inspection_id}"): [Probe(f"/api/v1/inspections/{_absent_id('inspection')}")],
+    ("GET", "/api/v1/inspections/{inspection_id}/qif"): [Probe(f"/api/v1/inspections/{_absent_id('inspection-qif')}/qif")],
+    ("GET", "/api/v1/inspections/{inspection_id}/surface.png"): [Probe(f"/api/v1/inspections/{_absent_id('inspection-surface')}/surface.png")],
     ("GET", "/api/v1/parts/{part_number}"): [Probe("/api/v1/parts/ZDZG-22.2-12.3851")],
-    ("GET", "/api/v1/reports/discovery/{report_id}"): [Probe(f"/api/v1/reports/discovery/{uuid.uuid4()}")],
+    ("GET", "/api/v1/reports/discovery/{report_id}"): [Probe(f"/api/v1/reports/discovery/{_absent_id('report')}")],
     ("GET", "/api/v1/reports/discovery/{report_id}/plots/{name}"): [
-        Probe(f"/api/v1/reports/discovery/{uuid.uuid4()}/plots/residual_position.png")],
+        Probe(f"/api/v1/reports/discovery/{_absent_id('report-plots')}/plots/residual_position.png")],
     # 422: no such part (the part is looked up only after the caller is admitted)
     ("POST", "/api/v1/job-orders"): [Probe("/api/v1/job-orders",
                                            {"json": {"part_number": "NO-SUCH-PART", "serial": "S"}})],
-    ("GET", "/api/v1/checks/{check_id}"): [Probe(f"/api/v1/checks/{uuid.uuid4()}")],
+    ("GET", "/api/v1/checks/{check_id}"): [Probe(f"/api/v1/checks/{_absent_id('check')}")],
     ("GET", "/api/v1/calibrations/master/{run_id}"): [Probe("/api/v1/calibrations/master/0123456789ab")],
     # 422: poses below 1 (validated only after the caller is admitted)
     ("POST", "/api/v1/calibrations/master"): [Probe("/api/v1/calibrations/master", {"json": {"poses": 0}})],
