@@ -739,17 +739,44 @@ CRITERIA = {"rms_z_max": 1.15, "share_beyond_3_max": 0.005, "count_beyond_5_max"
             "cover_3u_min": 0.995, "median_u_over_sigma_max": 1.35}
 
 
+def share_interval(count: int, n: int, level: float = 0.95) -> tuple[float, float] | None:
+    """The exact (Clopper-Pearson) interval of a share seen as ``count`` of ``n``: on ~600
+    holes the tails' bar of 0.5 % is three holes, and a count of four to eight cannot
+    tell a share of 0.5 % from one of 1 %; the interval says how far it can."""
+    from scipy.stats import beta
+
+    if n <= 0:
+        return None
+    a = (1.0 - level) / 2.0
+    lo = 0.0 if count == 0 else float(beta.ppf(a, count, n - count + 1))
+    hi = 1.0 if count == n else float(beta.ppf(1.0 - a, count + 1, n - count))
+    return lo, hi
+
+
 def _z_stats(z: np.ndarray, zu: np.ndarray, u_over_sigma: np.ndarray) -> dict:
-    """One quantity's criteria figures: z = error / bound sigma, zu = error / u."""
+    """One quantity's criteria figures: z = error / bound sigma, zu = error / u. Besides
+    the criteria's own figures: the 95 % interval of the share beyond 3 sigma, and the
+    share a normal law of the errors' own mean and spread puts there (round 21: the
+    errors are Gaussian to their tails, so the tails follow the RMS)."""
+    from scipy.special import ndtr
+
     z, zu, q = (np.asarray(a, float) for a in (z, zu, u_over_sigma))
     zu = zu[np.isfinite(zu)]
     q = q[np.isfinite(q)]
+    beyond = int(np.sum(np.abs(z) > 3))
+    normal = None
+    if z.size > 1:
+        m, sd = float(np.mean(z)), float(np.std(z, ddof=1))
+        normal = float(ndtr((-3.0 - m) / sd) + ndtr((m - 3.0) / sd)) if sd > 0 else None
     return {"n": int(z.size),
             "rms_z": float(np.sqrt(np.mean(z**2))) if z.size else None,
             # robust: the spread of the bulk, without the tails (MAD)
             "robust_sd_z": float(1.4826 * np.median(np.abs(z))) if z.size else None,
             "mean_z": float(np.mean(z)) if z.size else None,
             "share_beyond_3": float(np.mean(np.abs(z) > 3)) if z.size else None,
+            "count_beyond_3": beyond,
+            "share_beyond_3_ci95": share_interval(beyond, int(z.size)),
+            "share_beyond_3_if_normal": normal,
             "count_beyond_5": int(np.sum(np.abs(z) > 5)),
             "max_abs_z": float(np.max(np.abs(z))) if z.size else None,
             "n_with_u": int(zu.size),
@@ -891,6 +918,29 @@ _BOUND_WALL = {GROOVED: "the frame's grooves known exactly", "frame_aware": "a f
                "frame_aware_blotches_wide": "as frame_aware_blotches, the wall read 70 px past the rim"}
 
 
+def _tails_cell(st: dict) -> str:
+    """The share beyond 3 sigma and its count."""
+    if st["share_beyond_3"] is None:
+        return "-"
+    return f"{st['share_beyond_3']:.2%} ({st.get('count_beyond_3', '?')})"
+
+
+def _tails_note(stats: dict) -> str | None:
+    """Under the table: each share's 95 % interval, and what a normal law of the errors'
+    own spread would put beyond 3 sigma."""
+    parts = []
+    for q in ("diameter", "x", "y", "centre"):
+        st = stats.get(q) or {}
+        ci, nl = st.get("share_beyond_3_ci95"), st.get("share_beyond_3_if_normal")
+        if ci is None:
+            continue
+        parts.append(f"{q} {ci[0]:.2%}-{ci[1]:.2%}" + ("" if nl is None else f" (normal {nl:.2%})"))
+    if not parts:
+        return None
+    return ("beyond 3 sigma, the share's 95 % interval (and a normal law of the errors' own spread): "
+            + "; ".join(parts))
+
+
 def _criteria_table(r: dict, bound: str, stats: dict, verdict: dict, console) -> None:
     from rich.table import Table
 
@@ -908,11 +958,14 @@ def _criteria_table(r: dict, bound: str, stats: dict, verdict: dict, console) ->
         st, v = stats[q], verdict[q]
         mark = lambda ok: "" if ok is None else (" ok" if ok else " MISS")  # noqa: E731
         t.add_row(q, f(st["rms_z"]) + mark(v["efficiency"]), f(st["robust_sd_z"]), f(st["mean_z"]),
-                  f"{st['share_beyond_3']:.2%}" + mark(v["tails"]), str(st["count_beyond_5"]), f(st["max_abs_z"], 2),
+                  _tails_cell(st) + mark(v["tails"]), str(st["count_beyond_5"]), f(st["max_abs_z"], 2),
                   ("-" if st["cover_2u"] is None else f"{st['cover_2u']:.1%}") + mark(v["cover_2u"]),
                   ("-" if st["cover_3u"] is None else f"{st['cover_3u']:.1%}") + mark(v["cover_3u"]),
                   f(st["median_u_over_sigma"]) + mark(v["median_u_over_sigma"]))
     console.print(t)
+    note = _tails_note(stats)
+    if note:
+        console.print(note)
 
 
 def register(bench_app: typer.Typer) -> None:

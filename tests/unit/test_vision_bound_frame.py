@@ -137,6 +137,31 @@ def test_z_statistics_of_an_honest_gaussian_estimator():
     assert st["cover_2u"] == pytest.approx(0.9545, abs=0.005)
     assert st["cover_3u"] == pytest.approx(0.9973, abs=0.002)
     assert st["median_u_over_sigma"] == pytest.approx(1.1)
+    # a normal law of spread 1.1 puts 2 Phi(-3 / 1.1) = 0.64 % beyond 3 sigma; 20,000
+    # draws hold it within their interval, which is narrow (+/- ~0.1 %)
+    assert st["share_beyond_3_if_normal"] == pytest.approx(0.0064, abs=0.0004)
+    lo, hi = st["share_beyond_3_ci95"]
+    assert lo <= st["share_beyond_3"] <= hi and lo < 0.0064 < hi and hi - lo < 0.0025
+    assert st["count_beyond_3"] == round(st["share_beyond_3"] * n)
+
+
+def test_the_share_beyond_3_sigma_has_its_exact_interval():
+    """Clopper-Pearson, checked by its definition (binomial tails of 2.5 % at each end):
+    4 of 606 (session 41's seed 1000) is 0.18-1.68 %, which holds the bar of 0.5 %; none
+    of 600 reaches up to 1 - 0.025^(1/600) = 0.61 %; all of them ends at 1."""
+    from scipy.stats import binom
+
+    from station.bench.vision_bound import share_interval
+
+    for k, n in ((4, 606), (8, 599), (1, 50)):
+        lo, hi = share_interval(k, n)
+        assert binom.sf(k - 1, n, lo) == pytest.approx(0.025, rel=1e-6)  # P(X >= k | lo)
+        assert binom.cdf(k, n, hi) == pytest.approx(0.025, rel=1e-6)  # P(X <= k | hi)
+    lo, hi = share_interval(4, 606)
+    assert lo == pytest.approx(0.0018, abs=0.00005) and hi == pytest.approx(0.0168, abs=0.00005)
+    assert share_interval(0, 600) == (0.0, pytest.approx(1 - 0.025 ** (1 / 600), rel=1e-6))
+    assert share_interval(5, 5) == (pytest.approx(0.025 ** (1 / 5), rel=1e-6), 1.0)
+    assert share_interval(0, 0) is None
 
 
 def test_on_grain_only_frames_the_station_is_near_the_frame_aware_bound():
