@@ -1,6 +1,7 @@
 """The honing cross-hatch over a hole's wide neighbourhood: one profile per groove family;
 and the hatch's two directions, read from the frame's power spectrum (``frame_hatch``,
-``honing_directions``: the honing angle is the part's, 20-35 deg, not the station's).
+``honing_directions``: the honing angle is the part's, not the station's: 20-35 deg for
+plateau honing, 60-75 for helical slide honing).
 
 Why: a honing groove is a straight line that crosses the whole frame, so its profile
 across its direction is read on every wall pixel along it, not only on the 18 px ring
@@ -34,7 +35,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 from numba import njit
-from scipy.ndimage import gaussian_filter1d
+from scipy.ndimage import gaussian_filter1d, maximum_filter1d
 
 #: the smooth level the grooves are read against: a Gaussian of this sigma (px), wide
 #: against a groove (0.8-3 px) and narrow against the blotches and the vignetting
@@ -257,6 +258,10 @@ def _spectrum_geometry(hs: int, ws: int) -> tuple[np.ndarray, np.ndarray, np.nda
     return win, ring, line_bin
 
 
+#: the cross-hatch's half-angles (deg from the circumferential x axis) searched for
+HATCH_HALF_ANGLE_DEG = (6.0, 84.0)
+
+
 def honing_directions(darkness: np.ndarray, valid: np.ndarray, default_deg: float = 30.0) -> tuple[float, float]:
     """The cross-hatch's two line directions (deg, image sense, 0-180) from the frame's
     power spectrum: a family of straight grooves puts its power on the line through
@@ -292,26 +297,44 @@ def honing_directions(darkness: np.ndarray, valid: np.ndarray, default_deg: floa
         return float(((idx + 0.5) / bins * wts).sum() / wts.sum()) % 180.0
 
     # a clear hatch stands several times above the median direction (dev frames: 5-50x);
-    # grain alone is flat within a factor of ~1.5. Only half-angles a honing tool makes
-    # are searched (18-42 deg from the circumferential x axis; plateau honing specifies
-    # 20-35 deg), and the mirror family must carry a quarter of the first's power, or
-    # stand 10x above the median: one long scratch on a bare wall is one strong
-    # direction, not a hatch, but the two families of a real hatch may differ by more
-    # than 4x (a 22 deg hatch whose families stood 283x and 59x above the median fell
-    # back to +/-30 deg, and its grooves became seven "scratches")
+    # grain alone is flat within a factor of ~1.5. The hatch is a *pair* of directions
+    # mirrored about the bore's axis: each direction is scored by the lesser of its own
+    # power and the strongest within 8 deg of its mirror, so one long scratch on a bare
+    # wall (one strong direction) does not pass for a hatch, nor outshine the hatch of a
+    # scratched wall. Half-angles of 6-84 deg from the circumferential x axis are
+    # searched: conventional and plateau honing make 20-35 deg, helical slide honing
+    # 60-75 (a search of 18-42 deg read a 15 deg or 45 deg hatch as +/-30, and its grooves
+    # became scratches); nearer the axes the two families are one. The mirror family
+    # must carry a quarter of the first's power, or stand 10x above the median: the two
+    # families of a real hatch may differ by more than 4x (a 22 deg hatch whose families
+    # stood 283x and 59x above the median fell back to +/-30 deg, and its grooves became
+    # seven "scratches")
     lines = (np.arange(hist.size) + 0.5) / bins
     half_angle = np.minimum(lines, 180.0 - lines)
-    honing = (half_angle >= 18.0) & (half_angle <= 42.0)
-    first = int(np.argmax(np.where(honing, smooth, -np.inf)))
-    if base <= 0 or smooth[first] < 3.0 * base:
+    honing = (half_angle >= HATCH_HALF_ANGLE_DEG[0]) & (half_angle <= HATCH_HALF_ANGLE_DEG[1])
+    # the strongest power within 8 deg of each direction's mirror (bin i's mirror is
+    # bin n - 1 - i)
+    near_mirror = maximum_filter1d(smooth, size=2 * 8 * bins + 1, mode="wrap")[::-1]
+    pair = np.minimum(smooth, near_mirror)
+    if base <= 0 or not honing.any():
         return fallback
-    a1 = centroid(first)
-    mirror = (180.0 - a1) % 180.0
-    near = np.abs((lines - mirror + 90.0) % 180.0 - 90.0) <= 8.0
-    second = int(np.argmax(np.where(near, smooth, -np.inf)))
-    if smooth[second] < max(3.0 * base, min(0.25 * smooth[first], 10.0 * base)):
+    def dist(x, y):
+        return np.abs((x - y + 90.0) % 180.0 - 90.0)
+
+    # the best pair's direction, then its own peak (the stronger family's score is the
+    # weaker's power over a plateau of directions, whose first is not its peak)
+    i = int(np.argmax(np.where(honing, pair, -np.inf)))
+    i = int(np.argmax(np.where(dist(lines, lines[i]) <= 3.0, smooth, -np.inf)))
+    a = centroid(i)
+
+    near = (dist(lines, (180.0 - a) % 180.0) <= 8.0) & (dist(lines, a) >= 5.0)
+    if not near.any():
         return fallback
-    return tuple(sorted((a1, centroid(second))))
+    j = int(np.argmax(np.where(near, smooth, -np.inf)))
+    strong, weak = max(smooth[i], smooth[j]), min(smooth[i], smooth[j])
+    if strong < 3.0 * base or weak < max(3.0 * base, min(0.25 * strong, 10.0 * base)):
+        return fallback
+    return tuple(sorted((a, centroid(j))))
 
 
 def frame_hatch(image: np.ndarray, holes: list[tuple[float, float, float]],
@@ -322,8 +345,8 @@ def frame_hatch(image: np.ndarray, holes: list[tuple[float, float, float]],
     holes given as ``frame_grooves`` takes them left out), or ``nominal_deg`` when the
     frame shows no clear hatch.
 
-    Why: the honing angle is the part's (plateau honing specifies 20-35 deg, and a
-    machine holds it to a few degrees), not the station's. The hole fit reads each
+    Why: the honing angle is the part's (plateau honing specifies 20-35 deg, helical
+    slide honing 60-75, and a machine holds it to a few degrees), not the station's. The hole fit reads each
     family's profile along its lines over hundreds of px, so a model half a degree off
     already costs (dev seeds: diameter z^2 +0.03 to +0.06), and a 25 deg hatch read as
     30 deg costs +0.33 to +0.50 (docs/vision.md, "The hatch's angle")."""

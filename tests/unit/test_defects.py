@@ -292,6 +292,31 @@ def test_a_hatch_of_another_angle_whose_families_differ_in_strength_is_read():
     assert detect_defects(f.image, MM_PER_PX) == []
 
 
+@pytest.mark.parametrize("hatch, seed", [(15.0, 181015), (45.0, 180022), (65.0, 182001)])
+def test_a_hatch_outside_plateau_honings_angles_is_read_and_its_grooves_are_no_scratches(hatch, seed):
+    """Honing makes other angles than plateau honing's 20-35 deg (helical slide honing:
+    60-75): a search of 18-42 deg read 15, 45 and 65 deg hatches as +/-30, and the clean
+    walls' grooves became "scratches" of 0.36-2.5 mm (9 on the first seed, 8 on the
+    second; 39 and 10 over 25 clean frames of each angle)."""
+    f = random_defect_frame(seed, {}, mm_per_px=MM_PER_PX, hatch_deg=hatch)
+    small = cv2.resize(f.image.astype(np.float32), (640, 512), interpolation=cv2.INTER_AREA)
+    darkness = 1.0 - small / cv2.GaussianBlur(small, (0, 0), 8.0)
+    a1, a2 = honing_directions(darkness, np.ones(darkness.shape, bool))
+    assert a1 == pytest.approx(hatch, abs=0.3) and a2 == pytest.approx(180.0 - hatch, abs=0.3)
+    assert detect_defects(f.image, MM_PER_PX) == []
+
+
+def test_one_long_scratch_on_a_bare_wall_is_no_hatch():
+    """One strong direction is a scratch, not a hatch: without its mirror family the
+    directions fall back to the default."""
+    p = FrameParams(width_px=640, height_px=512, groove_depth=0.0)
+    spec = DefectSpec("scratch", 320.0, 256.0, 400.0, 3.0, 40.0, None, None, 7)
+    f = render_frame(p, [], seed=11, defects=[spec])
+    small = cv2.resize(f.image.astype(np.float32), (320, 256), interpolation=cv2.INTER_AREA)
+    darkness = 1.0 - small / cv2.GaussianBlur(small, (0, 0), 8.0)
+    assert honing_directions(darkness, np.ones(darkness.shape, bool), 30.0) == (30.0, 150.0)
+
+
 # ---------------------------------------------------------------- the twin's part
 def test_the_twin_renders_the_parts_defects_where_they_are_on_the_wall():
     from sim.camera.twin import CameraTwin, small_optics
