@@ -82,6 +82,10 @@ class PartTruth:
     #: the place in view, so two parts differ in their grooves, grain and blotches where
     #: they are drawn alike (0: the scenario's one part, as before parts had one)
     texture_seed: int = 0
+    #: the honing cross-hatch's half-angle (deg from the circumferential direction, both
+    #: signs): the part's, as its honing machine was set (plateau honing 20-35, helical
+    #: slide honing 60-75); the camera twin draws the grooves at it
+    hatch_deg: float = 30.0
 
 
 #: the paper's standard sample (Table 4): both holes 0.7 mm, at 71.03 and 85.19 mm.
@@ -304,7 +308,7 @@ def world_from_dict(data: dict[str, Any], source: str = "<dict>", base: Path | N
     (``[world.screw_heating]``, ``[world.ambient]``, ``[world.wear]``,
     ``[world.collision]``: sim.drift), ``[[world.holes]]`` (name, axial_mm,
     angle_deg, diameter_mm), ``[[world.defects]]`` (``SurfaceDefect``'s fields) and
-    ``texture_seed`` (``PartTruth.texture_seed``)."""
+    ``texture_seed`` and ``hatch_deg`` (``PartTruth``'s)."""
     model_path = data.get("model")
     if model_path is not None:
         p = Path(model_path)
@@ -363,9 +367,13 @@ def world_from_dict(data: dict[str, Any], source: str = "<dict>", base: Path | N
     texture_seed = data.get("texture_seed", 0)
     if isinstance(texture_seed, bool) or not isinstance(texture_seed, int) or texture_seed < 0:
         raise ValueError(f"{source}: world.texture_seed must be a whole number >= 0, not {texture_seed!r}")
+    hatch = data.get("hatch_deg", PartTruth.hatch_deg)
+    if isinstance(hatch, bool) or not isinstance(hatch, (int, float)) or not 0.0 < hatch < 90.0:
+        raise ValueError(f"{source}: world.hatch_deg must be a half-angle in degrees between 0 and 90 (exclusive), "
+                         f"not {hatch!r}")
     part = PartTruth(str(data.get("part_number", STANDARD_SAMPLE.part_number)),
                      float(data.get("bore_diameter_mm", STANDARD_SAMPLE.bore_diameter_mm)), holes, tuple(defects),
-                     texture_seed)
+                     texture_seed, float(hatch))
     try:
         return World(model, part, temperature, repeatability, drift_from_dict(data, source))
     except ValueError as exc:

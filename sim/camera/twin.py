@@ -214,6 +214,8 @@ class CameraTwin(Camera):
         else:
             specs, defects, truth = self.scene()
             seed = int(self._rng.integers(0, 2**31))
+            if self.world.part.hatch_deg != p.hatch_deg:
+                p = replace(p, hatch_deg=self.world.part.hatch_deg)  # the part's honing
             # rendering a frame takes tens of ms: off the event loop (and, with a
             # renderer process, off this interpreter's GIL, as a real camera's pixels are)
             image = await self._render(p, specs, seed, truth, defects)
@@ -232,11 +234,16 @@ class CameraTwin(Camera):
     def _wall_key(self, truth: ViewTruth) -> tuple[int, ...]:
         """The patch of wall in view: its place (px, rounded), and on another part than
         the scenario's first (``PartTruth.texture_seed``) that part too: a part put on
-        the table shows its own honing where another was scanned alike."""
+        the table shows its own honing where another was scanned alike; and a part
+        honed at another angle than the optics' (``PartTruth.hatch_deg``, in
+        thousandths of a degree) its angle."""
         s = self.optics.mm_per_px
         place = (round(truth.axial_mm / s),
                  round(np.deg2rad(truth.angle_deg) * self.world.part.bore_diameter_mm / 2.0 / s))
         texture = self.world.part.texture_seed
+        hatch = self.world.part.hatch_deg
+        if hatch != self.optics.params.hatch_deg:
+            return (texture, round(hatch * 1000.0), *place)
         return place if texture == 0 else (texture, *place)
 
     async def _render(self, p: FrameParams, specs: list[HoleSpec], seed: int, truth: ViewTruth,

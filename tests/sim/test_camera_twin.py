@@ -148,6 +148,40 @@ def test_another_part_on_the_table_shows_its_own_wall_at_the_same_place(rig):
     assert np.std(a - grab(cam).image.astype(float)) < 1.1 * noise
 
 
+def test_a_part_honed_at_another_angle_shows_its_grooves_at_that_angle(rig):
+    """The honing angle is the part's: a part honed at 65 deg (helical slide honing)
+    shows its cross-hatch at +/-65 deg, read back from the frame's spectrum, where the
+    optics' default part shows +/-30 (to within a degree: the small frame's few grooves
+    and its lens); put back, the first part shows its own wall again."""
+    import cv2
+
+    from station.vision.grooves import honing_directions
+
+    clock, world, z, c, cam = rig
+    first = world.part
+    move(clock, z, 40.0)  # plain wall, no hole in view
+
+    def hatch() -> tuple[float, float]:
+        img = grab(cam).image.astype(np.float32)
+        darkness = 1.0 - img / cv2.GaussianBlur(img, (0, 0), 8.0)
+        return honing_directions(darkness, np.ones(darkness.shape, bool), default_deg=10.0)
+
+    a = hatch()
+    assert a == (pytest.approx(30.0, abs=1.0), pytest.approx(150.0, abs=1.0))
+    world.part = replace(first, hatch_deg=65.0)
+    assert hatch() == (pytest.approx(65.0, abs=1.0), pytest.approx(115.0, abs=1.0))
+    world.part = first
+    assert hatch() == (pytest.approx(a[0], abs=0.05), pytest.approx(a[1], abs=0.05))
+
+
+def test_a_scenario_names_its_parts_honing_angle():
+    assert world_from_dict({"hatch_deg": 65}).part.hatch_deg == 65.0
+    assert world_from_dict({}).part.hatch_deg == 30.0
+    for bad in (0, 90, -10, "65", True):
+        with pytest.raises(ValueError, match="scenario.toml: world.hatch_deg"):
+            world_from_dict({"hatch_deg": bad}, "scenario.toml")
+
+
 def test_a_scenario_names_its_parts_texture():
     assert world_from_dict({"texture_seed": 12}).part.texture_seed == 12
     assert world_from_dict({}).part.texture_seed == 0
