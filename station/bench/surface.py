@@ -36,8 +36,9 @@ PLACE_TOL_MM = 0.05
 
 def random_defects(rng: np.random.Generator, part, band_mm: tuple[float, float], n_wall: int, n_rim: int):
     """``n_wall`` pores and scratches anywhere in the band (at least 1.5 mm from any
-    hole, 1 mm from each other and from the band's ends) and ``n_rim`` burrs and chips at
-    the holes' rims (0.5 mm apart along a rim), as the world's ``SurfaceDefect``s."""
+    hole, 1 mm from each other and from the band's ends; scratches off the part's honing,
+    ``PartTruth.hatch_deg``) and ``n_rim`` burrs and chips at the holes' rims (0.5 mm
+    apart along a rim), as the world's ``SurfaceDefect``s."""
     from sim.camera.defects import RANDOM_SIZES_MM, SCRATCH_MIN_ELONGATION, random_scratch_angle
     from sim.world import SurfaceDefect
 
@@ -68,7 +69,7 @@ def random_defects(rng: np.random.Generator, part, band_mm: tuple[float, float],
         # a scratch crosses the honing (the defect bench's rule: one along a groove is the
         # hatch's own line to any detector); the set of groove directions is symmetric, so
         # the image's sense and the wall's agree
-        orientation = random_scratch_angle(rng) if kind == "scratch" else float(rng.uniform(0.0, 180.0))
+        orientation = random_scratch_angle(rng, part.hatch_deg) if kind == "scratch" else float(rng.uniform(0.0, 180.0))
         out.append(SurfaceDefect(f"{kind}_{i}", kind, length, width, axial_mm=place[0], angle_deg=place[1],
                                  orientation_deg=orientation, seed=int(rng.integers(1 << 30))))
     for i in range(n_rim):
@@ -97,7 +98,7 @@ def _within(err: float, truth: float) -> bool:
 
 
 def run(parts: int = 3, seed: int = 23000, n_wall: int = 8, n_rim: int = 2, time_scale: float = 20.0,
-        progress=None) -> dict:
+        progress=None, hatch_deg: float = 30.0) -> dict:
     from sim.world import STANDARD_SAMPLE, PartTruth, defect_truth_place, rendered_size
     from station.parts import load_part
     from station.runtime import open_session
@@ -108,10 +109,12 @@ def run(parts: int = 3, seed: int = 23000, n_wall: int = 8, n_rim: int = 2, time
     per_part = []
     for k in range(parts):
         rng = np.random.default_rng(seed + k)
-        truth = PartTruth(holes=STANDARD_SAMPLE.holes, bore_diameter_mm=STANDARD_SAMPLE.bore_diameter_mm)
+        truth = PartTruth(holes=STANDARD_SAMPLE.holes, bore_diameter_mm=STANDARD_SAMPLE.bore_diameter_mm,
+                          hatch_deg=hatch_deg)
         # each part its own casting: its own defects and its own honed wall
         truth = PartTruth(truth.part_number, truth.bore_diameter_mm, truth.holes,
-                          random_defects(rng, truth, band, n_wall, n_rim), texture_seed=seed + k + 1)
+                          random_defects(rng, truth, band, n_wall, n_rim), texture_seed=seed + k + 1,
+                          hatch_deg=hatch_deg)
 
         async def one():
             with tempfile.TemporaryDirectory() as tmp:
@@ -162,7 +165,7 @@ def run(parts: int = 3, seed: int = 23000, n_wall: int = 8, n_rim: int = 2, time
     place = [r["place_error_mm"] for r in found]
     ratios = [p["ratio"] for p in per_part if p["ratio"] is not None]
     return {
-        "parts": parts, "seed": seed, "band_mm": list(band), "seeded": len(rows), "found": len(found),
+        "parts": parts, "seed": seed, "hatch_deg": hatch_deg, "band_mm": list(band), "seeded": len(rows), "found": len(found),
         "recall_above_limit": (sum(r["found"] for r in above) / len(above)) if above else None,
         "recall_all": len(found) / len(rows) if rows else None,
         "place_error_mm": {"median": statistics.median(place) if place else None, "max": max(place) if place else None,
@@ -193,6 +196,9 @@ def register(bench_app: typer.Typer) -> None:
         seed: int = typer.Option(23000, "--seed", help="first seed of the parts' defects"),
         n_wall: int = typer.Option(8, "--wall-defects", min=0, help="pores and scratches per part"),
         n_rim: int = typer.Option(2, "--rim-defects", min=0, help="burrs and chips per part, at the holes"),
+        hatch_deg: float = typer.Option(30.0, "--hatch-deg", min=1.0, max=89.0,
+                                        help="the parts' honing angle (cross-hatch half-angle, deg; plateau honing "
+                                             "20-35, helical slide honing 60-75)"),
         as_json: bool = typer.Option(False, "--json", help="one JSON object on stdout"),
     ) -> None:
         """Whole-surface inspections: each seeded defect's place (<= 0.05 mm), recall, sizes, cycle vs physical limit."""
@@ -204,11 +210,11 @@ def register(bench_app: typer.Typer) -> None:
 
         with Progress(console=out_console, transient=True, disable=as_json) as bar:
             task = bar.add_task("inspecting simulated parts (coverage scan)", total=parts)
-            r = run(parts, seed, n_wall, n_rim, progress=lambda: bar.advance(task))
+            r = run(parts, seed, n_wall, n_rim, progress=lambda: bar.advance(task), hatch_deg=hatch_deg)
         if as_json:
             print_json(r)
             return
-        t = Table(title=f"surface: {parts} parts, seed {seed}, band {r['band_mm'][0]:g}..{r['band_mm'][1]:g} mm")
+        t = Table(title=f"surface: {parts} parts, seed {seed}, hatch {hatch_deg:g} deg, band {r['band_mm'][0]:g}..{r['band_mm'][1]:g} mm")
         for c in ("part", "seeded", "reported", "false", "frames", "re-centred", "machine s", "limit s", "ratio"):
             t.add_column(c, justify="right")
         for p in r["per_part"]:
