@@ -71,29 +71,31 @@ postgres:
 	    || echo "WARNING: could not install postgresql: the PostgreSQL tests will fail"; \
 	fi
 
-# Everything on SQLite (the plant test on PostgreSQL), and beside it the store, API and
+# Everything on SQLite (the plant test on PostgreSQL), and then the store, API and
 # reliability tests again with every store on PostgreSQL. Of the fault matrix, the
 # PostgreSQL run takes the cells where a fault meets the database (the storing column,
 # the store's own failures, the vision error that ends in a commit); its other cells
 # test the drivers and the engine, which do not depend on the backend (docs/plant.md).
-# The runs go at once: the suite mostly waits (twins' motion, settles, timeouts; a
-# third of its wall time is CPU), so the SQLite run is split over SQLITE_WORKERS
-# pytest-xdist workers, a test file to a worker (a file's tests share its fixtures and
-# order), beside the PostgreSQL run. Each has its own temporary folder; the PostgreSQL
-# run's output follows the SQLite run's; make fails when either fails. The SQLite run
-# lists its 25 slowest tests (CI must stay well under an hour).
+# Each run is split over TEST_WORKERS pytest-xdist workers, a test file to a worker (a
+# file's tests share its fixtures and order), the slowest files first (tests/conftest.py):
+# the suite mostly waits (twins' motion, settles, timeouts; a third of its wall time is
+# CPU). The SQLite run goes first, then the PostgreSQL run: two streams at a time on
+# two cores, as the suite's real-time tests (drive watchdogs, the station's event loop)
+# were proven under; three at once starved the loop past a drive's 1 s watchdog. Each
+# run has its own temporary folder; make fails when either fails. The SQLite run lists
+# its 25 slowest tests (CI must stay well under an hour).
 PG_TESTS := tests/unit/test_store.py tests/unit/test_store_surface.py tests/unit/test_record_cache.py tests/api tests/reliability
 PG_SELECT := not test_cell or storing or store_ or vision_error
 TEST_TMP ?= $(or $(TMPDIR),/tmp)/bore-station-tests
-SQLITE_WORKERS ?= 2
+TEST_WORKERS ?= 2
+XDIST := -n $(TEST_WORKERS) --dist loadfile
 test: $(STAMP) chromium postgres
 	@mkdir -p $(TEST_TMP); \
-	$(BIN)/python -m pytest -q --basetemp=$(TEST_TMP)/postgresql --db postgresql $(PG_TESTS) -k "$(PG_SELECT)" \
-	  > $(TEST_TMP)/postgresql.log 2>&1 & pg=$$!; \
-	echo "== every test on SQLite (the PostgreSQL run goes beside it: $(TEST_TMP)/postgresql.log)"; \
-	$(BIN)/python -m pytest -q --durations=25 -n $(SQLITE_WORKERS) --dist loadfile --basetemp=$(TEST_TMP)/sqlite; sqlite=$$?; \
-	wait $$pg; postgresql=$$?; \
-	echo; echo "== the store, API and reliability tests on PostgreSQL"; cat $(TEST_TMP)/postgresql.log; \
+	echo "== every test on SQLite"; \
+	$(BIN)/python -m pytest -q --durations=25 $(XDIST) --basetemp=$(TEST_TMP)/sqlite; sqlite=$$?; \
+	echo; echo "== the store, API and reliability tests on PostgreSQL"; \
+	$(BIN)/python -m pytest -q $(XDIST) --basetemp=$(TEST_TMP)/postgresql --db postgresql $(PG_TESTS) -k "$(PG_SELECT)"; \
+	postgresql=$$?; \
 	echo; echo "== SQLite run: exit $$sqlite; PostgreSQL run: exit $$postgresql"; \
 	[ $$sqlite -eq 0 ] && [ $$postgresql -eq 0 ]
 

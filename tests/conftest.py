@@ -29,6 +29,40 @@ def pytest_addoption(parser):
                           "postgresql (a throwaway cluster, a database per data folder)")
 
 
+#: the test files that take minutes (CI's --durations on a 2-core machine), slowest
+#: first: under pytest-xdist (``make test``) each worker takes whole files in collection
+#: order, so these start at once and the short files fill in behind them; last, one of
+#: them would run alone at the end while the other worker idles
+SLOW_FILES = (
+    "tests/plant/test_plant_stations.py",  # ~6-7 min: three station processes, SIGKILLs
+    "tests/e2e/test_campaign.py",  # ~8-10 min in all: production campaigns in real time
+    "tests/api/test_schemathesis.py",  # ~4 min: stateful sequences over the served API
+    "tests/reliability/test_soak.py",  # ~3-4 min: repeated inspections, growth checks
+    "tests/reliability/test_crash.py",  # ~2 min: SIGKILLs at random points
+    "tests/reliability/test_fault_matrix.py",  # ~4 min over its cells
+    "tests/unit/test_discovery_parts.py",
+    "tests/e2e/test_scanlog.py",
+    "tests/e2e/test_calibrate_master.py",
+    "tests/e2e/test_calibration_observability_twins.py",
+)
+
+
+def pytest_collection_modifyitems(session, config, items):
+    """The slowest files first, in ``SLOW_FILES``' order; every other test keeps its
+    place (a stable sort, so every worker collects the same order)."""
+    rank = {path: i for i, path in enumerate(SLOW_FILES)}
+
+    def key(item):
+        path = Path(str(item.fspath)).resolve()
+        try:
+            rel = path.relative_to(REPO).as_posix()
+        except ValueError:
+            rel = path.as_posix()
+        return rank.get(rel, len(SLOW_FILES))
+
+    items.sort(key=key)
+
+
 def pytest_report_header(config):
     return f"results store under test: {config.getoption('--db')}"
 

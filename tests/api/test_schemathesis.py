@@ -57,6 +57,7 @@ def test_no_server_errors(fuzz_server):
     assert len(tested) >= 18, tested  # the schema's operations were found and exercised
 
 
+@pytest.mark.timeout(900)  # minutes of real time: a hang guard, 3x its time on a busy 2-core machine
 def test_stateful_sequences_follow_the_links_without_server_errors(fuzz_server):
     """Sequences along the schema's OpenAPI links (api/openapi_links.py): a job order,
     then its inspection and QIF; an upload, then its activation; a part written, then

@@ -12,6 +12,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 from station.bench.campaign import run_campaign
 from station.store import Store
 
@@ -28,6 +30,7 @@ def scenario(tmp_path: Path, name: str, extra: str = "", matched: bool = False) 
     return p
 
 
+@pytest.mark.timeout(900)  # minutes of real time: a hang guard, 3x its time on a busy 2-core machine
 def test_a_knocked_datum_is_caught_named_corrected_and_logged(tmp_path):
     # each part is about 14 s of the drives' clock at time scale 4: the knock falls after part 3
     knock = scenario(tmp_path, "knock", '\n[world.collision]\nat_s = 45.0\nbody = "J"\nshift = { z_um = 8.0 }\n')
@@ -64,6 +67,7 @@ def test_a_knocked_datum_is_caught_named_corrected_and_logged(tmp_path):
     assert "approved by campaign --auto-approve" in [m for k, m in kinds if k == "approval"][0]
 
 
+@pytest.mark.timeout(900)  # minutes of real time: a hang guard, 3x its time on a busy 2-core machine
 def test_a_world_that_agrees_with_its_model_raises_no_alarm(tmp_path):
     res = run_campaign(scenario(tmp_path, "matched", matched=True), parts=8, master_every=4,
                        data=tmp_path / "var", time_scale=4.0)
@@ -85,6 +89,7 @@ def test_campaign_cli_prints_one_json_object_and_refuses_nonsense(tmp_path):
     assert bad.returncode == 2 and "at least one part" in bad.stderr
 
 
+@pytest.mark.timeout(900)  # minutes of real time: a hang guard, 3x its time on a busy 2-core machine
 def test_a_warming_shop_is_caught_named_a_drift_and_the_station_stays_within_its_u(tmp_path):
     # the air steps 8 K warmer 30 s after power-on: the part (23 ppm/K, 10 min lag), the
     # frame and the grating follow, each at its pace; no sensor of the station reads a

@@ -3,6 +3,8 @@ open descriptors or threads (station/bench/soak.py; `station bench soak` runs lo
 
 from __future__ import annotations
 
+import pytest
+
 from station.bench.soak import RSS_SLOPE_KB, SoakResult, run
 
 
@@ -68,6 +70,7 @@ def test_the_verdict_lets_a_pool_step_up_once():
     assert v["ok"]
 
 
+@pytest.mark.timeout(900)  # minutes of real time: a hang guard, 3x its time on a busy 2-core machine
 def test_repeated_inspections_leave_no_growth(db_url):
     res = run(inspections=16, pollers=3, time_scale=50.0, db_url=db_url)
     v = res.verdict()
