@@ -71,31 +71,32 @@ postgres:
 	    || echo "WARNING: could not install postgresql: the PostgreSQL tests will fail"; \
 	fi
 
-# Everything on SQLite (the plant test on PostgreSQL), and then the store, API and
+# Everything on SQLite (the plant test on PostgreSQL), and beside it the store, API and
 # reliability tests again with every store on PostgreSQL. Of the fault matrix, the
 # PostgreSQL run takes the cells where a fault meets the database (the storing column,
 # the store's own failures, the vision error that ends in a commit); its other cells
 # test the drivers and the engine, which do not depend on the backend (docs/plant.md).
-# Each run is split over TEST_WORKERS pytest-xdist workers, a test file to a worker (a
-# file's tests share its fixtures and order), the slowest files first (tests/conftest.py):
-# the suite mostly waits (twins' motion, settles, timeouts; a third of its wall time is
-# CPU). The SQLite run goes first, then the PostgreSQL run: two streams at a time on
-# two cores, as the suite's real-time tests (drive watchdogs, the station's event loop)
-# were proven under; three at once starved the loop past a drive's 1 s watchdog. Each
-# run has its own temporary folder; make fails when either fails. The SQLite run lists
-# its 25 slowest tests (CI must stay well under an hour).
+# The two runs go at once: the suite mostly waits (twins' motion, settles, timeouts;
+# a third of its wall time is CPU), so two streams on two cores take about as long as
+# the longer one. Each has its own temporary folder; the PostgreSQL run's output
+# follows the SQLite run's; make fails when either fails. The SQLite run lists its 25
+# slowest tests (CI must stay well under an hour). The suite also runs on pytest-xdist
+# workers (`pytest -n 2 --dist loadfile`: a file to a worker, the slowest files first,
+# tests/conftest.py), about 40 min for the SQLite run on a 2-core machine where this
+# layout takes 65; CI keeps this layout because two xdist streams the whole time
+# starved the station's event loop past a drive's 1 s watchdog in real-time tests
+# (session 42: one such failure in 3,040 tests of a clean run; docs/reliability.md).
 PG_TESTS := tests/unit/test_store.py tests/unit/test_store_surface.py tests/unit/test_record_cache.py tests/api tests/reliability
 PG_SELECT := not test_cell or storing or store_ or vision_error
 TEST_TMP ?= $(or $(TMPDIR),/tmp)/bore-station-tests
-TEST_WORKERS ?= 2
-XDIST := -n $(TEST_WORKERS) --dist loadfile
 test: $(STAMP) chromium postgres
 	@mkdir -p $(TEST_TMP); \
-	echo "== every test on SQLite"; \
-	$(BIN)/python -m pytest -q --durations=25 $(XDIST) --basetemp=$(TEST_TMP)/sqlite; sqlite=$$?; \
-	echo; echo "== the store, API and reliability tests on PostgreSQL"; \
-	$(BIN)/python -m pytest -q $(XDIST) --basetemp=$(TEST_TMP)/postgresql --db postgresql $(PG_TESTS) -k "$(PG_SELECT)"; \
-	postgresql=$$?; \
+	$(BIN)/python -m pytest -q --basetemp=$(TEST_TMP)/postgresql --db postgresql $(PG_TESTS) -k "$(PG_SELECT)" \
+	  > $(TEST_TMP)/postgresql.log 2>&1 & pg=$$!; \
+	echo "== every test on SQLite (the PostgreSQL run goes beside it: $(TEST_TMP)/postgresql.log)"; \
+	$(BIN)/python -m pytest -q --durations=25 --basetemp=$(TEST_TMP)/sqlite; sqlite=$$?; \
+	wait $$pg; postgresql=$$?; \
+	echo; echo "== the store, API and reliability tests on PostgreSQL"; cat $(TEST_TMP)/postgresql.log; \
 	echo; echo "== SQLite run: exit $$sqlite; PostgreSQL run: exit $$postgresql"; \
 	[ $$sqlite -eq 0 ] && [ $$postgresql -eq 0 ]
 
