@@ -35,7 +35,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 from numba import njit
-from scipy.ndimage import gaussian_filter1d, maximum_filter1d
+from scipy.ndimage import gaussian_filter1d
 
 #: the smooth level the grooves are read against: a Gaussian of this sigma (px), wide
 #: against a groove (0.8-3 px) and narrow against the blotches and the vignetting
@@ -297,44 +297,47 @@ def honing_directions(darkness: np.ndarray, valid: np.ndarray, default_deg: floa
         return float(((idx + 0.5) / bins * wts).sum() / wts.sum()) % 180.0
 
     # a clear hatch stands several times above the median direction (dev frames: 5-50x);
-    # grain alone is flat within a factor of ~1.5. The hatch is a *pair* of directions
-    # mirrored about the bore's axis: each direction is scored by the lesser of its own
-    # power and the strongest within 8 deg of its mirror, so one long scratch on a bare
-    # wall (one strong direction) does not pass for a hatch, nor outshine the hatch of a
-    # scratched wall. Half-angles of 6-84 deg from the circumferential x axis are
-    # searched: conventional and plateau honing make 20-35 deg, helical slide honing
-    # 60-75 (a search of 18-42 deg read a 15 deg or 45 deg hatch as +/-30, and its grooves
-    # became scratches); nearer the axes the two families are one. The mirror family
-    # must carry a quarter of the first's power, or stand 10x above the median: the two
-    # families of a real hatch may differ by more than 4x (a 22 deg hatch whose families
-    # stood 283x and 59x above the median fell back to +/-30 deg, and its grooves became
-    # seven "scratches")
+    # grain alone is flat within a factor of ~1.5. The hatch is a *pair* of peaks
+    # mirrored about the bore's axis: each peak of the directions' power is paired with
+    # the strongest peak within 8 deg of its mirror, and the pair whose weaker peak is
+    # strongest is the hatch. So one long scratch on a bare wall (one peak) is no hatch,
+    # and a scratch beside a hatch is not paired with the shoulder of a groove family's
+    # peak (on a 640 x 512 frame a family's peak is several degrees wide: a scratch at 41
+    # deg paired with the 150 deg family's flank at 145 outranked a 30 deg hatch whose
+    # families differ in strength). Half-angles of 6-84 deg from the circumferential x
+    # axis are searched: conventional and plateau honing make 20-35 deg, helical slide
+    # honing 60-75 (a search of 18-42 deg read a 15 deg or 45 deg hatch as +/-30, and its
+    # grooves became scratches); nearer the axes the two families are one. The mirror
+    # family must carry a quarter of the first's power, or stand 10x above the median:
+    # the two families of a real hatch may differ by more than 4x (a 22 deg hatch whose
+    # families stood 283x and 59x above the median fell back to +/-30 deg, and its
+    # grooves became seven "scratches")
     lines = (np.arange(hist.size) + 0.5) / bins
     half_angle = np.minimum(lines, 180.0 - lines)
     honing = (half_angle >= HATCH_HALF_ANGLE_DEG[0]) & (half_angle <= HATCH_HALF_ANGLE_DEG[1])
-    # the strongest power within 8 deg of each direction's mirror (bin i's mirror is
-    # bin n - 1 - i)
-    near_mirror = maximum_filter1d(smooth, size=2 * 8 * bins + 1, mode="wrap")[::-1]
-    pair = np.minimum(smooth, near_mirror)
-    if base <= 0 or not honing.any():
+    if base <= 0:
         return fallback
+    peak = (smooth >= np.roll(smooth, 1)) & (smooth > np.roll(smooth, -1)) & (smooth >= 3.0 * base)
+
     def dist(x, y):
         return np.abs((x - y + 90.0) % 180.0 - 90.0)
 
-    # the best pair's direction, then its own peak (the stronger family's score is the
-    # weaker's power over a plateau of directions, whose first is not its peak)
-    i = int(np.argmax(np.where(honing, pair, -np.inf)))
-    i = int(np.argmax(np.where(dist(lines, lines[i]) <= 3.0, smooth, -np.inf)))
-    a = centroid(i)
-
-    near = (dist(lines, (180.0 - a) % 180.0) <= 8.0) & (dist(lines, a) >= 5.0)
-    if not near.any():
+    best = None
+    for i in np.flatnonzero(peak & honing):
+        near = peak & (dist(lines, 180.0 - lines[i]) <= 8.0) & (dist(lines, lines[i]) >= 5.0)
+        if not near.any():
+            continue
+        j = int(np.argmax(np.where(near, smooth, -np.inf)))
+        score = min(smooth[i], smooth[j])
+        if best is None or score > best[0]:
+            best = (score, int(i), j)
+    if best is None:
         return fallback
-    j = int(np.argmax(np.where(near, smooth, -np.inf)))
+    _, i, j = best
     strong, weak = max(smooth[i], smooth[j]), min(smooth[i], smooth[j])
-    if strong < 3.0 * base or weak < max(3.0 * base, min(0.25 * strong, 10.0 * base)):
+    if weak < max(3.0 * base, min(0.25 * strong, 10.0 * base)):
         return fallback
-    return tuple(sorted((a, centroid(j))))
+    return tuple(sorted((centroid(i), centroid(j))))
 
 
 def frame_hatch(image: np.ndarray, holes: list[tuple[float, float, float]],
