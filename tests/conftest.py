@@ -30,7 +30,7 @@ def pytest_addoption(parser):
 
 
 #: the test files that take minutes (CI's --durations on a 2-core machine), slowest
-#: first: under pytest-xdist (``make test``) each worker takes whole files in collection
+#: first: under pytest-xdist (``pytest -n 2 --dist loadfile``) each worker takes whole files in collection
 #: order, so these start at once and the short files fill in behind them; last, one of
 #: them would run alone at the end while the other worker idles
 SLOW_FILES = (

@@ -286,7 +286,7 @@ def register(bench_app: typer.Typer) -> None:
                                         help="the frames' scale at the wall (the station's camera: 0.010); defects' "
                                              "and holes' sizes are drawn in mm, the wall's texture in px unless "
                                              "--texture-in-mm"),
-        hatch_deg: float = typer.Option(30.0, "--hatch-deg", min=10.0, max=60.0,
+        hatch_deg: float = typer.Option(30.0, "--hatch-deg", min=6.0, max=84.0,
                                         help="the honing cross-hatch's half-angle (plateau honing: 20-35 deg, helical slide honing: 60-75; read from 6 to 84)"),
         texture_in_mm: bool = typer.Option(False, "--texture-in-mm",
                                            help="draw the wall's grooves, grain and blotches at the frames' scale (as "
