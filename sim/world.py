@@ -29,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from sim.camera.render import HONING_ANGLE_DEG
 from sim.drift import SIX_DOF_KEYS, Drift, drift_from_dict
 from station.effects import Eccentricity
 from station.kinematics.model import StationModel, load_model
@@ -85,7 +86,7 @@ class PartTruth:
     #: the honing cross-hatch's half-angle (deg from the circumferential direction, both
     #: signs): the part's, as its honing machine was set (plateau honing 20-35, helical
     #: slide honing 60-75); the camera twin draws the grooves at it
-    hatch_deg: float = 30.0
+    hatch_deg: float = HONING_ANGLE_DEG
 
 
 #: the paper's standard sample (Table 4): both holes 0.7 mm, at 71.03 and 85.19 mm.

@@ -98,11 +98,13 @@ def _within(err: float, truth: float) -> bool:
 
 
 def run(parts: int = 3, seed: int = 23000, n_wall: int = 8, n_rim: int = 2, time_scale: float = 20.0,
-        progress=None, hatch_deg: float = 30.0) -> dict:
+        progress=None, hatch_deg: float | None = None) -> dict:
     from sim.world import STANDARD_SAMPLE, PartTruth, defect_truth_place, rendered_size
     from station.parts import load_part
     from station.runtime import open_session
 
+    if hatch_deg is None:
+        hatch_deg = PartTruth.hatch_deg  # the renderer's nominal hatch
     spec = load_part("ZDZG-22.2-12.3851")
     band = spec.surface_band_mm()
     rows = []
