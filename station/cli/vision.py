@@ -51,8 +51,17 @@ def measure(
     if cal is not None and tuple(cal.image_size) != (frame.shape[1], frame.shape[0]):
         fail(f"calibration is for {cal.image_size[0]}x{cal.image_size[1]} px, the image is {frame.shape[1]}x{frame.shape[0]}")
     holes = measure_holes(frame, mm_per_px=mm_per_px, calibration=cal)
+    notes = []
+    if mm_per_px is None and cal is None:
+        from station.vision.detect import MAX_HOLE_MM, DetectConfig, oversized_discs
+
+        limit = DetectConfig().max_diameter_px
+        for d in oversized_discs(frame):
+            notes.append(f"a dark disc about {2 * d.radius_px:.0f} px across at ({d.x_px:.0f}, {d.y_px:.0f}) px was "
+                         f"not measured: without a scale holes are sought up to {limit:.0f} px ({MAX_HOLE_MM} mm at "
+                         f"{MAX_HOLE_MM / limit:.3f} mm/px); give --mm-per-px or --calibration")
     if as_json:
-        print_json({"image": str(image), "holes": [h.to_dict() for h in holes]})
+        print_json({"image": str(image), "holes": [h.to_dict() for h in holes], "notes": notes})
         return
     table = Table(title=f"{image.name}: {len(holes)} hole(s)")
     for col in ("x px", "y px", "u(x, y) px", "d px", "u(d) px", "d mm", "partial", "conf", "rms px", "edge DN"):
@@ -67,6 +76,8 @@ def measure(
             "yes" if h.partial else "no", f"{h.confidence:.2f}", f"{h.fit_rms_px:.3f}", f"{h.edge_contrast_dn:.0f}",
         )
     out_console.print(table)
+    for note in notes:
+        err_console.print(f"note: {note}", highlight=False, markup=False)
 
 
 @vision_app.command("defects")

@@ -78,6 +78,18 @@ class Candidate:
     darkness: float  # median relative darkness inside (0..1)
 
 
+def oversized_discs(image: np.ndarray, cfg: DetectConfig = DetectConfig()) -> list[Candidate]:
+    """Whole dark discs of ``image`` wider than ``cfg.max_diameter_px``, which
+    ``detect_candidates`` with ``cfg`` leaves out (up to half the frame's shorter side).
+    Without a scale the coarse stage stops at the station camera's largest hole; a finer
+    camera's larger holes are then not measured, and this says that they are there."""
+    widest = 0.5 * min(image.shape[:2])
+    if widest <= cfg.max_diameter_px:
+        return []
+    wide = detect_candidates(image, replace(cfg, max_diameter_px=float(widest)))
+    return [c for c in wide if not c.touches_border and 2.0 * c.radius_px > cfg.max_diameter_px]
+
+
 def _odd(n: float) -> int:
     n = int(np.ceil(n))
     return n + 1 - n % 2

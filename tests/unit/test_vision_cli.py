@@ -50,6 +50,28 @@ def test_measure_without_scale_has_no_mm(frame_png):
     assert all("diameter_mm" not in h for h in json.loads(result.stdout)["holes"])
 
 
+def test_a_hole_too_large_to_seek_without_a_scale_is_named_not_passed_over(tmp_path, frame_png):
+    """A finer camera shows a 1.05 mm hole 150 px across: without a scale the coarse stage
+    seeks holes up to 120 px, so the hole is not measured, and the output says so (where,
+    how large, what to give); with the scale it is measured and nothing is noted."""
+    f = render_frame(FrameParams(), [HoleSpec(640.3, 480.6, 150.0)], seed=5)
+    path = tmp_path / "large.png"
+    cv2.imwrite(str(path), f.image)
+    bare = runner.invoke(app, ["vision", "measure", str(path), "--json"])
+    assert bare.exit_code == 0, bare.output
+    out = json.loads(bare.stdout)
+    assert out["holes"] == []
+    (note,) = out["notes"]
+    assert "--mm-per-px" in note and "(640, 481) px" in note
+    assert 140 <= float(note.split("about ")[1].split(" px")[0]) <= 160
+    table = runner.invoke(app, ["vision", "measure", str(path)])
+    assert table.exit_code == 0 and "0 hole(s)" in table.stdout and "not measured" in table.stderr
+    scaled = json.loads(runner.invoke(app, ["vision", "measure", str(path), "--mm-per-px", "0.007", "--json"]).stdout)
+    (h,) = scaled["holes"]
+    assert h["diameter_px"] == pytest.approx(150.0, abs=0.3) and scaled["notes"] == []
+    assert json.loads(runner.invoke(app, ["vision", "measure", str(frame_png[0]), "--json"]).stdout)["notes"] == []
+
+
 def test_measure_table(frame_png):
     result = runner.invoke(app, ["vision", "measure", str(frame_png[0])])
     assert result.exit_code == 0 and "3 hole(s)" in result.stdout
