@@ -71,34 +71,48 @@ postgres:
 	    || echo "WARNING: could not install postgresql: the PostgreSQL tests will fail"; \
 	fi
 
-# Everything on SQLite (the plant test on PostgreSQL), and beside it the store, API and
-# reliability tests again with every store on PostgreSQL. Of the fault matrix, the
-# PostgreSQL run takes the cells where a fault meets the database (the storing column,
-# the store's own failures, the vision error that ends in a commit); its other cells
-# test the drivers and the engine, which do not depend on the backend (docs/plant.md).
-# The two runs go at once: the suite mostly waits (twins' motion, settles, timeouts;
-# a third of its wall time is CPU), so two streams on two cores take about as long as
-# the longer one. Each has its own temporary folder; the PostgreSQL run's output
-# follows the SQLite run's; make fails when either fails. The SQLite run lists its 25
-# slowest tests (CI must stay well under an hour). The suite also runs on pytest-xdist
-# workers (`pytest -n 2 --dist loadfile`: a file to a worker, the slowest files first,
-# tests/conftest.py), about 40 min for the SQLite run on a 2-core machine where this
-# layout takes 65; CI keeps this layout because two xdist streams the whole time
-# starved the station's event loop past a drive's 1 s watchdog in real-time tests
-# (session 42: one such failure in 3,040 tests of a clean run; docs/reliability.md).
+# Two streams at once, on two cores (the suite mostly waits: twins' motion, settles,
+# timeouts):
+#  1. the real-time tests on SQLite: every test but the plant's and the computation-only
+#     ones (``-m "not compute"``, tests/conftest.py: files of tests/unit and tests/sim that
+#     name no event loop, socket, thread, child process, sleep or server);
+#  2. beside it, one after another: the store, API and reliability tests again with every
+#     store on PostgreSQL; the plant test (three station processes on one PostgreSQL
+#     database, SIGKILLs); the computation-only tests at nice 10 with one BLAS/OpenMP
+#     thread, so that they take only what the real-time tests leave of the CPU.
+# Of the fault matrix, the PostgreSQL run takes the cells where a fault meets the
+# database (the storing column, the store's own failures, the vision error that ends in
+# a commit); its other cells test the drivers and the engine, which do not depend on the
+# backend (docs/plant.md). Two streams of real-time tests the whole time (pytest-xdist,
+# ``pytest -n 2 --dist loadfile``: the slowest files first, tests/conftest.py) starved the
+# station's event loop past a drive's 1 s watchdog (session 42: one failure in 3,040 tests
+# of a clean run; docs/reliability.md), so only stream 2's first part is real-time. Each
+# run has its own temporary folder and log; stream 2's logs follow stream 1's output; make
+# fails when any run fails. Stream 1 lists its 25 slowest tests (CI must stay well under
+# an hour).
 PG_TESTS := tests/unit/test_store.py tests/unit/test_store_surface.py tests/unit/test_record_cache.py tests/api tests/reliability
 PG_SELECT := not test_cell or storing or store_ or vision_error
 TEST_TMP ?= $(or $(TMPDIR),/tmp)/bore-station-tests
+ONE_THREAD := OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 NUMBA_NUM_THREADS=1
 test: $(STAMP) chromium postgres
-	@mkdir -p $(TEST_TMP); \
-	$(BIN)/python -m pytest -q --basetemp=$(TEST_TMP)/postgresql --db postgresql $(PG_TESTS) -k "$(PG_SELECT)" \
-	  > $(TEST_TMP)/postgresql.log 2>&1 & pg=$$!; \
-	echo "== every test on SQLite (the PostgreSQL run goes beside it: $(TEST_TMP)/postgresql.log)"; \
-	$(BIN)/python -m pytest -q --durations=25 --basetemp=$(TEST_TMP)/sqlite; sqlite=$$?; \
-	wait $$pg; postgresql=$$?; \
+	@mkdir -p $(TEST_TMP); rm -f $(TEST_TMP)/*.rc; \
+	{ $(BIN)/python -m pytest -q --basetemp=$(TEST_TMP)/postgresql --db postgresql $(PG_TESTS) -k "$(PG_SELECT)" \
+	    > $(TEST_TMP)/postgresql.log 2>&1; echo $$? > $(TEST_TMP)/postgresql.rc; \
+	  $(BIN)/python -m pytest -q --basetemp=$(TEST_TMP)/plant tests/plant > $(TEST_TMP)/plant.log 2>&1; \
+	  echo $$? > $(TEST_TMP)/plant.rc; \
+	  $(ONE_THREAD) nice -n 10 $(BIN)/python -m pytest -q -m compute --basetemp=$(TEST_TMP)/compute \
+	    > $(TEST_TMP)/compute.log 2>&1; echo $$? > $(TEST_TMP)/compute.rc; } & second=$$!; \
+	echo "== the real-time tests on SQLite (beside them, one after another: the PostgreSQL run, the plant test and"; \
+	echo "   the computation-only tests, logged in $(TEST_TMP)/{postgresql,plant,compute}.log)"; \
+	$(BIN)/python -m pytest -q --durations=25 -m "not compute" --ignore=tests/plant --basetemp=$(TEST_TMP)/sqlite; \
+	echo $$? > $(TEST_TMP)/sqlite.rc; \
+	wait $$second; \
 	echo; echo "== the store, API and reliability tests on PostgreSQL"; cat $(TEST_TMP)/postgresql.log; \
-	echo; echo "== SQLite run: exit $$sqlite; PostgreSQL run: exit $$postgresql"; \
-	[ $$sqlite -eq 0 ] && [ $$postgresql -eq 0 ]
+	echo; echo "== the plant test (three stations, one PostgreSQL database)"; cat $(TEST_TMP)/plant.log; \
+	echo; echo "== the computation-only tests (nice 10, one BLAS thread)"; cat $(TEST_TMP)/compute.log; \
+	echo; ok=0; for run in sqlite postgresql plant compute; do \
+	  rc=$$(cat $(TEST_TMP)/$$run.rc 2>/dev/null || echo missing); echo "== $$run run: exit $$rc"; \
+	  [ "$$rc" = 0 ] || ok=1; done; exit $$ok
 
 bench: $(STAMP)
 	$(BIN)/station bench kinematics

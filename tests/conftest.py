@@ -12,7 +12,9 @@ the URL on themselves (:func:`db_url`).
 
 from __future__ import annotations
 
+import functools
 import os
+import re
 from pathlib import Path
 
 import pytest
@@ -47,25 +49,53 @@ SLOW_FILES = (
 )
 
 
+#: the folders whose files may be computation only (the ``compute`` marker)
+COMPUTE_DIRS = ("tests/unit/", "tests/sim/")
+#: what a test file names when it runs anything in real time: an event loop, a socket
+#: or a pty, a thread, a child process, a sleep, a server (a twin over TCP, the served
+#: API), a database server. A file of ``COMPUTE_DIRS`` that names none of these is
+#: computation only (rendering, fitting, models, files) and is marked ``compute``
+REAL_TIME_WORDS = re.compile(r"asyncio|\bawait\b|socket|subprocess|Popen|threading|Thread\b|time\.sleep|pg_cluster"
+                             r"|\bserve\(|loop_hold|\bpty\b|modbus|Modbus|uvicorn|TestClient")
+
+
+def _rel(item) -> str:
+    path = Path(str(item.fspath)).resolve()
+    try:
+        return path.relative_to(REPO).as_posix()
+    except ValueError:
+        return path.as_posix()
+
+
+@functools.cache
+def is_compute_file(rel: str) -> bool:
+    """Whether the test file ``rel`` (relative to the checkout) is computation only:
+    ``make test`` runs these at a lower priority beside the real-time tests, where a
+    starved core costs them time and nothing else (a real-time test's drive watchdog
+    expires when the station's event loop does not turn for 1 s)."""
+    if not rel.startswith(COMPUTE_DIRS):
+        return False
+    return REAL_TIME_WORDS.search((REPO / rel).read_text(encoding="utf-8")) is None
+
+
+def pytest_configure(config):
+    config.addinivalue_line("markers", "compute: a test of computation only, nothing in real time "
+                                       "(tests/conftest.py: is_compute_file)")
+
+
 def pytest_collection_modifyitems(session, config, items):
-    """Under pytest-xdist (``-n N``): the slowest files first, in ``SLOW_FILES``' order;
-    every other test keeps its place (a stable sort, so every worker collects the same
-    order). In one stream the order stays as collected: ``make test`` runs the
-    PostgreSQL run beside the SQLite run, and the slow real-time files there come late,
-    when the other stream has ended."""
+    """Marks the tests of computation-only files ``compute`` (``-m compute`` / ``-m "not
+    compute"`` split the suite as ``make test`` runs it). Under pytest-xdist (``-n N``):
+    the slowest files first, in ``SLOW_FILES``' order; every other test keeps its place
+    (a stable sort, so every worker collects the same order). In one stream the order
+    stays as collected."""
+    for item in items:
+        if is_compute_file(_rel(item)):
+            item.add_marker(pytest.mark.compute)
     if not (getattr(config.option, "numprocesses", None) or hasattr(config, "workerinput")):
         return
     rank = {path: i for i, path in enumerate(SLOW_FILES)}
-
-    def key(item):
-        path = Path(str(item.fspath)).resolve()
-        try:
-            rel = path.relative_to(REPO).as_posix()
-        except ValueError:
-            rel = path.as_posix()
-        return rank.get(rel, len(SLOW_FILES))
-
-    items.sort(key=key)
+    items.sort(key=lambda item: rank.get(_rel(item), len(SLOW_FILES)))
 
 
 def pytest_report_header(config):
