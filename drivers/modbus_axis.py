@@ -48,6 +48,37 @@ from drivers.interfaces import register_map as rm
 
 log = logging.getLogger(__name__)
 
+
+class _NoFrameDump(logging.Filter):
+    """Cuts pymodbus' frame dump off its error records. When pymodbus does not log at
+    DEBUG it keeps its last 20 frames (class-wide: every Modbus link of the process, the
+    twins' too) and appends them to every error and critical message as ``>>>>> send:
+    ...`` lines, so a one-line error takes 21 lines, and its frames are mostly other
+    links' than the one that failed. The record keeps its first line and says how many
+    frames were cut; pymodbus at DEBUG (``logging.getLogger("pymodbus").setLevel``)
+    logs every frame as it goes instead."""
+
+    MARK = "\n>>>>> "
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        msg = record.msg
+        if isinstance(msg, str) and self.MARK in msg:
+            head, _, _ = msg.partition(self.MARK)
+            n = msg.count(self.MARK)
+            record.msg = f"{head} ({n} frame{'s' if n != 1 else ''} of pymodbus' process-wide dump cut: " \
+                         f"log pymodbus at DEBUG for every frame)"
+        return True
+
+
+def _quiet_frame_dumps() -> None:
+    """Puts ``_NoFrameDump`` on pymodbus' logger once per process."""
+    target = logging.getLogger("pymodbus.logging")
+    if not any(type(f).__name__ == _NoFrameDump.__name__ for f in target.filters):  # a module reloaded too
+        target.addFilter(_NoFrameDump())
+
+
+_quiet_frame_dumps()
+
 #: how often wait_in_position polls the status word; 20 ms is well below a move's
 #: duration and keeps the bus load at 50 requests/s per axis
 DEFAULT_POLL_S = 0.02
