@@ -63,7 +63,8 @@ def expired_tokens(api) -> dict[str, tuple[object, str]]:
     """An mes and an admin token that expired a moment ago; the server verified the
     mes one while it was valid (cached), the admin one never."""
     repo = _repo(api)
-    made = {role: repo.create(role, name=f"expired {role}", expires_at=utcnow() + timedelta(seconds=1.0))
+    # 3 s of life: the mes token's first use must come before it ends, on a loaded machine too
+    made = {role: repo.create(role, name=f"expired {role}", expires_at=utcnow() + timedelta(seconds=3.0))
             for role in ("mes", "admin")}
     assert _status(api, made["mes"][1]).status_code == 200
     _wait_past(max(record.expires_at for record, _ in made.values()))
@@ -94,7 +95,7 @@ def test_an_expired_token_gets_401_saying_when_on_every_authenticated_route(api,
 
 def test_an_expired_token_gets_401_on_a_read_and_a_write_route(api):
     repo = _repo(api)
-    record, token = repo.create("mes", name="expiring MES", expires_at=utcnow() + timedelta(seconds=1.0))
+    record, token = repo.create("mes", name="expiring MES", expires_at=utcnow() + timedelta(seconds=3.0))
     assert _status(api, token).status_code == 200
     assert _write(api, token).status_code == 422  # admitted (refused for its content)
     _wait_past(record.expires_at)
@@ -113,8 +114,10 @@ def test_an_expired_token_cannot_log_in_to_the_panel(api, expired_tokens):
 
 
 def test_a_panel_session_ends_when_its_token_expires(api):
+    # 6 s of life: the session, a read and an admitted command must come before it ends
+    # (2 s was too short on a loaded 2-core machine with PostgreSQL: the command came late)
     record, token = _repo(api).create("operator", name="badge, expiring",
-                                      expires_at=utcnow() + timedelta(seconds=2.0))
+                                      expires_at=utcnow() + timedelta(seconds=6.0))
     with httpx.Client(base_url=api.url, timeout=30.0) as c:
         r = c.post("/api/v1/session", json={"token": token})
         assert r.status_code == 200, r.text
@@ -122,7 +125,8 @@ def test_a_panel_session_ends_when_its_token_expires(api):
         # the session says it ends with the token (not 12 h on), and the browser forgets the cookie then
         assert abs((_at(body["expires_at"]) - record.expires_at).total_seconds()) < 1.0
         max_age = int(r.headers["set-cookie"].lower().split("max-age=")[1].split(";")[0])
-        assert 1 <= max_age <= 2
+        remaining = (record.expires_at - utcnow()).total_seconds()
+        assert 1 <= max_age <= 6 and abs(max_age - remaining) <= 1.5, (max_age, remaining)
         csrf, cookie = body["csrf_token"], c.cookies[SESSION_COOKIE]
         assert c.get("/api/v1/station").status_code == 200
         assert c.post("/api/v1/station/pause", headers={CSRF_HEADER: csrf}).status_code == 409  # admitted
@@ -139,7 +143,7 @@ def test_a_panel_session_ends_when_its_token_expires(api):
 def test_rotation_over_the_api_keeps_both_tokens_working_through_the_grace(api):
     record, old = _repo(api).create("mes", name="rotating MES")
     before = utcnow()
-    r = _status(api, old, "POST", "/api/v1/tokens/rotate", json={"grace_s": 1.5})
+    r = _status(api, old, "POST", "/api/v1/tokens/rotate", json={"grace_s": 4.0})
     assert r.status_code == 200, r.text
     assert r.headers["cache-control"] == "no-store"
     body = r.json()
@@ -148,7 +152,7 @@ def test_rotation_over_the_api_keeps_both_tokens_working_through_the_grace(api):
     assert (body["role"], body["name"], body["expires_at"]) == ("mes", "rotating MES", None)
     assert body["old"]["id"] == record.id and body["old"]["prefix"] == record.prefix
     old_end = _at(body["old"]["expires_at"])
-    assert before + timedelta(seconds=1.4) <= old_end <= utcnow() + timedelta(seconds=1.6)
+    assert before + timedelta(seconds=3.9) <= old_end <= utcnow() + timedelta(seconds=4.1)
     # the switch-over: both tokens read and write
     for token in (old, new):
         assert _status(api, token).status_code == 200
