@@ -73,13 +73,17 @@ postgres:
 
 # Two streams at once, on two cores (the suite mostly waits: twins' motion, settles,
 # timeouts):
-#  1. the real-time tests on SQLite: every test but the plant's and the computation-only
-#     ones (``-m "not compute"``, tests/conftest.py: files of tests/unit and tests/sim that
-#     name no event loop, socket, thread, child process, sleep or server);
+#  1. the real-time tests on SQLite: every test but the plant's, the campaigns' and the
+#     computation-only ones (``-m "not compute"``, tests/conftest.py: files of tests/unit
+#     and tests/sim that name no event loop, socket, thread, child process, sleep or
+#     server);
 #  2. beside it, one after another: the store, API and reliability tests again with every
 #     store on PostgreSQL; the plant test (three station processes on one PostgreSQL
-#     database, SIGKILLs); the computation-only tests at nice 10 with one BLAS/OpenMP
-#     thread, so that they take only what the real-time tests leave of the CPU.
+#     database, SIGKILLs); the campaigns (production runs in real time, ~12 min); the
+#     computation-only tests at nice 10 with one BLAS/OpenMP thread, so that they take only
+#     what the real-time tests leave of the CPU.
+# Session 43 (2-core machine): stream 1 took 55 min with the campaigns, stream 2 32 min
+# without them (PostgreSQL 16, plant 8, computation 7); the one stream of before, 64 min.
 # Of the fault matrix, the PostgreSQL run takes the cells where a fault meets the
 # database (the storing column, the store's own failures, the vision error that ends in
 # a commit); its other cells test the drivers and the engine, which do not depend on the
@@ -93,24 +97,29 @@ postgres:
 PG_TESTS := tests/unit/test_store.py tests/unit/test_store_surface.py tests/unit/test_record_cache.py tests/api tests/reliability
 PG_SELECT := not test_cell or storing or store_ or vision_error
 TEST_TMP ?= $(or $(TMPDIR),/tmp)/bore-station-tests
+CAMPAIGN_TESTS := tests/e2e/test_campaign.py
 ONE_THREAD := OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 NUMBA_NUM_THREADS=1
 test: $(STAMP) chromium postgres
 	@mkdir -p $(TEST_TMP); rm -f $(TEST_TMP)/*.rc; \
-	{ $(BIN)/python -m pytest -q --basetemp=$(TEST_TMP)/postgresql --db postgresql $(PG_TESTS) -k "$(PG_SELECT)" \
+	{ $(BIN)/python -m pytest -q --durations=10 --basetemp=$(TEST_TMP)/postgresql --db postgresql $(PG_TESTS) -k "$(PG_SELECT)" \
 	    > $(TEST_TMP)/postgresql.log 2>&1; echo $$? > $(TEST_TMP)/postgresql.rc; \
 	  $(BIN)/python -m pytest -q --basetemp=$(TEST_TMP)/plant tests/plant > $(TEST_TMP)/plant.log 2>&1; \
 	  echo $$? > $(TEST_TMP)/plant.rc; \
-	  $(ONE_THREAD) nice -n 10 $(BIN)/python -m pytest -q -m compute --basetemp=$(TEST_TMP)/compute \
+	  $(BIN)/python -m pytest -q --durations=5 --basetemp=$(TEST_TMP)/campaign $(CAMPAIGN_TESTS) > $(TEST_TMP)/campaign.log 2>&1; \
+	  echo $$? > $(TEST_TMP)/campaign.rc; \
+	  $(ONE_THREAD) nice -n 10 $(BIN)/python -m pytest -q -m compute --durations=10 --basetemp=$(TEST_TMP)/compute \
 	    > $(TEST_TMP)/compute.log 2>&1; echo $$? > $(TEST_TMP)/compute.rc; } & second=$$!; \
-	echo "== the real-time tests on SQLite (beside them, one after another: the PostgreSQL run, the plant test and"; \
-	echo "   the computation-only tests, logged in $(TEST_TMP)/{postgresql,plant,compute}.log)"; \
-	$(BIN)/python -m pytest -q --durations=25 -m "not compute" --ignore=tests/plant --basetemp=$(TEST_TMP)/sqlite; \
+	echo "== the real-time tests on SQLite (beside them, one after another: the PostgreSQL run, the plant test, the"; \
+	echo "   campaigns and the computation-only tests, logged in $(TEST_TMP)/{postgresql,plant,campaign,compute}.log)"; \
+	$(BIN)/python -m pytest -q --durations=25 -m "not compute" --ignore=tests/plant --ignore=$(CAMPAIGN_TESTS) \
+	  --basetemp=$(TEST_TMP)/sqlite; \
 	echo $$? > $(TEST_TMP)/sqlite.rc; \
 	wait $$second; \
 	echo; echo "== the store, API and reliability tests on PostgreSQL"; cat $(TEST_TMP)/postgresql.log; \
 	echo; echo "== the plant test (three stations, one PostgreSQL database)"; cat $(TEST_TMP)/plant.log; \
+	echo; echo "== the campaigns"; cat $(TEST_TMP)/campaign.log; \
 	echo; echo "== the computation-only tests (nice 10, one BLAS thread)"; cat $(TEST_TMP)/compute.log; \
-	echo; ok=0; for run in sqlite postgresql plant compute; do \
+	echo; ok=0; for run in sqlite postgresql plant campaign compute; do \
 	  rc=$$(cat $(TEST_TMP)/$$run.rc 2>/dev/null || echo missing); echo "== $$run run: exit $$rc"; \
 	  [ "$$rc" = 0 ] || ok=1; done; exit $$ok
 
