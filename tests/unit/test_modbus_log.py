@@ -9,8 +9,10 @@ from pymodbus.logging import Log
 import drivers.modbus_axis  # noqa: F401  (puts the filter on pymodbus' logger)
 
 
-def test_an_error_keeps_its_line_and_loses_the_process_wide_frame_dump(caplog):
+def test_an_error_keeps_its_line_and_loses_the_process_wide_frame_dump(caplog, monkeypatch):
     caplog.set_level(logging.INFO, logger="pymodbus")
+    # the dump is class-wide: earlier tests' links left their frames in it
+    monkeypatch.setattr(Log, "frame_dump", [])
     for i in range(3):  # frames of any link of the process, kept while pymodbus is not at DEBUG
         Log.transport_dump(Log.SEND_DATA, bytes([0, i, 0, 0, 0, 6, 1, 3]), b"")
     Log.error("Connection to ({}, {}) lost: {}", "127.0.0.1", 5020, "reset")
