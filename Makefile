@@ -82,8 +82,9 @@ postgres:
 #     database, SIGKILLs); the campaigns (production runs in real time, ~12 min); the
 #     computation-only tests at nice 10 with one BLAS/OpenMP thread, so that they take only
 #     what the real-time tests leave of the CPU.
-# Session 43 (2-core machine): stream 1 took 55 min with the campaigns, stream 2 32 min
-# without them (PostgreSQL 16, plant 8, computation 7); the one stream of before, 64 min.
+# Session 43 (2-core machine), clean runs: stream 1 47 min, stream 2 39 min (PostgreSQL 18,
+# plant 8, campaigns 8, computation 4), CI 48 min with the install; the one stream of
+# before took 64 min (docs/reliability.md).
 # Of the fault matrix, the PostgreSQL run takes the cells where a fault meets the
 # database (the storing column, the store's own failures, the vision error that ends in
 # a commit); its other cells test the drivers and the engine, which do not depend on the
