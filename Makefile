@@ -71,8 +71,7 @@ postgres:
 	    || echo "WARNING: could not install postgresql: the PostgreSQL tests will fail"; \
 	fi
 
-# Two streams at once, on two cores (the suite mostly waits: twins' motion, settles,
-# timeouts):
+# Two streams at once, on two cores:
 #  1. the real-time tests on SQLite: every test but the plant's, the campaigns' and the
 #     computation-only ones (``-m "not compute"``, tests/conftest.py: files of tests/unit
 #     and tests/sim that name no event loop, socket, thread, child process, sleep or
@@ -91,7 +90,9 @@ postgres:
 # backend (docs/plant.md). Two streams of real-time tests the whole time (pytest-xdist,
 # ``pytest -n 2 --dist loadfile``: the slowest files first, tests/conftest.py) starved the
 # station's event loop past a drive's 1 s watchdog (session 42: one failure in 3,040 tests
-# of a clean run; docs/reliability.md), so only stream 2's first part is real-time. Each
+# of a clean run; docs/reliability.md): here real-time tests have another stream of them
+# beside them for stream 2's first ~35 min (the PostgreSQL run, the plant test, the
+# campaigns; the layout before: 18 min), and then computation at a lower priority. Each
 # run has its own temporary folder and log; stream 2's logs follow stream 1's output; make
 # fails when any run fails. Stream 1 lists its 25 slowest tests (CI must stay well under
 # an hour).
