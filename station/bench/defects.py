@@ -34,6 +34,7 @@ from __future__ import annotations
 import statistics
 import time
 from collections import defaultdict
+from typing import Optional
 
 import numpy as np
 import typer
@@ -186,6 +187,7 @@ def run(frames: int = 100, seed: int = 50000, envelope: str = "station", mm_per_
     import cv2
 
     from sim.camera.defects import random_defect_frame  # the CLI side may import sim
+    from sim.camera.render import HONING_ANGLE_DEG
     from station.vision.defects import detect_defects
     from station.vision.measure import warm_up
 
@@ -248,7 +250,7 @@ def run(frames: int = 100, seed: int = 50000, envelope: str = "station", mm_per_
         "seed": seed,
         "envelope": envelope,
         "mm_per_px": mm_per_px,
-        "hatch_deg": hatch_deg if hatch_deg is not None else 30.0,
+        "hatch_deg": hatch_deg if hatch_deg is not None else HONING_ANGLE_DEG,
         "texture": "mm" if texture_in_mm else "px",
         "holes": n_holes,
         "kinds": kinds,
@@ -286,8 +288,10 @@ def register(bench_app: typer.Typer) -> None:
                                         help="the frames' scale at the wall (the station's camera: 0.010); defects' "
                                              "and holes' sizes are drawn in mm, the wall's texture in px unless "
                                              "--texture-in-mm"),
-        hatch_deg: float = typer.Option(30.0, "--hatch-deg", min=6.0, max=84.0,
-                                        help="the honing cross-hatch's half-angle (plateau honing: 20-35 deg, helical slide honing: 60-75; read from 6 to 84)"),
+        hatch_deg: Optional[float] = typer.Option(None, "--hatch-deg", min=6.0, max=84.0,
+                                                  help="the honing cross-hatch's half-angle (plateau honing: 20-35 deg, "
+                                                       "helical slide honing: 60-75; read from 6 to 84; default: the "
+                                                       "renderer's nominal 30)"),
         texture_in_mm: bool = typer.Option(False, "--texture-in-mm",
                                            help="draw the wall's grooves, grain and blotches at the frames' scale (as "
                                                 "a finer or coarser camera sees them), not in px"),

@@ -351,9 +351,9 @@ def frame_hatch(image: np.ndarray, holes: list[tuple[float, float, float]],
     Why: the honing angle is the part's (plateau honing specifies 20-35 deg, helical
     slide honing 60-75, and a machine holds it to a few degrees), not the station's.
     The hole fit reads each family's profile along its lines over hundreds of px, so a
-    model half a degree off
-    already costs (dev seeds: diameter z^2 +0.03 to +0.06), and a 25 deg hatch read as
-    30 deg costs +0.33 to +0.50 (docs/vision.md, "The hatch's angle")."""
+    model half a degree off already costs (dev seeds: diameter z^2 +0.03 to +0.06), and
+    a 25 deg hatch read as 30 deg costs +0.33 to +0.50 (docs/vision.md, "The hatch's
+    angle")."""
     h, w = image.shape[:2]
     small = cv2.resize(image, (w // 2, h // 2), interpolation=cv2.INTER_AREA).astype(np.float32)
     level = cv2.GaussianBlur(small, (0, 0), 8.0, borderType=cv2.BORDER_REFLECT)
