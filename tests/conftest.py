@@ -12,14 +12,12 @@ the URL on themselves (:func:`db_url`).
 
 from __future__ import annotations
 
-import functools
 import os
-import re
 from pathlib import Path
 
 import pytest
+from suite_layout import REPO, is_compute_file
 
-REPO = Path(__file__).resolve().parents[1]
 #: ``../shared`` beside the checkout (CI clones the project with shared/ beside it)
 SHARED = REPO.parent / "shared"
 BACKENDS = ("sqlite", "postgresql")
@@ -49,16 +47,6 @@ SLOW_FILES = (
 )
 
 
-#: the folders whose files may be computation only (the ``compute`` marker)
-COMPUTE_DIRS = ("tests/unit/", "tests/sim/")
-#: what a test file names when it runs anything in real time: an event loop, a socket
-#: or a pty, a thread, a child process, a sleep, a server (a twin over TCP, the served
-#: API), a database server. A file of ``COMPUTE_DIRS`` that names none of these is
-#: computation only (rendering, fitting, models, files) and is marked ``compute``
-REAL_TIME_WORDS = re.compile(r"asyncio|\bawait\b|socket|subprocess|Popen|threading|Thread\b|time\.sleep|pg_cluster"
-                             r"|\bserve\(|loop_hold|\bpty\b|modbus|Modbus|uvicorn|TestClient")
-
-
 def _rel(item) -> str:
     path = Path(str(item.fspath)).resolve()
     try:
@@ -67,20 +55,9 @@ def _rel(item) -> str:
         return path.as_posix()
 
 
-@functools.cache
-def is_compute_file(rel: str) -> bool:
-    """Whether the test file ``rel`` (relative to the checkout) is computation only:
-    ``make test`` runs these at a lower priority beside the real-time tests, where a
-    starved core costs them time and nothing else (a real-time test's drive watchdog
-    expires when the station's event loop does not turn for 1 s)."""
-    if not rel.startswith(COMPUTE_DIRS):
-        return False
-    return REAL_TIME_WORDS.search((REPO / rel).read_text(encoding="utf-8")) is None
-
-
 def pytest_configure(config):
     config.addinivalue_line("markers", "compute: a test of computation only, nothing in real time "
-                                       "(tests/conftest.py: is_compute_file)")
+                                       "(tests/suite_layout.py: is_compute_file)")
 
 
 def pytest_collection_modifyitems(session, config, items):

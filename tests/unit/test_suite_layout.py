@@ -1,11 +1,11 @@
-"""``make test``'s split of the suite (tests/conftest.py): the computation-only files run
+"""``make test``'s split of the suite (tests/suite_layout.py): the computation-only files run
 at a lower priority beside the real-time tests, so a real-time file must never be taken
 for one."""
 
 from __future__ import annotations
 
 import pytest
-from conftest import REPO, is_compute_file
+from suite_layout import REPO, is_compute_file
 
 #: files that run the station's loop, twins over TCP or a pty, threads or child processes
 REAL_TIME = ["tests/unit/test_engine.py", "tests/unit/test_stallwatch.py", "tests/unit/test_loopthread.py",
