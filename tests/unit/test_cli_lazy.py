@@ -1,0 +1,47 @@
+"""The ``station`` command imports a command's module only when that command runs
+(``station.cli.COMMANDS``): every ``station`` process, and every render worker that
+``multiprocessing`` starts from one, imports the console script again."""
+
+from __future__ import annotations
+
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+from typer.testing import CliRunner
+
+import station.cli
+from station.cli import COMMANDS, app, load_commands
+
+CLI_DIR = Path(station.cli.__file__).parent
+
+
+def test_every_command_module_is_named_with_the_commands_it_adds():
+    modules = sorted(p.stem for p in CLI_DIR.glob("*.py") if "\ndef register(" in p.read_text(encoding="utf-8"))
+    assert sorted(set(COMMANDS.values())) == modules
+    for module in modules:
+        added = set(load_commands(module))
+        assert added == {name for name, m in COMMANDS.items() if m == module}, module
+
+
+def test_importing_the_cli_imports_no_area():
+    code = ("import sys, station.cli\n"
+            "heavy = ('station.store', 'station.discovery', 'station.vision', 'station.inspection', 'sqlalchemy',"
+            " 'statsmodels', 'numba', 'scipy', 'cv2', 'sim', 'drivers')\n"
+            "print(sorted(m for m in sys.modules if m.split('.')[0] in heavy or m.startswith(heavy)))\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, check=True)
+    assert out.stdout.strip() == "[]", out.stdout
+
+
+def test_help_lists_every_command_and_a_command_runs():
+    runner = CliRunner()
+    result = runner.invoke(app, ["--help"], terminal_width=200)
+    assert result.exit_code == 0, result.output
+    # a command's row starts with its name; its help's second line starts with spaces
+    listed = [m.group(1) for m in (re.match(r"│ ([a-z0-9-]+) ", line) for line in result.output.splitlines()) if m]
+    assert [name for name in listed if name != "--help"] == list(COMMANDS)
+    result = runner.invoke(app, ["parts", "list"])
+    assert result.exit_code == 0 and "ZDZG-22.2-12.3851" in result.output, result.output
+    result = runner.invoke(app, ["no-such-command"])
+    assert result.exit_code != 0 and "No such command" in result.output
