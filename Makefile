@@ -73,7 +73,7 @@ postgres:
 
 # Two streams at once, on two cores:
 #  1. the real-time tests on SQLite: every test but the plant's, the campaigns' and the
-#     computation-only ones (``-m "not compute"``, tests/conftest.py: files of tests/unit
+#     computation-only ones (``-m "not compute"``, tests/suite_layout.py: files of tests/unit
 #     and tests/sim that name no event loop, socket, thread, child process, sleep or
 #     server);
 #  2. beside it, one after another: the store, API and reliability tests again with every
