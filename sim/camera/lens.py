@@ -63,7 +63,7 @@ class BrownLens:
         The same iteration as OpenCV's undistortPoints; 25 steps converge to far below
         1e-6 px for the barrel distortion of an endoscope (|k1| <= 0.3 over the frame).
         It stops early once no point moves by more than 1e-12 of the focal length (a
-        mild lens, the endoscope's k1 = -0.08, needs ~10 steps: the whole sensor's grid,
+        mild lens, the endoscope's k1 = -0.08, needs 9 steps: the whole sensor's grid,
         1.3 million points, is undistorted once per render process).
         """
         xd = (np.asarray(x_px, float) - self.cx_px) / self.fx_px
@@ -75,7 +75,8 @@ class BrownLens:
             radial, dx, dy = self._offsets(xn, yn)
             xn_new = (xd - dx) / radial
             yn_new = (yd - dy) / radial
-            moved = max(float(np.max(np.abs(xn_new - xn), initial=0.0)), float(np.max(np.abs(yn_new - yn), initial=0.0)))
+            moved = max(float(np.max(np.abs(xn_new - xn), initial=0.0)),
+                        float(np.max(np.abs(yn_new - yn), initial=0.0)))
             xn, yn = xn_new, yn_new
             if moved <= 1e-12:
                 break
