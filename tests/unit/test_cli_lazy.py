@@ -29,7 +29,7 @@ def test_importing_the_cli_imports_no_area():
     code = ("import sys, station.cli\n"
             "heavy = ('station.store', 'station.discovery', 'station.vision', 'station.inspection', 'sqlalchemy',"
             " 'statsmodels', 'numba', 'scipy', 'cv2', 'sim', 'drivers')\n"
-            "print(sorted(m for m in sys.modules if m.split('.')[0] in heavy or m.startswith(heavy)))\n")
+            "print(sorted(m for m in sys.modules if any(m == h or m.startswith(h + '.') for h in heavy)))\n")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, check=True)
     assert out.stdout.strip() == "[]", out.stdout
 
