@@ -10,6 +10,7 @@ concrete drivers or ``sim``.
 from __future__ import annotations
 
 import importlib
+import sys
 
 import typer
 import typer.main
@@ -71,5 +72,19 @@ def _station() -> None:
     pass
 
 
+#: the commands that run a station (its event loop carries the drives' 1 s heartbeats):
+#: before they start, every area is imported, as it was at every start before
+#: ``COMMANDS``, so that no module is imported for the first time inside a running
+#: session (on a loaded PC a heavy first import there, discovery's for an axis check,
+#: takes seconds). The other commands load only
+#: their own area, and so does the render worker, which imports this module but never
+#: calls ``main``
+RUNS_A_STATION = frozenset({"serve", "inspect", "campaign", "check", "calibrate", "demo", "gauge", "paper", "sim",
+                            "bench"})
+
+
 def main() -> None:
+    if sys.argv[1:2] and sys.argv[1] in RUNS_A_STATION:
+        for module_name in dict.fromkeys(COMMANDS.values()):
+            load_commands(module_name)
     app()

@@ -45,3 +45,20 @@ def test_help_lists_every_command_and_a_command_runs():
     assert result.exit_code == 0 and "ZDZG-22.2-12.3851" in result.output, result.output
     result = runner.invoke(app, ["no-such-command"])
     assert result.exit_code != 0 and "No such command" in result.output
+
+
+def _areas_loaded_by(args: list[str]) -> list[bool]:
+    code = ("import sys\n"
+            f"sys.argv = ['station', *{args!r}]\n"
+            "from station.cli import main\n"
+            "try:\n    main()\nexcept SystemExit:\n    pass\n"
+            "print([m in sys.modules for m in ('station.discovery', 'station.exports.qif', 'station.bench.vision')])\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, check=True)
+    return eval(out.stdout.strip().splitlines()[-1])  # a list of three booleans
+
+
+def test_a_command_that_runs_a_station_imports_every_area_before_it_starts():
+    # no module is imported for the first time inside a running session, where the
+    # drives' heartbeats ride the station's loop; a command that runs none stays light
+    assert _areas_loaded_by(["inspect", "--help"]) == [True, True, True]
+    assert _areas_loaded_by(["parts", "list"]) == [False, False, False]
