@@ -13,6 +13,7 @@ import re
 import uuid
 from datetime import datetime, timezone
 
+from playwright.sync_api import TimeoutError as PlaywrightTimeout
 from playwright.sync_api import expect
 
 from tests.browser.conftest import check_master_over_rest, login, open_page, screenshot
@@ -21,10 +22,20 @@ from tests.browser.conftest import check_master_over_rest, login, open_page, scr
 LOADED = "img => img.complete && img.naturalWidth > 0 && img.naturalHeight > 0"
 
 
-def _wait_loaded(page, img) -> dict:
-    """Wait until the <img> has loaded its picture; its natural size."""
+#: ... and is laid out on the page wider than px (a loaded picture can still be 0 px
+#: wide for a moment, until the browser lays the page out again: a loaded CI run saw it)
+SHOWN = "([img, px]) => img.clientWidth > px"
+
+
+def _wait_loaded(page, img, min_shown_px: int) -> dict:
+    """Wait until the <img> has loaded its picture and is laid out wider than ``min_shown_px`` (at most
+    30 s each); its natural size and its width on the page."""
     img.wait_for(state="visible")
     page.wait_for_function(LOADED, arg=img.element_handle(), timeout=30_000)
+    try:
+        page.wait_for_function(SHOWN, arg=[img.element_handle(), min_shown_px], timeout=30_000)
+    except PlaywrightTimeout:
+        pass  # the caller's assertion says what width it has
     return img.evaluate("img => ({w: img.naturalWidth, h: img.naturalHeight, shown: img.clientWidth})")
 
 
@@ -53,7 +64,7 @@ def test_the_proposals_page_shows_the_proposals_picture(browser, knocked_station
         img = card.locator("figure.proposal-plot img")
         expect(img).to_have_count(1)
         expect(img).to_have_attribute("src", f"/api/v1/model-proposals/{pid}/plot")
-        size = _wait_loaded(eng, img)
+        size = _wait_loaded(eng, img, 300)
         assert size["w"] > 500 and size["h"] > 200 and size["shown"] > 300, size
         expect(card.locator("figure.proposal-plot figcaption")).to_contain_text("before and after")
         # with its change, its explanation and the expected change at each hole
@@ -106,7 +117,7 @@ def test_the_discovery_page_shows_the_residual_before_and_after(browser, knocked
         for i, name in enumerate(names):
             img = imgs.nth(i)
             expect(img).to_have_attribute("src", f"/api/v1/reports/discovery/{entry['id']}/plots/{name}")
-            size = _wait_loaded(page, img)
+            size = _wait_loaded(page, img, 200)
             assert size["w"] > 500 and size["h"] > 200 and size["shown"] > 200, (name, size)
         expect(detail.locator("figure.plot-residual_position figcaption")).to_contain_text("before and after")
         # next to its numbers: the verdict and the RMS before and after
