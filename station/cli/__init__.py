@@ -76,9 +76,8 @@ def _station() -> None:
 #: before they start, every area is imported, as it was at every start before
 #: ``COMMANDS``, so that no module is imported for the first time inside a running
 #: session (on a loaded PC a heavy first import there, discovery's for an axis check,
-#: takes seconds). The other commands load only
-#: their own area, and so does the render worker, which imports this module but never
-#: calls ``main``
+#: takes seconds). The other commands load only their own area, and so does the render
+#: worker, which imports this module but never calls ``main``
 RUNS_A_STATION = frozenset({"serve", "inspect", "campaign", "check", "calibrate", "demo", "gauge", "paper", "sim",
                             "bench"})
 

@@ -4,6 +4,7 @@
 
 from __future__ import annotations
 
+import json
 import re
 import subprocess
 import sys
@@ -52,9 +53,11 @@ def _areas_loaded_by(args: list[str]) -> list[bool]:
             f"sys.argv = ['station', *{args!r}]\n"
             "from station.cli import main\n"
             "try:\n    main()\nexcept SystemExit:\n    pass\n"
-            "print([m in sys.modules for m in ('station.discovery', 'station.exports.qif', 'station.bench.vision')])\n")
+            "import json\n"
+            "print(json.dumps([m in sys.modules for m in ('station.discovery', 'station.exports.qif',"
+            " 'station.bench.vision')]))\n")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, check=True)
-    return eval(out.stdout.strip().splitlines()[-1])  # a list of three booleans
+    return json.loads(out.stdout.strip().splitlines()[-1])
 
 
 def test_a_command_that_runs_a_station_imports_every_area_before_it_starts():
