@@ -9,6 +9,7 @@ concrete drivers or ``sim``.
 
 from __future__ import annotations
 
+import functools
 import importlib
 import sys
 
@@ -35,8 +36,10 @@ COMMANDS = {
 _SETTINGS = dict(no_args_is_help=True, add_completion=False, pretty_exceptions_show_locals=False)
 
 
+@functools.cache
 def load_commands(module_name: str) -> dict:
-    """The click commands (and groups) that ``station.cli.<module_name>`` registers, by name."""
+    """The click commands (and groups) that ``station.cli.<module_name>`` registers, by name
+    (once per process: ``main`` and the group ask for the same module)."""
     module = importlib.import_module(f"station.cli.{module_name}")
     sub = typer.Typer(**_SETTINGS)
     module.register(sub)

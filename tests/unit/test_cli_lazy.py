@@ -13,7 +13,7 @@ from pathlib import Path
 from typer.testing import CliRunner
 
 import station.cli
-from station.cli import COMMANDS, app, load_commands
+from station.cli import COMMANDS, RUNS_A_STATION, app, load_commands
 
 CLI_DIR = Path(station.cli.__file__).parent
 
@@ -21,6 +21,7 @@ CLI_DIR = Path(station.cli.__file__).parent
 def test_every_command_module_is_named_with_the_commands_it_adds():
     modules = sorted(p.stem for p in CLI_DIR.glob("*.py") if "\ndef register(" in p.read_text(encoding="utf-8"))
     assert sorted(set(COMMANDS.values())) == modules
+    assert RUNS_A_STATION <= set(COMMANDS)
     for module in modules:
         added = set(load_commands(module))
         assert added == {name for name, m in COMMANDS.items() if m == module}, module
