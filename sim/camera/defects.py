@@ -376,21 +376,27 @@ SCRATCH_MIN_ELONGATION = 5.0
 RANDOM_REFLECTANCE = {"pore": (0.15, 0.6), "scratch": (0.4, 0.8), "burr": (0.9, 1.15)}
 #: a chip's floor: its hole's level plus up to this share of the wall-to-hole step
 CHIP_LIFT = 0.15
-#: a scratch crosses the honing pattern: its direction keeps this far from the grooves'
+#: a scratch crosses the honing pattern: by default its direction keeps this far from the
+#: grooves' (a random draw's; 0 draws any direction, as a real part may have one along the
+#: hatch: ``station bench defects --scratch-clearance-deg 0``)
 HONING_CLEARANCE_DEG = 10.0
 
 
-def random_scratch_angle(rng: np.random.Generator, honing_angle_deg: float = 30.0) -> float:
-    """A direction (deg, 0-180) at least ``HONING_CLEARANCE_DEG`` from both groove families."""
+def random_scratch_angle(rng: np.random.Generator, honing_angle_deg: float = 30.0,
+                         clearance_deg: float = HONING_CLEARANCE_DEG) -> float:
+    """A direction (deg, 0-180) at least ``clearance_deg`` from both groove families."""
+    if not 0.0 <= clearance_deg < 45.0:
+        raise ValueError(f"clearance_deg must lie in [0, 45) deg, got {clearance_deg}")
     while True:
         a = float(rng.uniform(0.0, 180.0))
-        if all(abs((a - g + 90.0) % 180.0 - 90.0) >= HONING_CLEARANCE_DEG for g in (honing_angle_deg,
-                                                                                       180.0 - honing_angle_deg)):
+        if all(abs((a - g + 90.0) % 180.0 - 90.0) >= clearance_deg for g in (honing_angle_deg,
+                                                                             180.0 - honing_angle_deg)):
             return a
 
 
 def random_defects(rng: np.random.Generator, params, holes: list, kinds: dict[str, int], mm_per_px: float,
-                   border_px: float = 8.0, clearance_px: float = 12.0) -> list[DefectSpec]:
+                   border_px: float = 8.0, clearance_px: float = 12.0,
+                   scratch_clearance_deg: float = HONING_CLEARANCE_DEG) -> list[DefectSpec]:
     """Defects drawn across ``RANDOM_SIZES_MM``: ``kinds`` maps a kind to how many.
 
     Pores and scratches lie wholly in the frame, clear of the holes and of each other
@@ -427,7 +433,7 @@ def random_defects(rng: np.random.Generator, params, holes: list, kinds: dict[st
                     length = rng.uniform(*sizes["length"]) / mm_per_px
                     # a furrow is long and thin: at least SCRATCH_MIN_ELONGATION times its width
                     width = min(rng.uniform(*sizes["width"]) / mm_per_px, length / SCRATCH_MIN_ELONGATION)
-                    angle = random_scratch_angle(rng, params.hatch_deg)
+                    angle = random_scratch_angle(rng, params.hatch_deg, scratch_clearance_deg)
                 else:
                     length = rng.uniform(*sizes["length"]) / mm_per_px
                     width = rng.uniform(*sizes["width"]) / mm_per_px
@@ -475,7 +481,8 @@ def random_defects(rng: np.random.Generator, params, holes: list, kinds: dict[st
 
 def random_defect_frame(seed: int, kinds: dict[str, int] | None = None, *, mm_per_px: float = 0.010,
                         n_holes: int | None = None, hole_diameter_mm: tuple[float, float] = (0.6, 1.0),
-                        envelope: str = "station", **overrides):
+                        envelope: str = "station", scratch_clearance_deg: float = HONING_CLEARANCE_DEG,
+                        **overrides):
     """A random frame with random defects from one seed (the defect bench's and tests'
     unit of work), its truth in px and mm.
 
@@ -483,7 +490,8 @@ def random_defect_frame(seed: int, kinds: dict[str, int] | None = None, *, mm_pe
     station's compensating holes, 0.6-1.0 mm (the spec's 0.7 mm +/- 0.125 and more; the
     largest pore is 0.5 mm, so a dark disc's size tells a hole from a pore). ``kinds``:
     how many of each kind (None: 0-2 pores, 0-2 scratches, and 0-2 burrs and 0-2 chips
-    when there are holes; ``{}``: a clean frame).
+    when there are holes; ``{}``: a clean frame). ``scratch_clearance_deg``: how far the
+    scratches' directions keep from the hatch's (0: any direction).
     """
     from sim.camera.render import random_holes, random_params, render_frame
 
@@ -497,7 +505,7 @@ def random_defect_frame(seed: int, kinds: dict[str, int] | None = None, *, mm_pe
         kinds = {"pore": int(rng.integers(0, 3)), "scratch": int(rng.integers(0, 3))}
         if holes:
             kinds.update(burr=int(rng.integers(0, 3)), chip=int(rng.integers(0, 3)))
-    defects = random_defects(rng, params, holes, kinds, mm_per_px)
+    defects = random_defects(rng, params, holes, kinds, mm_per_px, scratch_clearance_deg=scratch_clearance_deg)
     frame = render_frame(params, holes, seed=int(rng.integers(2**31)), defects=defects)
     frame.defects = [d.with_scale(mm_per_px) for d in frame.defects]
     return frame

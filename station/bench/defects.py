@@ -177,16 +177,19 @@ def _twin_scratches(frames: int, seed: int, mm_per_px: float, tick) -> dict:
 
 
 def run(frames: int = 100, seed: int = 50000, envelope: str = "station", mm_per_px: float = 0.010,
-        progress=None, twin_frames: int = 0, hatch_deg: float | None = None, texture_in_mm: bool = False) -> dict:
+        progress=None, twin_frames: int = 0, hatch_deg: float | None = None, texture_in_mm: bool = False,
+        scratch_clearance_deg: float | None = None) -> dict:
     """``frames`` frames with defects and ``frames`` clean ones, and ``twin_frames``
     frames of the camera twin with a long scratch (``twin_scratch_frame``, seeds from
     ``seed + 2,000,000``); ``progress()`` after each. ``hatch_deg``: the cross-hatch's
     half-angle (None: the renderer's 30 deg); ``texture_in_mm``: the wall's texture
     drawn at the frames' scale (grooves, grain and blotches as large in mm as at the
-    station's 0.010 mm/px), not in px."""
+    station's 0.010 mm/px), not in px. ``scratch_clearance_deg``: how far the random
+    scratches keep from the hatch's directions (None: the renderer's 10 deg; 0: any
+    direction, along the grooves too)."""
     import cv2
 
-    from sim.camera.defects import random_defect_frame  # the CLI side may import sim
+    from sim.camera.defects import HONING_CLEARANCE_DEG, random_defect_frame  # the CLI side may import sim
     from sim.camera.render import HONING_ANGLE_DEG
     from station.vision.defects import detect_defects
     from station.vision.measure import warm_up
@@ -198,6 +201,7 @@ def run(frames: int = 100, seed: int = 50000, envelope: str = "station", mm_per_
         wall["hatch_deg"] = float(hatch_deg)
     if texture_in_mm:
         wall["texture_scale"] = STATION_MM_PER_PX / mm_per_px
+    clearance = HONING_CLEARANCE_DEG if scratch_clearance_deg is None else float(scratch_clearance_deg)
     warm_up()
     per_kind: dict[str, list[tuple]] = defaultdict(list)
     long_no_hole: list[tuple] = []
@@ -207,7 +211,8 @@ def run(frames: int = 100, seed: int = 50000, envelope: str = "station", mm_per_
         for i in range(frames):
             # clean frames from their own seeds: other walls than the defect frames'
             s = seed + i + (1_000_000 if clean else 0)
-            f = random_defect_frame(s, {} if clean else None, mm_per_px=mm_per_px, envelope=envelope, **wall)
+            f = random_defect_frame(s, {} if clean else None, mm_per_px=mm_per_px, envelope=envelope,
+                                    scratch_clearance_deg=clearance, **wall)
             n_holes += len(f.holes)
             c0 = time.process_time()
             found = detect_defects(f.image, mm_per_px)
@@ -252,6 +257,7 @@ def run(frames: int = 100, seed: int = 50000, envelope: str = "station", mm_per_
         "mm_per_px": mm_per_px,
         "hatch_deg": hatch_deg if hatch_deg is not None else HONING_ANGLE_DEG,
         "texture": "mm" if texture_in_mm else "px",
+        "scratch_clearance_deg": clearance,
         "holes": n_holes,
         "kinds": kinds,
         "false_per_100_clean_frames": 100.0 * len(false_clean) / frames,
@@ -295,6 +301,10 @@ def register(bench_app: typer.Typer) -> None:
         texture_in_mm: bool = typer.Option(False, "--texture-in-mm",
                                            help="draw the wall's grooves, grain and blotches at the frames' scale (as "
                                                 "a finer or coarser camera sees them), not in px"),
+        scratch_clearance_deg: Optional[float] = typer.Option(
+            None, "--scratch-clearance-deg", min=0.0, max=44.0,
+            help="how far the random scratches' directions keep from the hatch's (default: the renderer's 10 deg; "
+                 "0: any direction, along the grooves too)"),
         as_json: bool = typer.Option(False, "--json", help="one JSON object on stdout"),
     ) -> None:
         """Surface defects: recall above the limit per kind, false defects on clean walls, size errors, CPU time."""
@@ -306,13 +316,15 @@ def register(bench_app: typer.Typer) -> None:
         with Progress(console=out_console, transient=True, disable=as_json) as bar:
             task = bar.add_task("rendering and inspecting frames", total=2 * frames + twin_frames)
             r = run(frames, seed, envelope, mm_per_px=mm_per_px, progress=lambda: bar.advance(task),
-                    twin_frames=twin_frames, hatch_deg=hatch_deg, texture_in_mm=texture_in_mm)
+                    twin_frames=twin_frames, hatch_deg=hatch_deg, texture_in_mm=texture_in_mm,
+                    scratch_clearance_deg=scratch_clearance_deg)
         if as_json:
             print_json(r)
             return
         t = Table(title=f"defects: {r['frames_with_defects']} frames with defects + {r['clean_frames']} clean, "
                         f"seed {r['seed']}, {r['mm_per_px']} mm/px, hatch +/-{r['hatch_deg']:g} deg, texture in "
-                        f"{r['texture']}, {r['holes']} holes (one core)")
+                        f"{r['texture']}, scratches >= {r['scratch_clearance_deg']:g} deg off it, {r['holes']} "
+                        f"holes (one core)")
         for c in ("kind", "seeded", "limit mm", "above", "recall", "below: recall", "other kind",
                   "L med mm", "L p90 mm", "L in tol", "W med mm", "W p90 mm", "W in tol", "L in 2u"):
             t.add_column(c, justify="right")

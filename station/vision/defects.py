@@ -173,6 +173,30 @@ class DefectConfig:
     #: the whole-surface scan's one false scratch (station bench surface, seed 23300);
     #: the defect bench's recall and sizes are the same at 6 and 8 (seed 80000)
     groove_alignment_deg: float = 7.5
+    #: ... unless it ends in cuts: a scratch is a furrow and ends in a step of its darkness
+    #: blurred by the camera alone, where a groove fades along its length over tens of px
+    #: (the renderer's amplitude field, ~96 px cells; worn stones) and runs on. At each end
+    #: the raw darkness along the line (the grooves *not* removed) is fitted as a blurred
+    #: step, and every end the frame shows must be square: no wider than this (px,
+    #: Gaussian sigma) ...
+    square_end_max_width_px: float = 4.0
+    #: ... with a step of at least this share of the mark's darkness inside it. Session 45,
+    #: dev seeds (station envelope 520000-520059 and clean 1500000-1500099; the twin's
+    #: optics 2070000-2070059 and clean 2060000-2060059; scratches drawn 0-7.5 deg off the
+    #: hatch), the marks along the hatch that passed every other test: 135 of 167 true
+    #: scratches kept and none of 172 groove pieces and duplicates. One square end was
+    #: not enough: with the other allowed to fade (any width, a step of 0.8) it kept 151
+    #: and none, but read a groove piece on a fresh twin frame (2093047: one end 0.6 px,
+    #: the other 11.7 px wide)
+    square_end_min_height: float = 0.8
+    #: an end where the mark runs on at more than this share of its darkness, while the
+    #: other end is square, makes it a piece of a longer mark: measured again with its line
+    #: left out of the wall model's grooves (``_examine``)
+    square_end_max_run_on: float = 0.2
+    #: ... and such a mark must be at least this dark (the fitted cross profile's
+    #: contrast): the twin's deep grooves (10 % on average, up to 30 %) leave pieces of
+    #: 0.12-0.13 there; the true scratches along the hatch fitted 0.13 and more
+    aligned_min_scratch_contrast: float = 0.14
     #: a furrow no wider than this (mm): the bench's scratches are 0.015-0.06 mm wide;
     #: a broad dark band is wear or the cross-hatch's residue (dev frames: 14-28 px "scratches")
     max_scratch_width_mm: float = 0.1
@@ -2088,9 +2112,12 @@ def _examine(img: np.ndarray, box, seed: np.ndarray, zone: np.ndarray, angles_de
     of the end) is examined again in a patch grown along it: the patch is the box of
     the candidates that were found, and a long scratch near a groove direction breaks
     into pieces that are not joined (the twin's frames: a 161 px scratch 10 deg off the
-    hatch measured as three overlapping scratches of 73, 99 and 129 px). What a scratch
-    covers, its centre line and blur, is claimed with its region, so that its other
-    pieces are not measured again."""
+    hatch measured as three overlapping scratches of 73, 99 and 129 px). So is a piece of
+    a scratch along a groove direction that ends square at one end and runs on at the
+    other (``_square_end``): the wall model's grooves along its line took the rest of it
+    in, and the line is left out of them the second time. What a scratch covers, its
+    centre line and blur, is claimed with its region, so that its other pieces are not
+    measured again."""
     hh, ww = img.shape
     excl = seed
     ex = None
@@ -2106,7 +2133,7 @@ def _examine(img: np.ndarray, box, seed: np.ndarray, zone: np.ndarray, angles_de
             # the hatch's residue at the border, 7 deg off a groove, stood as a 0.32 mm scratch)
             break
         ex = again
-        if kind != "scratch" or m is None or not m.get("cut") or attempt == 2:
+        if kind != "scratch" or m is None or not (m.get("cut") or m.get("runs_on")) or attempt == 2:
             break
         # the ends (frame px), each moved out by as much again as the scratch is long
         (xa, ya), (xb, yb) = ((m["line"][0][i] + box[0], m["line"][1][i] + box[1]) for i in (0, -1))
@@ -2117,7 +2144,7 @@ def _examine(img: np.ndarray, box, seed: np.ndarray, zone: np.ndarray, angles_de
         new = (int(max(min(box[0], min(pa[0], pb[0]) - pad), 0)), int(max(min(box[1], min(pa[1], pb[1]) - pad), 0)),
                int(min(max(box[2], max(pa[0], pb[0]) + pad), ww)), int(min(max(box[3], max(pa[1], pb[1]) + pad), hh)))
         # no larger than the frame's quarter each way: a bound on the time, far beyond a scratch
-        if new == tuple(box) or (new[2] - new[0]) * (new[3] - new[1]) > ww * hh / 4:
+        if (new == tuple(box) and not m.get("runs_on")) or (new[2] - new[0]) * (new[3] - new[1]) > ww * hh / 4:
             break
         shape = (new[3] - new[1], new[2] - new[0])
         grown_seed = np.zeros(shape, bool)
@@ -2164,9 +2191,6 @@ def _examine_once(img: np.ndarray, box, seed: np.ndarray, excl: np.ndarray, zone
     ext_l = float(np.ptp(xx * ca + yy * sa)) + 1.0
     ext_w = float(np.ptp(-xx * sa + yy * ca)) + 1.0
     elongated = ext_l >= cfg.scratch_elongation * ext_w and ext_l >= 12.0
-    if elongated and any(_circ_diff_deg(float(np.rad2deg(ang) % 180.0), g) < cfg.groove_alignment_deg
-                         for g in angles_deg):
-        return _Examined(None, region, tuple(box)), None, None  # a piece of groove the wall model left
     touches = region[0, :].any() or region[-1, :].any() or region[:, 0].any() or region[:, -1].any()
     at_border = bool(touches and (x0 == 0 or y0 == 0 or x1 == img.shape[1] or y1 == img.shape[0]))
     if elongated:
@@ -2181,6 +2205,10 @@ def _examine_once(img: np.ndarray, box, seed: np.ndarray, excl: np.ndarray, zone
         kind, m = "pore", _measure_pore(patch, region, cfg, allow_scratch=False, blur_hint=blur_hint)  # short, broad
     if kind == "scratch" and m is not None:
         m["along_share"] = _along_share(rs, region, m["angle"], angles_deg)
+        if any(_circ_diff_deg(m["angle"], g) < cfg.groove_alignment_deg for g in angles_deg):
+            # one cut end and the other running on: a piece of a longer scratch (the wall
+            # model's grooves along its line took the rest in), measured again along it
+            m["square_end"], m["runs_on"] = _square_end(img, wall_level, x0, y0, m, cfg)
     defect = _accept(m, kind, box, at_border, angles_deg, cfg, max_width_px)
     cover = None
     if defect is not None and kind == "scratch":
@@ -2190,6 +2218,75 @@ def _examine_once(img: np.ndarray, box, seed: np.ndarray, excl: np.ndarray, zone
         cv2.polylines(lines, [pts], False, 1, int(2 * m["half_band"] + 1))
         cover = lines.astype(bool)
     return _Examined(defect, region, tuple(box), cover), m, kind
+
+
+def _square_end(img: np.ndarray, level: np.ndarray, x0: int, y0: int, m: dict,
+                cfg: DefectConfig) -> tuple[bool, bool]:
+    """Whether a scratch measured along a groove direction (``m``, patch offset ``x0``,
+    ``y0``) ends in a cut at both ends, as a furrow does, rather than fading as a groove
+    does. The raw relative darkness ``1 - img / level`` (the grooves kept: the
+    wall model's grooves along such a line may have taken the mark in) is read along the
+    centre line (its chord) from up to 30 px inside each end to 30 px beyond it, the mean
+    across the mark's core less that of its 4 px flanks (the other family's grooves cross
+    both alike), and fitted as a blurred step (height, place, width, offset). An end the
+    frame cuts is not read. Returns (square, runs on): whether both ends are read and
+    square (no wider than ``cfg.square_end_max_width_px``, or 2.5 of the mark's blur, with a
+    step of at least ``cfg.square_end_min_height`` of the darkness inside), and whether
+    one is while another runs on at more than ``cfg.square_end_max_run_on`` of it (a
+    piece of a longer mark)."""
+    lx, ly = (np.asarray(v, float) for v in m["line"])
+    if lx.size < 2:
+        return False, False
+    px, py = lx + x0, ly + y0
+    length = float(np.hypot(px[-1] - px[0], py[-1] - py[0]))
+    if length < 4.0:
+        return False, False
+    blur = float(np.clip(m["blur"], 0.7, 2.8))
+    core = max(m["width"] / 2.0 + blur, 1.5)
+    off = np.arange(-(core + 6.0), core + 6.0 + 0.25, 0.5)
+    in_core, in_flank = np.abs(off) <= core, np.abs(off) >= core + 2.0
+    inner = min(30.0, length / 2.0)
+    t = np.arange(-inner, 30.0 + 0.25, 0.5)  # along the line, outwards from the end
+    max_width = max(cfg.square_end_max_width_px, 2.5 * blur)
+    hh, ww = img.shape
+    steps = []  # (width, share of the darkness) of each end read
+    # along the chord: the centre line's last few px bend as its polynomial likes, and a
+    # groove's piece read on past its end along them left the groove within 30 px (a
+    # "square end": the twin's frames, 9 false scratches in 50)
+    cux, cuy = (px[-1] - px[0]) / length, (py[-1] - py[0]) / length
+    for k, ux, uy in ((0, -cux, -cuy), (-1, cux, cuy)):
+        mx = px[k] + t[None, :] * ux - off[:, None] * uy
+        my = py[k] + t[None, :] * uy + off[:, None] * ux
+        bx0, by0 = int(max(np.floor(mx.min()) - 1, 0)), int(max(np.floor(my.min()) - 1, 0))
+        bx1, by1 = int(min(np.ceil(mx.max()) + 2, ww)), int(min(np.ceil(my.max()) + 2, hh))
+        if bx1 - bx0 < 2 or by1 - by0 < 2:
+            continue
+        dark = (1.0 - img[by0:by1, bx0:bx1].astype(np.float32)
+                / np.maximum(level[by0:by1, bx0:bx1], 1.0)).astype(np.float32)
+        st = cv2.remap(dark, (mx - bx0).astype(np.float32), (my - by0).astype(np.float32), cv2.INTER_LINEAR,
+                       borderMode=cv2.BORDER_CONSTANT, borderValue=float("nan"))
+        ok = np.isfinite(st).all(axis=0)
+        if ok.sum() < 20 or t[ok].max() < 12.0:
+            continue  # the frame cuts this end
+        a = st[in_core][:, ok].mean(axis=0) - st[in_flank][:, ok].mean(axis=0)
+        tt = t[ok]
+        inside, beyond = tt < -3.0 * blur, tt > 3.0 * blur
+        if inside.sum() < 4:
+            continue
+        h_in = float(np.median(a[inside]))
+        if h_in <= 0.0:
+            steps.append((np.inf, 0.0))  # no darker inside than beyond: no end of a dark mark
+            continue
+        h_out = float(np.median(a[beyond])) if beyond.sum() >= 4 else 0.0
+        fit = _gauss_newton(lambda q: q[0] * ndtr(-(tt - q[1]) / q[2]) + q[3],
+                            np.array([max(h_in - h_out, 0.01), 0.0, 2.0, h_out]), a,
+                            np.array([-1.0, -12.0, 0.4, -1.0]), np.array([2.0, 12.0, 30.0, 1.0]), iterations=25)
+        steps.append((float(fit.x[2]), float(fit.x[0]) / h_in))
+    square = [w <= max_width and h >= cfg.square_end_min_height for w, h in steps]
+    runs_on = [h < 1.0 - cfg.square_end_max_run_on for _, h in steps]
+    # both ends: one the frame cuts leaves a groove's piece at the border as square as a
+    # scratch's (a fresh twin frame, 2080043); the scan's overlap sees such a scratch whole
+    return len(square) == 2 and all(square), any(square) and any(runs_on)
 
 
 def _along_share(rs: np.ndarray, region: np.ndarray, angle_deg: float, angles_deg, sigma_px: float = 2.0,
@@ -2236,7 +2333,9 @@ def _accept(m: dict | None, kind: str, box, at_border: bool, angles_deg, cfg: De
         return None  # broad and faint: the cross-hatch's residue, not a cavity
     if kind == "scratch" and (m["contrast"] < cfg.min_scratch_contrast or m["blur"] > cfg.max_edge_blur_px
                               or m["width"] > max_width_px or m["length"] < cfg.scratch_elongation * m["width"]
-                              or any(_circ_diff_deg(m["angle"], g) < cfg.groove_alignment_deg for g in angles_deg)
+                              or (any(_circ_diff_deg(m["angle"], g) < cfg.groove_alignment_deg for g in angles_deg)
+                                  and (not m.get("square_end", False)
+                                       or m["contrast"] < cfg.aligned_min_scratch_contrast))
                               or m.get("along_share", 1.0) < cfg.min_scratch_along_share):
         return None  # the cross-hatch's residue: broad, faint, soft, short, along a groove or not one line
     conf = _confidence(m["significance"], cfg.min_significance)
