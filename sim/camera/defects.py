@@ -383,8 +383,14 @@ HONING_CLEARANCE_DEG = 10.0
 
 
 def random_scratch_angle(rng: np.random.Generator, honing_angle_deg: float = 30.0,
-                         clearance_deg: float = HONING_CLEARANCE_DEG) -> float:
-    """A direction (deg, 0-180) at least ``clearance_deg`` from both groove families."""
+                         clearance_deg: float = HONING_CLEARANCE_DEG, within_deg: float | None = None) -> float:
+    """A direction (deg, 0-180) at least ``clearance_deg`` from both groove families; or,
+    with ``within_deg``, at most that far from one of them (a scratch along the hatch)."""
+    if within_deg is not None:
+        if not 0.0 < within_deg <= 45.0:
+            raise ValueError(f"within_deg must lie in (0, 45] deg, got {within_deg}")
+        family = honing_angle_deg if rng.uniform() < 0.5 else 180.0 - honing_angle_deg
+        return float((family + rng.uniform(-within_deg, within_deg)) % 180.0)
     if not 0.0 <= clearance_deg < 45.0:
         raise ValueError(f"clearance_deg must lie in [0, 45) deg, got {clearance_deg}")
     while True:
@@ -396,7 +402,8 @@ def random_scratch_angle(rng: np.random.Generator, honing_angle_deg: float = 30.
 
 def random_defects(rng: np.random.Generator, params, holes: list, kinds: dict[str, int], mm_per_px: float,
                    border_px: float = 8.0, clearance_px: float = 12.0,
-                   scratch_clearance_deg: float = HONING_CLEARANCE_DEG) -> list[DefectSpec]:
+                   scratch_clearance_deg: float = HONING_CLEARANCE_DEG,
+                   scratch_within_deg: float | None = None) -> list[DefectSpec]:
     """Defects drawn across ``RANDOM_SIZES_MM``: ``kinds`` maps a kind to how many.
 
     Pores and scratches lie wholly in the frame, clear of the holes and of each other
@@ -433,7 +440,7 @@ def random_defects(rng: np.random.Generator, params, holes: list, kinds: dict[st
                     length = rng.uniform(*sizes["length"]) / mm_per_px
                     # a furrow is long and thin: at least SCRATCH_MIN_ELONGATION times its width
                     width = min(rng.uniform(*sizes["width"]) / mm_per_px, length / SCRATCH_MIN_ELONGATION)
-                    angle = random_scratch_angle(rng, params.hatch_deg, scratch_clearance_deg)
+                    angle = random_scratch_angle(rng, params.hatch_deg, scratch_clearance_deg, scratch_within_deg)
                 else:
                     length = rng.uniform(*sizes["length"]) / mm_per_px
                     width = rng.uniform(*sizes["width"]) / mm_per_px
@@ -482,7 +489,7 @@ def random_defects(rng: np.random.Generator, params, holes: list, kinds: dict[st
 def random_defect_frame(seed: int, kinds: dict[str, int] | None = None, *, mm_per_px: float = 0.010,
                         n_holes: int | None = None, hole_diameter_mm: tuple[float, float] = (0.6, 1.0),
                         envelope: str = "station", scratch_clearance_deg: float = HONING_CLEARANCE_DEG,
-                        **overrides):
+                        scratch_within_deg: float | None = None, **overrides):
     """A random frame with random defects from one seed (the defect bench's and tests'
     unit of work), its truth in px and mm.
 
@@ -491,7 +498,8 @@ def random_defect_frame(seed: int, kinds: dict[str, int] | None = None, *, mm_pe
     largest pore is 0.5 mm, so a dark disc's size tells a hole from a pore). ``kinds``:
     how many of each kind (None: 0-2 pores, 0-2 scratches, and 0-2 burrs and 0-2 chips
     when there are holes; ``{}``: a clean frame). ``scratch_clearance_deg``: how far the
-    scratches' directions keep from the hatch's (0: any direction).
+    scratches' directions keep from the hatch's (0: any direction); ``scratch_within_deg``:
+    instead, at most that far from a groove family (scratches along the hatch).
     """
     from sim.camera.render import random_holes, random_params, render_frame
 
@@ -505,7 +513,8 @@ def random_defect_frame(seed: int, kinds: dict[str, int] | None = None, *, mm_pe
         kinds = {"pore": int(rng.integers(0, 3)), "scratch": int(rng.integers(0, 3))}
         if holes:
             kinds.update(burr=int(rng.integers(0, 3)), chip=int(rng.integers(0, 3)))
-    defects = random_defects(rng, params, holes, kinds, mm_per_px, scratch_clearance_deg=scratch_clearance_deg)
+    defects = random_defects(rng, params, holes, kinds, mm_per_px, scratch_clearance_deg=scratch_clearance_deg,
+                             scratch_within_deg=scratch_within_deg)
     frame = render_frame(params, holes, seed=int(rng.integers(2**31)), defects=defects)
     frame.defects = [d.with_scale(mm_per_px) for d in frame.defects]
     return frame

@@ -178,7 +178,7 @@ def _twin_scratches(frames: int, seed: int, mm_per_px: float, tick) -> dict:
 
 def run(frames: int = 100, seed: int = 50000, envelope: str = "station", mm_per_px: float = 0.010,
         progress=None, twin_frames: int = 0, hatch_deg: float | None = None, texture_in_mm: bool = False,
-        scratch_clearance_deg: float | None = None) -> dict:
+        scratch_clearance_deg: float | None = None, scratch_within_deg: float | None = None) -> dict:
     """``frames`` frames with defects and ``frames`` clean ones, and ``twin_frames``
     frames of the camera twin with a long scratch (``twin_scratch_frame``, seeds from
     ``seed + 2,000,000``); ``progress()`` after each. ``hatch_deg``: the cross-hatch's
@@ -186,7 +186,8 @@ def run(frames: int = 100, seed: int = 50000, envelope: str = "station", mm_per_
     drawn at the frames' scale (grooves, grain and blotches as large in mm as at the
     station's 0.010 mm/px), not in px. ``scratch_clearance_deg``: how far the random
     scratches keep from the hatch's directions (None: the renderer's 10 deg; 0: any
-    direction, along the grooves too)."""
+    direction, along the grooves too); ``scratch_within_deg``: instead, every random
+    scratch at most that far from a groove family (scratches along the hatch)."""
     import cv2
 
     from sim.camera.defects import HONING_CLEARANCE_DEG, random_defect_frame  # the CLI side may import sim
@@ -212,7 +213,7 @@ def run(frames: int = 100, seed: int = 50000, envelope: str = "station", mm_per_
             # clean frames from their own seeds: other walls than the defect frames'
             s = seed + i + (1_000_000 if clean else 0)
             f = random_defect_frame(s, {} if clean else None, mm_per_px=mm_per_px, envelope=envelope,
-                                    scratch_clearance_deg=clearance, **wall)
+                                    scratch_clearance_deg=clearance, scratch_within_deg=scratch_within_deg, **wall)
             n_holes += len(f.holes)
             c0 = time.process_time()
             found = detect_defects(f.image, mm_per_px)
@@ -258,6 +259,7 @@ def run(frames: int = 100, seed: int = 50000, envelope: str = "station", mm_per_
         "hatch_deg": hatch_deg if hatch_deg is not None else HONING_ANGLE_DEG,
         "texture": "mm" if texture_in_mm else "px",
         "scratch_clearance_deg": clearance,
+        "scratch_within_deg": scratch_within_deg,
         "holes": n_holes,
         "kinds": kinds,
         "false_per_100_clean_frames": 100.0 * len(false_clean) / frames,
@@ -305,6 +307,10 @@ def register(bench_app: typer.Typer) -> None:
             None, "--scratch-clearance-deg", min=0.0, max=44.0,
             help="how far the random scratches' directions keep from the hatch's (default: the renderer's 10 deg; "
                  "0: any direction, along the grooves too)"),
+        scratch_within_deg: Optional[float] = typer.Option(
+            None, "--scratch-within-deg", min=0.1, max=45.0,
+            help="instead, draw every random scratch at most this far from a groove family (scratches along the "
+                 "hatch; the detector's groove-alignment angle is 7.5)"),
         as_json: bool = typer.Option(False, "--json", help="one JSON object on stdout"),
     ) -> None:
         """Surface defects: recall above the limit per kind, false defects on clean walls, size errors, CPU time."""
@@ -317,14 +323,16 @@ def register(bench_app: typer.Typer) -> None:
             task = bar.add_task("rendering and inspecting frames", total=2 * frames + twin_frames)
             r = run(frames, seed, envelope, mm_per_px=mm_per_px, progress=lambda: bar.advance(task),
                     twin_frames=twin_frames, hatch_deg=hatch_deg, texture_in_mm=texture_in_mm,
-                    scratch_clearance_deg=scratch_clearance_deg)
+                    scratch_clearance_deg=scratch_clearance_deg, scratch_within_deg=scratch_within_deg)
         if as_json:
             print_json(r)
             return
         t = Table(title=f"defects: {r['frames_with_defects']} frames with defects + {r['clean_frames']} clean, "
                         f"seed {r['seed']}, {r['mm_per_px']} mm/px, hatch +/-{r['hatch_deg']:g} deg, texture in "
-                        f"{r['texture']}, scratches >= {r['scratch_clearance_deg']:g} deg off it, {r['holes']} "
-                        f"holes (one core)")
+                        f"{r['texture']}, scratches "
+                        + (f"<= {r['scratch_within_deg']:g} deg off a groove family" if r["scratch_within_deg"]
+                           else f">= {r['scratch_clearance_deg']:g} deg off it")
+                        + f", {r['holes']} holes (one core)")
         for c in ("kind", "seeded", "limit mm", "above", "recall", "below: recall", "other kind",
                   "L med mm", "L p90 mm", "L in tol", "W med mm", "W p90 mm", "W in tol", "L in 2u"):
             t.add_column(c, justify="right")

@@ -183,12 +183,16 @@ class DefectConfig:
     #: ... with a step of at least this share of the mark's darkness inside it. Session 45,
     #: dev seeds (station envelope 520000-520059 and clean 1500000-1500099; the twin's
     #: optics 2070000-2070059 and clean 2060000-2060059; scratches drawn 0-7.5 deg off the
-    #: hatch), the marks along the hatch that passed every other test: 135 of 167 true
-    #: scratches kept and none of 172 groove pieces and duplicates. One square end was
-    #: not enough: with the other allowed to fade (any width, a step of 0.8) it kept 151
-    #: and none, but read a groove piece on a fresh twin frame (2093047: one end 0.6 px,
-    #: the other 11.7 px wide)
+    #: hatch), the marks along the hatch that passed every other test: with both ends so,
+    #: 135 of 167 true scratches kept and none of 172 groove pieces and duplicates; one
+    #: square end and the other of any width (a step of 0.8) kept 151 and none, but read a
+    #: groove piece on a fresh twin frame
     square_end_min_height: float = 0.8
+    #: ... and its other end no wider than this (a ragged or bent end fits wider than the
+    #: blur; a groove's fade, tens of px): on the dev marks above 144 of 167 true scratches
+    #: kept (135 with both ends within 4 px) and still none of the 172 others; a fresh twin
+    #: frame's groove piece (2093047) had ends of 0.6 and 11.7 px
+    square_end_other_max_width_px: float = 8.0
     #: an end where the mark runs on at more than this share of its darkness, while the
     #: other end is square, makes it a piece of a longer mark: measured again with its line
     #: left out of the wall model's grooves (``_examine``)
@@ -2048,6 +2052,7 @@ def detect_defects(image: np.ndarray, mm_per_px: float, *, holes=None, blur_px: 
         claimed[rb[1]:rb[3], rb[0]:rb[2]] |= ex.region if ex.cover is None else ex.region | ex.cover
         claimed_regions[rb[1]:rb[3], rb[0]:rb[2]] |= ex.region
         examined.append(ex)
+    examined = _drop_scratch_pieces(examined)
     found: list[Defect] = [ex.defect for ex in examined if ex.defect is not None]
     others = [_hole_zone(img.shape, [h for j, h in enumerate(holes) if j != i], reach_px) for i in range(len(holes))]
     blur_rim = blur_hint if blur_hint is not None else BLUR_PRIOR_PX[0]
@@ -2101,6 +2106,35 @@ class _Examined:
     #: a scratch's cover over the same box: its centre line, half its width plus the blur's
     #: reach either side (claimed too; None: the region alone)
     cover: np.ndarray | None = None
+
+
+def _cover_share(a: "_Examined", b: "_Examined") -> float:
+    """The share of ``a``'s cover that lies in ``b``'s (frame px)."""
+    (ax0, ay0, ax1, ay1), (bx0, by0, bx1, by1) = a.box, b.box
+    x0, y0, x1, y1 = max(ax0, bx0), max(ay0, by0), min(ax1, bx1), min(ay1, by1)
+    total = int(a.cover.sum())
+    if x1 <= x0 or y1 <= y0 or total == 0:
+        return 0.0
+    inter = a.cover[y0 - ay0:y1 - ay0, x0 - ax0:x1 - ax0] & b.cover[y0 - by0:y1 - by0, x0 - bx0:x1 - bx0]
+    return float(inter.sum()) / total
+
+
+def _drop_scratch_pieces(examined: list["_Examined"]) -> list["_Examined"]:
+    """Scratches of which most of the cover (over half) lies in a longer scratch's: a
+    piece of it, measured from its own candidate before the whole one was (claiming
+    stops only the pieces that come after). Along the hatch the wall model's grooves
+    take a scratch in by pieces, and each was reported (session 45: 5 duplicates in 60
+    fresh frames of two such scratches)."""
+    scratches = [ex for ex in examined if ex.defect is not None and ex.defect.kind == "scratch"
+                 and ex.cover is not None and ex.box is not None]
+    drop = set()
+    for a in scratches:
+        for b in scratches:
+            if b is not a and id(b) not in drop and b.defect.length_px > a.defect.length_px \
+                    and _cover_share(a, b) > 0.5:
+                drop.add(id(a))
+                break
+    return [ex for ex in examined if id(ex) not in drop]
 
 
 def _examine(img: np.ndarray, box, seed: np.ndarray, zone: np.ndarray, angles_deg, wall_level: np.ndarray,
@@ -2229,11 +2263,12 @@ def _square_end(img: np.ndarray, level: np.ndarray, x0: int, y0: int, m: dict,
     centre line (its chord) from up to 30 px inside each end to 30 px beyond it, the mean
     across the mark's core less that of its 4 px flanks (the other family's grooves cross
     both alike), and fitted as a blurred step (height, place, width, offset). An end the
-    frame cuts is not read. Returns (square, runs on): whether both ends are read and
-    square (no wider than ``cfg.square_end_max_width_px``, or 2.5 of the mark's blur, with a
-    step of at least ``cfg.square_end_min_height`` of the darkness inside), and whether
-    one is while another runs on at more than ``cfg.square_end_max_run_on`` of it (a
-    piece of a longer mark)."""
+    frame cuts is not read. Returns (square, runs on): whether both ends are read, both
+    step by at least ``cfg.square_end_min_height`` of the darkness inside, one of them
+    square (no wider than ``cfg.square_end_max_width_px``, or 2.5 of the mark's blur) and
+    the other no wider than ``cfg.square_end_other_max_width_px``; and whether one end is
+    square while another runs on at more than ``cfg.square_end_max_run_on`` of the
+    darkness (a piece of a longer mark)."""
     lx, ly = (np.asarray(v, float) for v in m["line"])
     if lx.size < 2:
         return False, False
@@ -2282,11 +2317,14 @@ def _square_end(img: np.ndarray, level: np.ndarray, x0: int, y0: int, m: dict,
                             np.array([max(h_in - h_out, 0.01), 0.0, 2.0, h_out]), a,
                             np.array([-1.0, -12.0, 0.4, -1.0]), np.array([2.0, 12.0, 30.0, 1.0]), iterations=25)
         steps.append((float(fit.x[2]), float(fit.x[0]) / h_in))
+    m["end_steps"] = steps
     square = [w <= max_width and h >= cfg.square_end_min_height for w, h in steps]
+    ends = [w <= max(cfg.square_end_other_max_width_px, max_width) and h >= cfg.square_end_min_height
+            for w, h in steps]
     runs_on = [h < 1.0 - cfg.square_end_max_run_on for _, h in steps]
     # both ends: one the frame cuts leaves a groove's piece at the border as square as a
     # scratch's (a fresh twin frame, 2080043); the scan's overlap sees such a scratch whole
-    return len(square) == 2 and all(square), any(square) and any(runs_on)
+    return len(steps) == 2 and any(square) and all(ends), any(square) and any(runs_on)
 
 
 def _along_share(rs: np.ndarray, region: np.ndarray, angle_deg: float, angles_deg, sigma_px: float = 2.0,
