@@ -297,6 +297,37 @@ def test_a_groove_that_fades_is_no_scratch_and_a_cut_furrow_is():
         assert _square_end(img, level, 0, 0, m, DefectConfig()) == (square, False)
 
 
+def test_a_piece_of_a_longer_scratch_is_not_reported_beside_it_but_a_crossing_scratch_is():
+    """``_drop_scratch_pieces``: a scratch whose cover lies mostly in a longer one's is a
+    piece of it, measured from its own candidate first; a scratch crossing it is not."""
+    from station.vision.defects import Defect, _drop_scratch_pieces, _Examined
+
+    def scratch(x0, y0, x1, y1, length):
+        cover = np.zeros((200, 300), np.uint8)
+        cv2.line(cover, (x0, y0), (x1, y1), 1, 9)
+        d = Defect("scratch", (x0 + x1) / 2, (y0 + y1) / 2, length, 3.0, 0.9, 30.0, 1.0, 0.5, 20.0, False)
+        return _Examined(d, cover.astype(bool), (0, 0, 300, 200), cover.astype(bool))
+
+    whole, piece = scratch(20, 20, 260, 160, 278.0), scratch(80, 55, 160, 102, 93.0)
+    crossing = scratch(60, 180, 200, 20, 212.0)
+    kept = _drop_scratch_pieces([piece, whole, crossing])
+    assert [ex.defect.length_px for ex in kept] == [278.0, 212.0]
+
+
+def test_the_bench_draws_scratches_along_the_hatch_when_asked():
+    from sim.camera.defects import random_scratch_angle
+
+    def off_hatch(a):
+        return min(abs((a - g + 90.0) % 180.0 - 90.0) for g in (25.0, 155.0))
+
+    rng = np.random.default_rng(5)
+    along = [off_hatch(random_scratch_angle(rng, 25.0, within_deg=7.5)) for _ in range(400)]
+    assert max(along) <= 7.5 and min(along) < 0.5
+    assert min(off_hatch(random_scratch_angle(rng, 25.0)) for _ in range(400)) >= 10.0
+    with pytest.raises(ValueError, match="within_deg"):
+        random_scratch_angle(rng, 25.0, within_deg=0.0)
+
+
 # ---------------------------------------------------------------- clean walls and rims
 def test_clean_walls_give_no_defects():
     """The honing cross-hatch (grooves up to 24 % deep), grain, blotches and vignetting of
