@@ -177,14 +177,15 @@ class DefectConfig:
     #: blurred by the camera alone, where a groove fades along its length over tens of px
     #: (the renderer's amplitude field, ~96 px cells; worn stones) and runs on. At each end
     #: the raw darkness along the line (the grooves *not* removed) is fitted as a blurred
-    #: step, and every end the frame shows must be square: no wider than this (px,
-    #: Gaussian sigma) ...
+    #: step (``_square_end``); both ends must be in the frame and one of them square: no
+    #: wider than this (px, Gaussian sigma) ...
     square_end_max_width_px: float = 4.0
-    #: ... with a step of at least this share of the mark's darkness inside it. Session 45,
+    #: ... and each with a step of at least this share of the mark's darkness inside it
+    #: (the mark ends there). Session 45,
     #: dev seeds (station envelope 520000-520059 and clean 1500000-1500099; the twin's
     #: optics 2070000-2070059 and clean 2060000-2060059; scratches drawn 0-7.5 deg off the
-    #: hatch), the marks along the hatch that passed every other test: with both ends so,
-    #: 135 of 167 true scratches kept and none of 172 groove pieces and duplicates; one
+    #: hatch), the marks along the hatch that passed every other test: with both ends
+    #: square, 135 of 167 true scratches kept and none of 172 groove pieces and duplicates; one
     #: square end and the other of any width (a step of 0.8) kept 151 and none, but read a
     #: groove piece on a fresh twin frame
     square_end_min_height: float = 0.8
@@ -2240,8 +2241,9 @@ def _examine_once(img: np.ndarray, box, seed: np.ndarray, excl: np.ndarray, zone
     if kind == "scratch" and m is not None:
         m["along_share"] = _along_share(rs, region, m["angle"], angles_deg)
         if any(_circ_diff_deg(m["angle"], g) < cfg.groove_alignment_deg for g in angles_deg):
-            # one cut end and the other running on: a piece of a longer scratch (the wall
-            # model's grooves along its line took the rest in), measured again along it
+            # along the hatch: a scratch if it ends in cuts (``_accept``); one cut end and the
+            # other running on is a piece of a longer scratch (the wall model's grooves along
+            # its line took the rest in), measured again along it (``_examine``)
             m["square_end"], m["runs_on"] = _square_end(img, wall_level, x0, y0, m, cfg)
     defect = _accept(m, kind, box, at_border, angles_deg, cfg, max_width_px)
     cover = None
@@ -2287,7 +2289,7 @@ def _square_end(img: np.ndarray, level: np.ndarray, x0: int, y0: int, m: dict,
     steps = []  # (width, share of the darkness) of each end read
     # along the chord: the centre line's last few px bend as its polynomial likes, and a
     # groove's piece read on past its end along them left the groove within 30 px (a
-    # "square end": the twin's frames, 9 false scratches in 50)
+    # "square end": the twin's frames, 9 false scratches in 50 with this test's first form)
     cux, cuy = (px[-1] - px[0]) / length, (py[-1] - py[0]) / length
     for k, ux, uy in ((0, -cux, -cuy), (-1, cux, cuy)):
         mx = px[k] + t[None, :] * ux - off[:, None] * uy
@@ -2317,7 +2319,6 @@ def _square_end(img: np.ndarray, level: np.ndarray, x0: int, y0: int, m: dict,
                             np.array([max(h_in - h_out, 0.01), 0.0, 2.0, h_out]), a,
                             np.array([-1.0, -12.0, 0.4, -1.0]), np.array([2.0, 12.0, 30.0, 1.0]), iterations=25)
         steps.append((float(fit.x[2]), float(fit.x[0]) / h_in))
-    m["end_steps"] = steps
     square = [w <= max_width and h >= cfg.square_end_min_height for w, h in steps]
     ends = [w <= max(cfg.square_end_other_max_width_px, max_width) and h >= cfg.square_end_min_height
             for w, h in steps]
