@@ -2232,9 +2232,9 @@ def _examine_once(img: np.ndarray, box, seed: np.ndarray, excl: np.ndarray, zone
         # scratch cost the twin's frames 1.26x their time; the ends' test on the region's
         # own axis first (loosely: a piece that runs on may be a longer scratch's)
         along = (xx - mx_) * ca + (yy - my_) * sa
+        ends = np.array([along.min(), along.max()])
         blur0 = float(blur_hint) if blur_hint is not None else BLUR_PRIOR_PX[0]
-        pre = dict(line=(mx_ + np.array([along.min(), along.max()]) * ca, my_ + np.array([along.min(), along.max()]) * sa),
-                   blur=blur0, width=max(ext_w - 2.0 * blur0, 1.0))
+        pre = dict(line=(mx_ + ends * ca, my_ + ends * sa), blur=blur0, width=max(ext_w - 2.0 * blur0, 1.0))
         if not any(_square_end(img, wall_level, x0, y0, pre, cfg)):
             return _Examined(None, region, tuple(box)), None, None  # a piece of groove the wall model left
     touches = region[0, :].any() or region[-1, :].any() or region[:, 0].any() or region[:, -1].any()

@@ -225,6 +225,18 @@ def test_sizes_are_sub_pixel_not_pixel_counts():
     assert np.all(np.abs(steps - 0.5) < 0.25), lengths
 
 
+def _the_one_scratch_found(p: FrameParams, spec: DefectSpec, seed: int):
+    """``spec`` rendered alone on a wall of ``p``: (its truth, the one defect found), which
+    must be a scratch matched to it with nothing else reported."""
+    f = render_frame(p, [], seed=seed, defects=[spec])
+    (t,) = [d.with_scale(MM_PER_PX) for d in f.defects]
+    found = detect_defects(f.image, MM_PER_PX)
+    pairs, false = match([t], found, MM_PER_PX)
+    d = pairs[0][1]
+    assert d is not None and d.kind == "scratch" and not false, (seed, [(e.kind, e.length_mm) for e in found])
+    return t, d
+
+
 def test_long_scratches_in_frames_without_a_hole_keep_their_ends_width_and_place():
     """The camera twin's condition (``FrameParams()``: grooves 10 % deep, 10 e-/DN, blur
     1.2 px), no hole to give the blur, one scratch of 1.5-2 mm near the centre crossing
@@ -241,12 +253,7 @@ def test_long_scratches_in_frames_without_a_hole_keep_their_ends_width_and_place
         length, width, angle = rng.uniform(150.0, 200.0), rng.uniform(1.5, 6.0), random_scratch_angle(rng)
         spec = DefectSpec("scratch", 319.5 + rng.uniform(-30, 30), 255.5 + rng.uniform(-30, 30), length, width, angle,
                           None, None, seed)
-        f = render_frame(p, [], seed=seed, defects=[spec])
-        (t,) = [d.with_scale(MM_PER_PX) for d in f.defects]
-        found = detect_defects(f.image, MM_PER_PX)
-        pairs, false = match([t], found, MM_PER_PX)
-        d = pairs[0][1]
-        assert d is not None and d.kind == "scratch" and not false, (seed, [(e.kind, e.length_mm) for e in found])
+        t, d = _the_one_scratch_found(p, spec, seed)
         assert abs(d.length_mm - t.length_mm) <= 0.1 * t.length_mm, (seed, d.length_mm, t.length_mm)
         assert _within(d.width_mm, t.width_mm), (seed, d.width_mm, t.width_mm)
         assert np.hypot(d.x_px - t.x_px, d.y_px - t.y_px) * MM_PER_PX <= 0.05, (seed, d.x_px, d.y_px, t.x_px, t.y_px)
@@ -267,12 +274,7 @@ def test_a_scratch_along_the_hatch_is_found_and_measured():
         length, width = float(rng.uniform(60.0, 180.0)), float(rng.uniform(2.5, 5.0))
         spec = DefectSpec("scratch", 319.5 + rng.uniform(-60, 60), 255.5 + rng.uniform(-60, 60), length, width, angle,
                           reflectance=float(rng.uniform(0.4, 0.7)), shape_seed=seed)
-        f = render_frame(p, [], seed=seed, defects=[spec])
-        (t,) = [d.with_scale(MM_PER_PX) for d in f.defects]
-        found = detect_defects(f.image, MM_PER_PX)
-        pairs, false = match([t], found, MM_PER_PX)
-        d = pairs[0][1]
-        assert d is not None and d.kind == "scratch" and not false, (seed, [(e.kind, e.length_mm) for e in found])
+        t, d = _the_one_scratch_found(p, spec, seed)
         assert _within(d.length_mm, t.length_mm), (seed, d.length_mm, t.length_mm)
         assert np.hypot(d.x_px - t.x_px, d.y_px - t.y_px) * MM_PER_PX <= 0.05, (seed, d.x_px, d.y_px, t.x_px, t.y_px)
 
@@ -289,7 +291,7 @@ def test_a_groove_that_fades_is_no_scratch_and_a_cut_furrow_is():
     across = np.exp(-0.5 * ((np.arange(h, dtype=np.float32) - 60.0) / 1.5) ** 2)[:, None]
     fade = 0.25 * np.exp(-0.5 * ((xs - 200.0) / 45.0) ** 2)[None, :]
     cut = 0.25 * ((xs >= 140) & (xs <= 260)).astype(np.float32)[None, :]
-    line = (np.linspace(140.0, 260.0, 25) - 0.0, np.full(25, 60.0))
+    line = (np.linspace(140.0, 260.0, 25), np.full(25, 60.0))
     m = dict(line=line, blur=1.5, width=3.0)
     for band, square in ((fade, False), (cut, True)):
         dark = cv2.GaussianBlur((across * band).astype(np.float32), (0, 0), 1.5)
