@@ -62,6 +62,24 @@ class SurfaceSettings:
     #: sightings of one defect from overlapping frames lie within this (mm) plus half the
     #: longer's length of each other (the distortion moves a corner's sighting ~0.2 mm)
     merge_mm: float = 0.35
+    #: pieces of one scratch longer than a frame, each cut by a frame's border, are
+    #: joined when they meet: overlapping along the furrow or apart by at most
+    #: ``join_gap_mm``, their directions within ``join_angle_deg`` and their lines where
+    #: they meet within ``join_offset_mm`` plus the wider's width plus ``join_bend_share``
+    #: of the longer piece. A piece is measured as one straight chord, and a scratch bends
+    #: (the renderer's two modes of 1.2 % of its length each): a 12 mm piece's chord
+    #: strays from the furrow by up to ~0.3 mm and turns by up to ~6 deg from its
+    #: neighbour's. Without the lens's calibration a piece's end at a frame's border is
+    #: off by up to ``join_lens_mm`` (2.7 % of the offset at a corner), which the gap and
+    #: the offset allow as well.
+    join_gap_mm: float = 0.35
+    join_offset_mm: float = 0.06
+    join_angle_deg: float = 10.0
+    join_bend_share: float = 0.03
+    join_lens_mm: float = 0.2
+    #: a cut scratch's end this near (px) a frame's border was cut there: the detector
+    #: reads a furrow's end from a strip across it, which the border cuts short
+    border_px: float = 40.0
     #: the flat field's Gaussian (mm): wide against a defect (0.5 mm), narrow against
     #: the vignetting and the light's blotches
     flat_sigma_mm: float = 1.0
@@ -119,6 +137,20 @@ class _Sighting:
     angle_deg: float
     r_px: float
     frame: int
+    #: where the frame was centred on the part (grating included)
+    centre: tuple[float, float] | None = None
+
+
+@dataclass
+class _Piece:
+    """A scratch's sighting as a segment on the part: its two ends (axial mm, angle deg,
+    the lens taken out when known), each end's image px and whether the frame's border
+    cut it there."""
+
+    sighting: _Sighting
+    ends: tuple[tuple[float, float], tuple[float, float]]
+    ends_px: tuple[tuple[float, float], tuple[float, float]]
+    cut: tuple[bool, bool]
 
 
 @dataclass
@@ -292,7 +324,7 @@ class _SurfaceScan:
         def analysed(frame_k: int, centre: tuple[float, float], defects) -> None:
             for d in defects:
                 ax, an = self.place(centre, d.x_px, d.y_px)
-                sightings.append(_Sighting(d, ax, an, math.hypot(d.x_px - cx, d.y_px - cy), frame_k))
+                sightings.append(_Sighting(d, ax, an, math.hypot(d.x_px - cx, d.y_px - cy), frame_k, centre))
 
         for ring, axial in enumerate(plan.axials_mm):
             yield m.Checkpoint(f"surface ring {ring + 1}")
@@ -309,9 +341,13 @@ class _SurfaceScan:
         if pending is not None:
             defects = yield m.MeasureSurface(pending[2])
             analysed(pending[0], pending[1], list(defects or []))
-        groups = self.merge(sightings)
-        yield m.Note(f"surface: {len(sightings)} sightings, {len(groups)} defect(s) to measure")
+        chains, rest = self.join_scratches(sightings)
+        groups = self.merge(rest)
+        yield m.Note(f"surface: {len(sightings)} sightings, {len(groups) + len(chains)} defect(s) to measure"
+                     + (f" ({len(chains)} scratch(es) longer than a frame, joined from their pieces)" if chains else ""))
         defects = []
+        for chain in chains:
+            defects.append((yield from self.measure_joined(chain)))
         for g in self.route(groups):
             for d in (yield from self.measure(g)):
                 # a re-centred frame shared by two groups shows a defect to both: once
@@ -353,6 +389,233 @@ class _SurfaceScan:
         for i, s in enumerate(sightings):
             groups.setdefault(root(i), []).append(s)
         return list(groups.values())
+
+    # -------------------------------------------------------------- scratches longer than a frame
+    def wall_vec(self, a: tuple[float, float], b: tuple[float, float]) -> np.ndarray:
+        """From place ``a`` to place ``b`` on the unrolled wall (mm: arc, axial)."""
+        return np.array([math.radians(wrap_deg(b[1] - a[1])) * self.radius, b[0] - a[0]])
+
+    def off_wall(self, origin: tuple[float, float], v: np.ndarray) -> tuple[float, float]:
+        """The place ``v`` (mm: arc, axial) from ``origin`` on the unrolled wall."""
+        return origin[0] + float(v[1]), (origin[1] + math.degrees(float(v[0]) / self.radius)) % 360.0
+
+    def piece(self, sg: _Sighting) -> _Piece:
+        """A scratch's sighting as a segment on the part: its centre line's ends (the
+        centre +/- half its length along its direction), each placed as a defect is."""
+        d = sg.defect
+        h = d.length_px / 2.0
+        c, s_ = math.cos(math.radians(d.angle_deg)), math.sin(math.radians(d.angle_deg))
+        px = ((d.x_px - h * c, d.y_px - h * s_), (d.x_px + h * c, d.y_px + h * s_))
+        b, w, hh = self.cfg.border_px, self.geo.width_px, self.geo.height_px
+        cut = tuple(bool(getattr(d, "partial", False)) and (x <= b or y <= b or x >= w - 1 - b or y >= hh - 1 - b)
+                    for x, y in px)
+        return _Piece(sg, (self.place(sg.centre, *px[0]), self.place(sg.centre, *px[1])), px, cut)
+
+    def width_mm(self, d) -> float:
+        return float(d.width_mm if d.width_mm is not None else d.width_px * self.geo.mm_per_px)
+
+    def meet(self, p: _Piece, q: _Piece) -> bool:
+        """Whether two pieces from different frames, one of them cut by its frame's
+        border, are one furrow: along one direction, overlapping or nearly touching, and
+        on one line where they meet."""
+        if p.sighting.frame == q.sighting.frame:
+            return False
+        if not (getattr(p.sighting.defect, "partial", False) or getattr(q.sighting.defect, "partial", False)):
+            return False
+        cfg = self.cfg
+        lens = 0.0 if self.lens is not None else cfg.join_lens_mm
+        o = p.ends[0]
+        p0, p1 = (self.wall_vec(o, e) for e in p.ends)
+        q0, q1 = (self.wall_vec(o, e) for e in q.ends)
+        lp, lq = float(np.hypot(*(p1 - p0))), float(np.hypot(*(q1 - q0)))
+        if lp <= 0.0 or lq <= 0.0:
+            return False
+        up, uq = (p1 - p0) / lp, (q1 - q0) / lq
+        cos_turn = float(up @ uq)
+        if math.degrees(math.acos(min(1.0, abs(cos_turn)))) > cfg.join_angle_deg:
+            return False
+        u = up + (uq if cos_turn >= 0.0 else -uq)
+        u /= np.hypot(*u)
+        n = np.array([-u[1], u[0]])
+        tp, tq = sorted((float(p0 @ u), float(p1 @ u))), sorted((float(q0 @ u), float(q1 @ u)))
+        if max(tq[0] - tp[1], tp[0] - tq[1]) > cfg.join_gap_mm + lens:
+            return False
+
+        def across(a: np.ndarray, b: np.ndarray, t: float) -> float:  # the segment's offset at t along u
+            ta, tb = float(a @ u), float(b @ u)
+            k = 0.5 if tb == ta else (t - ta) / (tb - ta)
+            return float((a + k * (b - a)) @ n)
+
+        t_meet = (max(tp[0], tq[0]) + min(tp[1], tq[1])) / 2.0  # the overlap's middle (or the gap's)
+        reach = cfg.join_offset_mm + max(self.width_mm(p.sighting.defect), self.width_mm(q.sighting.defect)) + lens \
+            + cfg.join_bend_share * max(lp, lq)
+        return abs(across(p0, p1, t_meet) - across(q0, q1, t_meet)) <= reach
+
+    def join_scratches(self, sightings: list[_Sighting]) -> tuple[list[list[_Piece]], list[_Sighting]]:
+        """Scratches longer than a frame: pieces that meet (:meth:`meet`) across frames'
+        borders, as chains to measure joined, and the sightings left to merge. A chain
+        that one frame saw whole (a whole piece as long as the chain) is left to the
+        merge as any defect seen by overlapping frames."""
+        pieces = [self.piece(sg) for sg in sightings
+                  if sg.defect.kind == "scratch" and sg.centre is not None and sg.defect.length_px > 0]
+        parent = list(range(len(pieces)))
+
+        def root(i: int) -> int:
+            while parent[i] != i:
+                parent[i] = parent[parent[i]]
+                i = parent[i]
+            return i
+
+        for i in range(len(pieces)):
+            for j in range(i):
+                if root(i) != root(j) and self.meet(pieces[i], pieces[j]):
+                    parent[root(i)] = root(j)
+        comps: dict[int, list[_Piece]] = {}
+        for i, pc in enumerate(pieces):
+            comps.setdefault(root(i), []).append(pc)
+        chains, used = [], set()
+        for comp in comps.values():
+            if len(comp) < 2:
+                continue
+            a, b, _ = self.chain_ends(comp)
+            length = float(np.hypot(*self.wall_vec(a[0], b[0])))
+            whole = max((float(np.hypot(*self.wall_vec(*pc.ends))) for pc in comp
+                         if not getattr(pc.sighting.defect, "partial", False)), default=0.0)
+            if whole >= length - max(0.05, 0.03 * length):
+                continue
+            chains.append(comp)
+            used.update(id(pc.sighting) for pc in comp)
+        return chains, [sg for sg in sightings if id(sg) not in used]
+
+    def chain_ends(self, chain: list[_Piece]):
+        """The chain's outer ends, each as (place, piece, which end), and the direction
+        they are taken along (unit, mm: arc, axial; the pieces' length-weighted mean)."""
+        o = chain[0].ends[0]
+        acc = np.zeros(2)
+        for pc in chain:  # directions as doubled angles: a piece's sense does not matter
+            v = self.wall_vec(*pc.ends)
+            ang = math.atan2(v[1], v[0])
+            acc += np.hypot(*v) * np.array([math.cos(2 * ang), math.sin(2 * ang)])
+        ang = 0.5 * math.atan2(acc[1], acc[0])
+        u = np.array([math.cos(ang), math.sin(ang)])
+        ends = [(float(self.wall_vec(o, e) @ u), pc, k) for pc in chain for k, e in enumerate(pc.ends)]
+        lo, hi = min(ends, key=lambda t: t[0]), max(ends, key=lambda t: t[0])
+        return (lo[1].ends[lo[2]], lo[1], lo[2]), (hi[1].ends[hi[2]], hi[1], hi[2]), u
+
+    def end_recentred(self, end: tuple[float, float], direction: np.ndarray):
+        """A joined scratch's end measured in a frame centred on it (no calibration: a
+        coverage frame's piece ends at its border, where the lens moves it most): the
+        scratch's end nearest ``end`` there, as (place, r_px, defect, end's px), or None."""
+        cfg, geo = self.cfg, self.geo
+        reach_mm = cfg.recentre_reach_px * geo.mm_per_px * 0.5
+        look = next((lk for lk in self.looks if self.wall_mm((lk.axial_mm, lk.angle_deg), end) <= reach_mm), None)
+        if look is None:
+            yield m.Checkpoint("surface scratch end")
+            centre = yield from self.move(*end)
+            _image, found = yield from self.frame()
+            look = _Look(centre[0], centre[1], found)
+            self.looks.append(look)
+        cx, cy = geo.centre_px
+        best = None
+        for d in look.defects:
+            if d.kind != "scratch" or d.length_px <= 0:
+                continue
+            pc = self.piece(_Sighting(d, look.axial_mm, look.angle_deg, 0.0, -1, (look.axial_mm, look.angle_deg)))
+            v = self.wall_vec(*pc.ends)
+            if abs(float(v @ direction)) / float(np.hypot(*v)) < math.cos(math.radians(cfg.join_angle_deg)):
+                continue
+            for k in (0, 1):
+                if pc.cut[k]:
+                    continue
+                dist = self.wall_mm(pc.ends[k], end)
+                r_px = math.hypot(pc.ends_px[k][0] - cx, pc.ends_px[k][1] - cy)
+                if dist <= cfg.join_gap_mm + cfg.join_lens_mm and r_px <= cfg.recentre_reach_px \
+                        and (best is None or dist < best[0]):
+                    best = (dist, pc.ends[k], r_px, d, pc.ends_px[k])
+        return None if best is None else best[1:]
+
+    def measure_joined(self, chain: list[_Piece]):
+        """One scratch from its pieces: its length between the chain's outer ends, its
+        place their middle (moved across by the pieces' mean offset from that chord: a
+        bent scratch's centroid lies off it), its width the pieces' length-weighted mean.
+        Without the lens's calibration each outer end is measured again re-centred."""
+        cfg, geo, st = self.cfg, self.geo, self.settings
+        s = geo.mm_per_px
+        (a, pa, ka), (b, pb, kb), u = self.chain_ends(chain)
+        ends = []
+        for place, pc, k in ((a, pa, ka), (b, pb, kb)):
+            d = pc.sighting.defect
+            x, y = pc.ends_px[k]
+            cx, cy = geo.centre_px
+            r_px = math.hypot(x - cx, y - cy)
+            if self.lens is None and not pc.cut[k] and r_px > cfg.recentre_reach_px:
+                again = yield from self.end_recentred(place, u)
+                if again is not None:
+                    place, r_px, d, (x, y) = again
+            size_u = float(d.size_u_mm if d.size_u_mm is not None else d.length_u_px * s)
+            ends.append((place, math.sqrt(size_u ** 2 / 2.0 + self.point_u(x, y, r_px) ** 2), pc.cut[k]))
+        (a, ua, cut_a), (b, ub, cut_b) = ends
+        chord = self.wall_vec(a, b)
+        length = float(np.hypot(*chord))
+        e = chord / max(length, 1e-9)
+        n = np.array([-e[1], e[0]])
+        # the centroid off the chord: at each point along it, the mean offset of the
+        # pieces' chords that cover it (overlapping pieces counted once per point)
+        segs = []
+        for pc in chain:
+            e0, e1 = self.wall_vec(a, pc.ends[0]), self.wall_vec(a, pc.ends[1])
+            t0, t1 = float(e0 @ e), float(e1 @ e)
+            if t1 < t0:
+                e0, e1, t0, t1 = e1, e0, t1, t0
+            segs.append((t0, t1, float(e0 @ n), float(e1 @ n)))
+        along = np.linspace(0.0, length, max(int(length / 0.05), 2))
+        offs = []
+        for t in along:
+            cover = [o0 + (o1 - o0) * ((t - t0) / (t1 - t0) if t1 > t0 else 0.5) for t0, t1, o0, o1 in segs
+                     if t0 <= t <= t1]
+            if cover:
+                offs.append(float(np.mean(cover)))
+        sag = float(np.mean(offs)) if offs else 0.0
+        place = self.off_wall(a, 0.5 * chord + sag * n)
+        weights = [float(np.hypot(*self.wall_vec(*pc.ends))) for pc in chain]
+        widths = [self.width_mm(pc.sighting.defect)
+                  * self.local_scale(pc.sighting.defect.x_px, pc.sighting.defect.y_px,
+                                     float(pc.sighting.defect.angle_deg) + 90.0, pc.sighting.defect.width_px / 2.0)
+                  for pc in chain]
+        width = float(np.average(widths, weights=weights)) if sum(weights) > 0 else float(np.mean(widths))
+        # the place: its ends' and, as for a whole scratch (:meth:`defect`), the centroid's
+        # own term, here for how far the pieces' straight chords miss the bend
+        u_centroid = cfg.centroid_u_px * s + cfg.centroid_u_share * length
+        u_pos = 2.0 * math.sqrt(u_centroid ** 2 + (ua ** 2 + ub ** 2) / 4.0) + st.evidence_bound_um * 1e-3
+        frames = len({pc.sighting.frame for pc in chain})
+        lo, hi = self.plan.band_mm
+        if any(cut and min(abs(end[0] - lo), abs(end[0] - hi)) <= cfg.overlap_mm + 0.5
+               for end, cut in ((a, cut_a), (b, cut_b))):
+            self.notes.append(f"a scratch at {place[0]:.3f} mm, {place[1]:.2f} deg runs out of the scanned band: "
+                              f"its length ({length:.3f} mm, joined over {frames} frames) is what the band shows")
+        axial = place[0] * (1.0 - st.part_scale_ppm * 1e-6)
+        zone = self.part.surface_zone(axial)
+        conf = max(float(pc.sighting.defect.confidence) for pc in chain)
+        return SurfaceDefect("", "scratch", axial, place[1], length, width, 2.0 * math.sqrt(ua ** 2 + ub ** 2),
+                             u_pos, conf, zone=None if zone is None else zone.id, frames=frames)
+
+    def point_u(self, x_px: float, y_px: float, r_px: float) -> float:
+        """Standard uncertainty (mm) of an image point placed on the part, beside its own
+        scatter: the model at the detection point, the scale over the offset, and the
+        lens: beyond the re-centring reach without a calibration its distortion (k1 r^3 /
+        f^2 of the endoscope, up to 2.7 % of the offset) as a rectangular bound; with one,
+        the calibration map's own error."""
+        geo, cfg, st = self.geo, self.cfg, self.settings
+        s = geo.mm_per_px
+        u_model = st.model_u_um * 1e-3
+        u_scale = geo.scale_u_rel * r_px * s
+        u_lens = 0.0 if r_px <= cfg.recentre_reach_px or self.lens is not None \
+            else 0.027 * (r_px * s) * (r_px / 820.0) ** 2 / math.sqrt(3)
+        u_map = 0.0
+        if self.lens is not None:
+            mu = self.lens.undistort_u_px(np.array([[x_px, y_px]], np.float64))
+            u_map = 0.0 if mu is None else float(np.max(mu)) * s
+        return math.sqrt(u_model ** 2 + u_scale ** 2 + u_lens ** 2 + u_map ** 2)
 
     @staticmethod
     def best(group: list[_Sighting]) -> _Sighting:
@@ -430,26 +693,16 @@ class _SurfaceScan:
         length = float(d.length_mm if d.length_mm is not None else d.length_px * s)
         width = float(d.width_mm if d.width_mm is not None else d.width_px * s)
         size_u = float(d.size_u_mm if d.size_u_mm is not None else d.length_u_px * s)
-        u_map = 0.0
         if self.lens is not None:
             # the lens's local scale along the length and across it (a rim defect: both
-            # ways; its angle is round its hole), and the calibration's own map error
+            # ways; its angle is round its hole)
             along = None if self.family(d.kind) == "rim" else float(d.angle_deg)
             k_len = self.local_scale(d.x_px, d.y_px, along, d.length_px / 2.0)
             k_wid = self.local_scale(d.x_px, d.y_px, None if along is None else along + 90.0, d.width_px / 2.0)
             length, width, size_u = length * k_len, width * k_wid, size_u * k_len
-            mu = self.lens.undistort_u_px(np.array([[d.x_px, d.y_px]], np.float64))
-            u_map = 0.0 if mu is None else float(np.max(mu)) * s
-        # the place: the centroid's own scatter, the model at the detection point, the
-        # scale over the offset; beyond the re-centring reach the lens's distortion
-        # (k1 r^3 / f^2 of the endoscope, up to 2.7 % of the offset) as a rectangular bound
+        # the place: the centroid's own scatter, and the point's (:meth:`point_u`)
         u_centroid = cfg.centroid_u_px * s + cfg.centroid_u_share * length
-        u_model = st.model_u_um * 1e-3
-        u_scale = geo.scale_u_rel * r_px * s
-        u_lens = 0.0 if r_px <= cfg.recentre_reach_px or self.lens is not None \
-            else 0.027 * (r_px * s) * (r_px / 820.0) ** 2 / math.sqrt(3)
-        u_pos = 2.0 * math.sqrt(u_centroid ** 2 + u_model ** 2 + u_scale ** 2 + u_lens ** 2 + u_map ** 2) \
-            + st.evidence_bound_um * 1e-3
+        u_pos = 2.0 * math.sqrt(u_centroid ** 2 + self.point_u(d.x_px, d.y_px, r_px) ** 2) + st.evidence_bound_um * 1e-3
         axial = place[0] * (1.0 - st.part_scale_ppm * 1e-6)
         hole = None
         if self.family(d.kind) == "rim":
