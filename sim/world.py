@@ -429,6 +429,25 @@ def rendered_size(part: PartTruth, d: SurfaceDefect, mm_per_px: float = 0.01) ->
     return float(t.length_mm), float(t.width_mm)
 
 
+def scratch_middle(part: PartTruth, d: SurfaceDefect, mm_per_px: float = 0.01) -> tuple[float, float]:
+    """Where the middle of a scratch's centre line lies on the part (axial mm, angle deg),
+    as the twin renders it bent: the station places a scratch there (a long one's area
+    centroid, the truth's ``axial_mm`` / ``angle_deg``, is moved along it by its width's
+    variation, ~0.05 mm on a 15 mm scratch)."""
+    from sim.camera.defects import DefectSpec, geometry
+
+    s = mm_per_px
+    spec = DefectSpec(d.kind, 0.0, 0.0, d.length_mm / s, d.width_mm / s, -d.orientation_deg, d.reflectance, None,
+                      d.seed)
+    g = geometry(spec, [])._scratch
+    i = len(g["sg"]) // 2
+    tx, ty, nx, ny = g["t"]
+    x = g["ox"] + g["sg"][i] * tx + g["bend"][i] * nx  # ideal px from the centroid: +x round, +y against the axis
+    y = g["oy"] + g["sg"][i] * ty + g["bend"][i] * ny
+    r = part.bore_diameter_mm / 2.0
+    return d.axial_mm - y * s, (d.angle_deg + math.degrees(x * s / r)) % 360.0
+
+
 def match_defects(world: "World", found) -> list[tuple[Any, dict | None]]:
     """Each defect the station reports (``axial_mm``, ``angle_deg``, ``kind``,
     ``length_mm``) with the world's defect it is (ground truth: an annotation for tests
@@ -457,4 +476,9 @@ def match_defects(world: "World", found) -> list[tuple[Any, dict | None]]:
         length, width = rendered_size(part, t)
         out[i] = {"name": t.name, "kind": t.kind, "axial_mm": round(ax, 5), "angle_deg": round(an, 5),
                   "length_mm": round(length, 5), "width_mm": round(width, 5), "place_error_mm": round(dist, 5)}
+        if t.kind == "scratch":
+            d = found[i]
+            mx, mn = scratch_middle(part, t)
+            out[i]["middle_error_mm"] = round(math.hypot(d.axial_mm - mx, math.radians((d.angle_deg - mn + 180.0) % 360.0
+                                                                                        - 180.0) * r), 5)
     return [(d, out.get(i)) for i, d in enumerate(found)]

@@ -32,9 +32,12 @@ from station.bench.defects import LIMITS_MM, SIZE_TOL_MM, SIZE_TOL_REL
 
 #: the issue's bar for a defect's place on the part (mm)
 PLACE_TOL_MM = 0.05
+#: ``--long-scratches``: their lengths (mm), mostly beyond a frame (10.24 x 12.8 mm)
+LONG_SCRATCH_MM = (3.0, 25.0)
 
 
-def random_defects(rng: np.random.Generator, part, band_mm: tuple[float, float], n_wall: int, n_rim: int):
+def random_defects(rng: np.random.Generator, part, band_mm: tuple[float, float], n_wall: int, n_rim: int,
+                   n_long: int = 0):
     """``n_wall`` pores and scratches anywhere in the band (at least 1.5 mm from any
     hole, 1 mm from each other and from the band's ends; scratches off the part's honing,
     ``PartTruth.hatch_deg``) and ``n_rim`` burrs and chips at the holes' rims (0.5 mm
@@ -50,6 +53,35 @@ def random_defects(rng: np.random.Generator, part, band_mm: tuple[float, float],
         return math.hypot(a[0] - b[0], math.radians((a[1] - b[1] + 180.0) % 360.0 - 180.0) * r)
 
     lo, hi = band_mm
+    lines: list[np.ndarray] = []  # the long scratches' chords (axial mm, angle deg), sampled
+
+    def clear_of_lines(place: tuple[float, float], reach: float) -> bool:
+        return all(min(wall(place, (float(a), float(g))) for a, g in pts) > reach for pts in lines)
+
+    for i in range(n_long):
+        # longer than a frame (10.24 x 12.8 mm) mostly: seen only in pieces
+        length = float(rng.uniform(*LONG_SCRATCH_MM))
+        width = float(rng.uniform(*RANDOM_SIZES_MM["scratch"]["width"]))
+        orientation = random_scratch_angle(rng, part.hatch_deg)
+        rise = abs(math.sin(math.radians(orientation)))
+        length = min(length, (hi - lo - 2.0) / max(rise, 1e-6))
+        t = np.linspace(-0.5, 0.5, 101) * length
+        for _ in range(200):
+            place = (float(rng.uniform(lo + 1.0 + length * rise / 2, hi - 1.0 - length * rise / 2)),
+                     float(rng.uniform(0.0, 360.0)))
+            pts = np.column_stack([place[0] + t * math.sin(math.radians(orientation)),
+                                   place[1] + np.degrees(t * math.cos(math.radians(orientation)) / r)])
+            if all(min(wall((float(a), float(g)), (h.axial_mm, h.angle_deg)) for a, g in pts) > 1.5 + h.diameter_mm / 2
+                   for h in part.holes) \
+                    and all(min(wall((float(a), float(g)), q) for a, g in pts) > 1.0 for q in places):
+                if all(min(wall((float(a), float(g)), (float(b), float(k))) for a, g in pts for b, k in other[::5]) > 1.0
+                       for other in lines):
+                    break
+        else:
+            continue
+        lines.append(pts)
+        out.append(SurfaceDefect(f"long_{i}", "scratch", length, width, axial_mm=place[0], angle_deg=place[1],
+                                 orientation_deg=orientation, seed=int(rng.integers(1 << 30))))
     for i in range(n_wall):
         kind = "pore" if rng.random() < 0.55 else "scratch"
         sz = RANDOM_SIZES_MM[kind]
@@ -61,7 +93,7 @@ def random_defects(rng: np.random.Generator, part, band_mm: tuple[float, float],
         for _ in range(200):
             place = (float(rng.uniform(lo + 1.0 + length / 2, hi - 1.0 - length / 2)), float(rng.uniform(0.0, 360.0)))
             if all(wall(place, (h.axial_mm, h.angle_deg)) > 1.5 + length / 2 for h in part.holes) \
-                    and all(wall(place, p) > 1.0 + length / 2 for p in places):
+                    and all(wall(place, p) > 1.0 + length / 2 for p in places) and clear_of_lines(place, 1.0 + length / 2):
                 break
         else:
             continue
@@ -98,7 +130,7 @@ def _within(err: float, truth: float) -> bool:
 
 
 def run(parts: int = 3, seed: int = 23000, n_wall: int = 8, n_rim: int = 2, time_scale: float = 20.0,
-        progress=None, hatch_deg: float | None = None) -> dict:
+        progress=None, hatch_deg: float | None = None, n_long: int = 0) -> dict:
     from sim.world import STANDARD_SAMPLE, PartTruth, defect_truth_place, rendered_size
     from station.parts import load_part
     from station.runtime import open_session
@@ -115,7 +147,7 @@ def run(parts: int = 3, seed: int = 23000, n_wall: int = 8, n_rim: int = 2, time
                           hatch_deg=hatch_deg)
         # each part its own casting: its own defects and its own honed wall
         truth = PartTruth(truth.part_number, truth.bore_diameter_mm, truth.holes,
-                          random_defects(rng, truth, band, n_wall, n_rim), texture_seed=seed + k + 1,
+                          random_defects(rng, truth, band, n_wall, n_rim, n_long), texture_seed=seed + k + 1,
                           hatch_deg=hatch_deg)
 
         async def one():
@@ -137,6 +169,8 @@ def run(parts: int = 3, seed: int = 23000, n_wall: int = 8, n_rim: int = 2, time
             rows.append({"part": k, "name": t.name, "kind": t.kind, "length_mm": length, "width_mm": width,
                          "above_limit": _above(t.kind, length, width), "found": d is not None,
                          "place_error_mm": None if d is None else d.truth["place_error_mm"],
+                         "middle_error_mm": None if d is None else d.truth.get("middle_error_mm"),
+                         "long": t.name.startswith("long_"),
                          "length_error_mm": None if d is None else d.length_mm - length,
                          "width_error_mm": None if d is None else d.width_mm - width,
                          "length_u_mm": None if d is None else d.size_u_mm,
@@ -164,7 +198,26 @@ def run(parts: int = 3, seed: int = 23000, n_wall: int = 8, n_rim: int = 2, time
                        "found": len(fd),
                        "lengths_within_tol": (sum(_within(r["length_error_mm"], r["length_mm"]) for r in fd) / len(fd))
                        if fd else None}
-    place = [r["place_error_mm"] for r in found]
+    place = [r["place_error_mm"] for r in found if not r["long"]]
+    longs = [r for r in rows if r["long"]]
+    long_found = [r for r in longs if r["found"]]
+    long_summary = None
+    if longs:
+        errs = [abs(r["length_error_mm"]) for r in long_found]
+        mids = [r["middle_error_mm"] for r in long_found]
+        long_summary = {
+            "seeded": len(longs), "found": len(long_found),
+            "lengths_mm": [round(min(r["length_mm"] for r in longs), 2), round(max(r["length_mm"] for r in longs), 2)],
+            "lengths_within_tol": (sum(_within(r["length_error_mm"], r["length_mm"]) for r in long_found)
+                                   / len(long_found)) if long_found else None,
+            "length_error_mm": {"median": statistics.median(errs) if errs else None, "max": max(errs) if errs else None},
+            "length_within_U": (sum(abs(r["length_error_mm"]) <= r["length_u_mm"] for r in long_found)
+                                / len(long_found)) if long_found else None,
+            "middle_error_mm": {"median": statistics.median(mids) if mids else None, "max": max(mids) if mids else None,
+                                "within_0_05": (sum(m <= PLACE_TOL_MM for m in mids) / len(mids)) if mids else None},
+            "place_within_U": (sum(r["place_error_mm"] <= r["position_u_mm"] for r in long_found)
+                               / len(long_found)) if long_found else None,
+        }
     ratios = [p["ratio"] for p in per_part if p["ratio"] is not None]
     return {
         "parts": parts, "seed": seed, "hatch_deg": hatch_deg, "band_mm": list(band), "seeded": len(rows), "found": len(found),
@@ -176,6 +229,7 @@ def run(parts: int = 3, seed: int = 23000, n_wall: int = 8, n_rim: int = 2, time
         if found else None,
         "widths_within_tol": (sum(_within(r["width_error_mm"], r["width_mm"]) for r in found) / len(found))
         if found else None,
+        "long_scratches": long_summary,
         "false_defects": sum(len(p["false"]) for p in per_part),
         "false_per_part": sum(len(p["false"]) for p in per_part) / parts,
         "kinds": kinds,
@@ -201,6 +255,9 @@ def register(bench_app: typer.Typer) -> None:
         hatch_deg: float = typer.Option(30.0, "--hatch-deg", min=1.0, max=89.0,
                                         help="the parts' honing angle (cross-hatch half-angle, deg; plateau honing "
                                              "20-35, helical slide honing 60-75)"),
+        n_long: int = typer.Option(0, "--long-scratches", min=0,
+                                   help="scratches of 3-25 mm per part besides the others: most no frame sees whole, "
+                                        "joined from their pieces (their place: the middle of the centre line)"),
         as_json: bool = typer.Option(False, "--json", help="one JSON object on stdout"),
     ) -> None:
         """Whole-surface inspections: each seeded defect's place (<= 0.05 mm), recall, sizes, cycle vs physical limit."""
@@ -212,7 +269,7 @@ def register(bench_app: typer.Typer) -> None:
 
         with Progress(console=out_console, transient=True, disable=as_json) as bar:
             task = bar.add_task("inspecting simulated parts (coverage scan)", total=parts)
-            r = run(parts, seed, n_wall, n_rim, progress=lambda: bar.advance(task), hatch_deg=hatch_deg)
+            r = run(parts, seed, n_wall, n_rim, progress=lambda: bar.advance(task), hatch_deg=hatch_deg, n_long=n_long)
         if as_json:
             print_json(r)
             return
@@ -232,3 +289,12 @@ def register(bench_app: typer.Typer) -> None:
             f"{fmt_cell(r['lengths_within_tol'])}, widths {fmt_cell(r['widths_within_tol'])}; "
             f"false defects {r['false_defects']} ({r['false_per_part']:.2f} per part); coverage scan "
             f"{fmt_cell(r['cycle']['median_ratio'], 2)} x its physical limit (median)")
+        ls = r["long_scratches"]
+        if ls:
+            out_console.print(
+                f"long scratches ({ls['lengths_mm'][0]:g}-{ls['lengths_mm'][1]:g} mm): found {ls['found']} of "
+                f"{ls['seeded']}; lengths within 10 % or 0.02 mm {fmt_cell(ls['lengths_within_tol'])} (error median "
+                f"{fmt_cell(ls['length_error_mm']['median'], 4)}, max {fmt_cell(ls['length_error_mm']['max'], 4)} mm; "
+                f"within U {fmt_cell(ls['length_within_U'])}); the centre line's middle within {PLACE_TOL_MM} mm "
+                f"{fmt_cell(ls['middle_error_mm']['within_0_05'])} (median {fmt_cell(ls['middle_error_mm']['median'], 4)}, "
+                f"max {fmt_cell(ls['middle_error_mm']['max'], 4)} mm); place within U {fmt_cell(ls['place_within_U'])}")

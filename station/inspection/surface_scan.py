@@ -46,6 +46,7 @@ from station.kinematics.model import StationModel
 from station.motion import AxisLimits
 from station.parts.spec import PartSpec, SURFACE_RIM_KINDS
 from station.sequencer import messages as m
+from station.vision.defects import DefectConfig
 
 
 @dataclass(frozen=True)
@@ -151,6 +152,27 @@ class _Piece:
     ends: tuple[tuple[float, float], tuple[float, float]]
     ends_px: tuple[tuple[float, float], tuple[float, float]]
     cut: tuple[bool, bool]
+
+
+@dataclass
+class _CentreLine:
+    """A joined scratch's centre line: its offset across its chord (mm) as a polynomial in
+    x = 2 t / length - 1 over the chord's 0 <= t <= length."""
+
+    length_mm: float
+    coef: np.ndarray
+
+    def basis(self, t: float) -> np.ndarray:
+        x = 2.0 * t / max(self.length_mm, 1e-9) - 1.0
+        return x ** np.arange(self.coef.size)
+
+    def offset(self, t: float) -> float:
+        return float(self.basis(t) @ self.coef)
+
+    def length(self) -> float:
+        t = np.linspace(0.0, self.length_mm, max(int(self.length_mm / 0.02), 8) + 1)
+        off = np.array([self.offset(x) for x in t])
+        return float(np.hypot(np.diff(t), np.diff(off)).sum())
 
 
 @dataclass
@@ -507,14 +529,7 @@ class _SurfaceScan:
         coverage frame's piece ends at its border, where the lens moves it most): the
         scratch's end nearest ``end`` there, as (place, r_px, defect, end's px), or None."""
         cfg, geo = self.cfg, self.geo
-        reach_mm = cfg.recentre_reach_px * geo.mm_per_px * 0.5
-        look = next((lk for lk in self.looks if self.wall_mm((lk.axial_mm, lk.angle_deg), end) <= reach_mm), None)
-        if look is None:
-            yield m.Checkpoint("surface scratch end")
-            centre = yield from self.move(*end)
-            _image, found = yield from self.frame()
-            look = _Look(centre[0], centre[1], found)
-            self.looks.append(look)
+        look = yield from self.recentred_look(end, "surface scratch end")
         cx, cy = geo.centre_px
         best = None
         for d in look.defects:
@@ -534,11 +549,49 @@ class _SurfaceScan:
                     best = (dist, pc.ends[k], r_px, d, pc.ends_px[k])
         return None if best is None else best[1:]
 
+    def recentred_look(self, place: tuple[float, float], why: str):
+        """A frame centred on ``place`` (one taken within the re-centring reach serves)."""
+        reach_mm = self.cfg.recentre_reach_px * self.geo.mm_per_px * 0.5
+        look = next((lk for lk in self.looks if self.wall_mm((lk.axial_mm, lk.angle_deg), place) <= reach_mm), None)
+        if look is None:
+            yield m.Checkpoint(why)
+            centre = yield from self.move(*place)
+            _image, found = yield from self.frame()
+            look = _Look(centre[0], centre[1], found)
+            self.looks.append(look)
+        return look
+
+    def middle_recentred(self, middle: tuple[float, float], direction: np.ndarray):
+        """A joined scratch's middle read in a frame centred on it: the furrow's offset
+        across ``direction`` at ``middle``, from the piece of it that passes there (its
+        reported point lies on its bent centre line, near the frame's centre), or None."""
+        cfg, geo = self.cfg, self.geo
+        look = yield from self.recentred_look(middle, "surface scratch middle")
+        cx, cy = geo.centre_px
+        n = np.array([-direction[1], direction[0]])
+        best = None
+        for d in look.defects:
+            if d.kind != "scratch" or d.length_px <= 0 or math.hypot(d.x_px - cx, d.y_px - cy) > cfg.recentre_reach_px:
+                continue
+            pc = self.piece(_Sighting(d, look.axial_mm, look.angle_deg, 0.0, -1, (look.axial_mm, look.angle_deg)))
+            v = self.wall_vec(*pc.ends)
+            along = float(v @ direction)
+            if abs(along) / float(np.hypot(*v)) < math.cos(math.radians(cfg.join_angle_deg)):
+                continue
+            p = self.wall_vec(middle, self.place((look.axial_mm, look.angle_deg), d.x_px, d.y_px))
+            at_middle = p - v * (float(p @ direction) / along)  # along the piece to the middle's place
+            off = float(at_middle @ n)
+            if abs(off) <= cfg.join_offset_mm + self.width_mm(d) + cfg.join_lens_mm and \
+                    (best is None or abs(off) < abs(best)):
+                best = off
+        return None if best is None else self.off_wall(middle, best * n)
+
     def measure_joined(self, chain: list[_Piece]):
-        """One scratch from its pieces: its length between the chain's outer ends, its
-        place their middle (moved across by the pieces' mean offset from that chord: a
-        bent scratch's centroid lies off it), its width the pieces' length-weighted mean.
-        Without the lens's calibration each outer end is measured again re-centred."""
+        """One scratch from its pieces: its centre line (:meth:`centre_line`) between the
+        chain's outer ends, its length along that line, its place the line's middle (as
+        the detector places a whole scratch), its width the pieces' length-weighted mean.
+        Without the lens's calibration each outer end and the middle are read again
+        re-centred."""
         cfg, geo, st = self.cfg, self.geo, self.settings
         s = geo.mm_per_px
         (a, pa, ka), (b, pb, kb), u = self.chain_ends(chain)
@@ -552,31 +605,25 @@ class _SurfaceScan:
                 again = yield from self.end_recentred(place, u)
                 if again is not None:
                     place, r_px, d, (x, y) = again
-            size_u = float(d.size_u_mm if d.size_u_mm is not None else d.length_u_px * s)
-            ends.append((place, math.sqrt(size_u ** 2 / 2.0 + self.point_u(x, y, r_px) ** 2), pc.cut[k]))
+            # the end's own share of the piece's length u: the detector's u less its term
+            # for a whole scratch's bend and fading (a share of its length), halved
+            share = DefectConfig.scratch_length_u_share * d.length_px
+            u_end_px = math.sqrt(max(d.length_u_px ** 2 - share ** 2, 0.0) / 2.0)
+            ends.append((place, math.hypot(u_end_px * s, self.point_u(x, y, r_px)), pc.cut[k]))
         (a, ua, cut_a), (b, ub, cut_b) = ends
         chord = self.wall_vec(a, b)
         length = float(np.hypot(*chord))
         e = chord / max(length, 1e-9)
         n = np.array([-e[1], e[0]])
-        # the centroid off the chord: at each point along it, the mean offset of the
-        # pieces' chords that cover it (overlapping pieces counted once per point)
-        segs = []
-        for pc in chain:
-            e0, e1 = self.wall_vec(a, pc.ends[0]), self.wall_vec(a, pc.ends[1])
-            t0, t1 = float(e0 @ e), float(e1 @ e)
-            if t1 < t0:
-                e0, e1, t0, t1 = e1, e0, t1, t0
-            segs.append((t0, t1, float(e0 @ n), float(e1 @ n)))
-        along = np.linspace(0.0, length, max(int(length / 0.05), 2))
-        offs = []
-        for t in along:
-            cover = [o0 + (o1 - o0) * ((t - t0) / (t1 - t0) if t1 > t0 else 0.5) for t0, t1, o0, o1 in segs
-                     if t0 <= t <= t1]
-            if cover:
-                offs.append(float(np.mean(cover)))
-        sag = float(np.mean(offs)) if offs else 0.0
-        place = self.off_wall(a, 0.5 * chord + sag * n)
+        line = self.centre_line(chain, a, e, length)
+        traced = line.length()
+        place = self.off_wall(a, (0.5 * length) * e + line.offset(0.5 * length) * n)
+        if self.lens is None:
+            # the pieces' chords carry the lens's distortion across the furrow (up to
+            # ~0.1 mm off a frame's centre): its middle is read again re-centred
+            again = yield from self.middle_recentred(place, e)
+            if again is not None:
+                place = again
         weights = [float(np.hypot(*self.wall_vec(*pc.ends))) for pc in chain]
         widths = [self.width_mm(pc.sighting.defect)
                   * self.local_scale(pc.sighting.defect.x_px, pc.sighting.defect.y_px,
@@ -592,12 +639,49 @@ class _SurfaceScan:
         if any(cut and min(abs(end[0] - lo), abs(end[0] - hi)) <= cfg.overlap_mm + 0.5
                for end, cut in ((a, cut_a), (b, cut_b))):
             self.notes.append(f"a scratch at {place[0]:.3f} mm, {place[1]:.2f} deg runs out of the scanned band: "
-                              f"its length ({length:.3f} mm, joined over {frames} frames) is what the band shows")
+                              f"its length ({traced:.3f} mm, joined over {frames} frames) is what the band shows")
         axial = place[0] * (1.0 - st.part_scale_ppm * 1e-6)
         zone = self.part.surface_zone(axial)
         conf = max(float(pc.sighting.defect.confidence) for pc in chain)
-        return SurfaceDefect("", "scratch", axial, place[1], length, width, 2.0 * math.sqrt(ua ** 2 + ub ** 2),
+        # the length's U: its ends', and half what the bend adds to the chord (the pieces'
+        # chords trace the bend only between them)
+        size_u = math.sqrt(ua ** 2 + ub ** 2 + (0.5 * (traced - length)) ** 2)
+        return SurfaceDefect("", "scratch", axial, place[1], traced, width, 2.0 * size_u,
                              u_pos, conf, zone=None if zone is None else zone.id, frames=frames)
+
+    def centre_line(self, chain: list[_Piece], a: tuple[float, float], e: np.ndarray, length: float) -> "_CentreLine":
+        """The scratch's centre line as its offset across the chord ``a`` + t ``e`` (0 <= t
+        <= ``length``): a polynomial (cubic from three pieces, else quadratic) fitted by
+        least squares to what each piece fixes: its reported middle (a point on its bent
+        centre line) and its chord's direction (the line's mean slope over the piece). Not
+        its ends: a piece's end is its middle +/- half its length along its chord, off the
+        line across by the piece's own bend (up to ~0.15 mm on a 10 mm piece); along the
+        chord they are right, and give the line's extent."""
+        n = np.array([-e[1], e[0]])
+        rows, rhs = [], []
+        deg = 3 if len(chain) >= 3 else 2
+        line = _CentreLine(length, np.zeros(deg + 1))
+
+        def add(row: np.ndarray, value: float, sd: float) -> None:
+            rows.append(row / sd)
+            rhs.append(value / sd)
+
+        s = self.geo.mm_per_px
+        for pc in chain:
+            d = pc.sighting.defect
+            mid = self.wall_vec(a, (pc.sighting.axial_mm, pc.sighting.angle_deg))
+            v = self.wall_vec(*pc.ends)
+            if float(v @ e) < 0.0:
+                v = -v
+            h = 0.5 * float(v @ e)
+            t = float(mid @ e)
+            add(line.basis(t), float(mid @ n), 0.01 + 0.5 * self.width_mm(d) / max(d.length_px * s, 1e-6))
+            if h > 0.05:
+                add((line.basis(t + h) - line.basis(t - h)) / (2.0 * h), float(v @ n) / float(v @ e), 0.001 + 0.02 / h)
+        a_rows = np.asarray(rows)
+        deg = min(deg, a_rows.shape[0] - 1)  # no more terms than what fixes them
+        coef, *_ = np.linalg.lstsq(a_rows[:, :deg + 1], np.asarray(rhs), rcond=None)
+        return _CentreLine(length, coef)
 
     def point_u(self, x_px: float, y_px: float, r_px: float) -> float:
         """Standard uncertainty (mm) of an image point placed on the part, beside its own
@@ -659,14 +743,7 @@ class _SurfaceScan:
                     by_frame.setdefault(sg.frame, []).append(sg)
                 chosen = min(by_frame.values(), key=lambda v: (-len(v), min(sg.r_px for sg in v)))
                 return [self.defect(sg.defect, (sg.axial_mm, sg.angle_deg), sg.r_px, frames) for sg in chosen]
-        reach_mm = cfg.recentre_reach_px * geo.mm_per_px * 0.5
-        look = next((lk for lk in self.looks if self.wall_mm((lk.axial_mm, lk.angle_deg), want) <= reach_mm), None)
-        if look is None:
-            yield m.Checkpoint("surface defect")
-            centre = yield from self.move(*want)
-            _image, found = yield from self.frame()
-            look = _Look(centre[0], centre[1], found)
-            self.looks.append(look)
+        look = yield from self.recentred_look(want, "surface defect")
         fam = self.family(best.defect.kind)
         cx, cy = geo.centre_px
         out = []

@@ -214,3 +214,173 @@ def cv_blur(a):
     import cv2
 
     return cv2.GaussianBlur(a, (0, 0), 1.5)
+
+
+# ---------------------------------------------------------------- scratches longer than a frame
+def _scan(calibrated: bool = True):
+    """A coverage scan of SPEC's band, as the station holds it; ``calibrated``: with a lens
+    calibration of no distortion (a piece's place is then its pixel's, exactly)."""
+    from station.inspection.surface_scan import _SurfaceScan
+    from station.vision.calibration import CameraCalibration
+
+    geo = GEO
+    if calibrated:
+        cx, cy = GEO.centre_px
+        lens = CameraCalibration(np.array([[1000.0, 0, cx], [0, 1000.0, cy], [0, 0, 1]]), np.zeros(4),
+                                 (GEO.width_px, GEO.height_px), 0.0, GEO.mm_per_px)
+        geo = CameraGeometry(GEO.mm_per_px, GEO.width_px, GEO.height_px, GEO.bore_radius_mm, calibration=lens)
+    return _SurfaceScan(load_ideal_model(), spec(), geo, ScanSettings(), SurfaceSettings(), None, [])
+
+
+def _bent_line(start_mm: tuple[float, float], orientation_deg: float, length_mm: float, bends=(0.012, -0.01)):
+    """A scratch's centre line on the unrolled wall (arc mm from angle 0, axial mm), 0.01 mm
+    apart: straight from ``start_mm`` along ``orientation_deg`` (from circumferential towards
+    +axial), bent across in two sine modes of the given shares of its length."""
+    t = np.arange(0.0, length_mm + 1e-9, 0.01)
+    s = t / length_mm
+    bend = length_mm * (bends[0] * np.sin(np.pi * s) + bends[1] * np.sin(2 * np.pi * s))
+    a = math.radians(orientation_deg)
+    return np.column_stack([start_mm[0] + t * math.cos(a) - bend * math.sin(a),
+                            start_mm[1] + t * math.sin(a) + bend * math.cos(a)])
+
+
+def _seen(line: np.ndarray, centre: tuple[float, float], width_mm: float = 0.04, cut_short_px: float = 20.0):
+    """What a frame centred at ``centre`` (axial mm, angle deg) reports of a scratch along
+    ``line``: each run of it inside the frame as one straight piece (its centre line's
+    middle, its chord's direction, its arc length), ``partial`` where the border cuts it, a cut end
+    read ``cut_short_px`` short of the border (the detector reads an end from a strip
+    across the furrow, which the border cuts)."""
+    from station.vision.defects import Defect
+
+    s, r = GEO.mm_per_px, GEO.bore_radius_mm
+    cx, cy = GEO.centre_px
+    u0 = math.radians(centre[1]) * r
+    circ = 2 * math.pi * r
+    du = (line[:, 0] - u0 + circ / 2) % circ - circ / 2
+    x, y = cx + du / s, cy - (line[:, 1] - centre[0]) / s
+    inside = (x >= 0) & (x <= GEO.width_px - 1) & (y >= 0) & (y <= GEO.height_px - 1)
+    out = []
+    idx = np.flatnonzero(inside)
+    if idx.size == 0:
+        return out
+    for run in np.split(idx, np.flatnonzero(np.diff(idx) > 1) + 1):
+        cut_lo, cut_hi = run[0] > 0, run[-1] < len(line) - 1
+        step = np.hypot(np.diff(x[run]), np.diff(y[run]))
+        arc = np.concatenate([[0.0], np.cumsum(step)])
+        keep = (arc >= (cut_short_px if cut_lo else 0.0)) & (arc <= arc[-1] - (cut_short_px if cut_hi else 0.0))
+        if keep.sum() < 10:
+            continue
+        xs, ys = x[run][keep], y[run][keep]
+        length = float(np.hypot(np.diff(xs), np.diff(ys)).sum())
+        mid = int(np.searchsorted(arc[keep] - arc[keep][0], length / 2.0))  # its middle, on the bent line
+        ang = math.degrees(math.atan2(ys[-1] - ys[0], xs[-1] - xs[0])) % 180.0
+        u_len = math.hypot(1.5 * 0.5, 1.0, 0.03 * length)  # the detector's: its fit, its model, a share
+        out.append(Defect("scratch", float(xs[mid]), float(ys[mid]), length, width_mm / s, 0.9, ang, u_len, 0.3,
+                          20.0, bool(cut_lo or cut_hi), None, length * s, width_mm, length * s, u_len * s, 0.003))
+    return out
+
+
+def _sightings(scan, lines):
+    from station.inspection.surface_scan import _Sighting
+
+    cx, cy = GEO.centre_px
+    out = []
+    k = 0
+    for axial in scan.plan.axials_mm:
+        for angle in scan.plan.angles_deg:
+            for line in lines:
+                for d in _seen(line, (axial, angle)):
+                    ax, an = scan.place((axial, angle), d.x_px, d.y_px)
+                    out.append(_Sighting(d, ax, an, math.hypot(d.x_px - cx, d.y_px - cy), k, (axial, angle)))
+            k += 1
+    return out
+
+
+def _run(gen):
+    try:
+        while True:
+            msg = next(gen)
+            raise AssertionError(f"a calibrated join asked the station for {msg}")
+    except StopIteration as stop:
+        return stop.value
+
+
+def _truth(line: np.ndarray, r: float) -> tuple[float, float, float]:
+    """The line's arc length (mm) and middle (axial mm, angle deg): where the station
+    places a scratch."""
+    arc = float(np.hypot(*np.diff(line, axis=0).T).sum())
+    u, v = line[len(line) // 2]
+    return arc, float(v), math.degrees(u / r) % 360.0
+
+
+@pytest.mark.parametrize("start, orientation, length", [
+    ((math.radians(195.0) * 11.1, 72.0), 5.0, 20.0),    # round the bore across three columns' seams
+    ((math.radians(100.0) * 11.1, 68.5), 80.0, 15.0),   # along it across two rings' seams
+    ((math.radians(340.0) * 11.1, 64.0), 40.0, 14.0),   # across a corner where four frames meet, and 0 deg
+], ids=["round", "along", "diagonal"])
+def test_a_scratch_longer_than_a_frame_is_joined_from_its_pieces(start, orientation, length):
+    """A bent scratch that no frame sees whole: its pieces, each a straight chord of what
+    one frame shows with its cut ends read short, are joined into one scratch whose
+    length and place are the line's (the chords miss the bend by a few hundredths)."""
+    scan = _scan()
+    line = _bent_line(start, orientation, length)
+    sightings = _sightings(scan, [line])
+    assert len({sg.frame for sg in sightings}) >= 3 and all(sg.defect.length_mm < 13.0 for sg in sightings)
+    chains, rest = scan.join_scratches(sightings)
+    assert len(chains) == 1 and rest == [], (len(chains), len(rest))
+    assert len(chains[0]) == len(sightings)
+    d = _run(scan.measure_joined(chains[0]))
+    arc, axial, angle = _truth(line, GEO.bore_radius_mm)
+    assert d.kind == "scratch" and d.frames == len({sg.frame for sg in sightings})
+    assert abs(d.length_mm - arc) <= max(0.005 * arc, 0.03), (d.length_mm, arc)
+    assert abs(d.width_mm - 0.04) <= 0.002
+    err = math.hypot(d.axial_mm - axial, math.radians((d.angle_deg - angle + 180) % 360 - 180) * GEO.bore_radius_mm)
+    assert err <= 0.05 and err <= d.position_u_mm, (err, d.position_u_mm)
+    assert abs(d.length_mm - arc) <= d.size_u_mm
+    assert not scan.notes
+
+
+def test_pieces_of_other_scratches_are_not_joined():
+    """Two parallel scratches 0.5 mm apart and one crossing them, all across the same
+    seams: three scratches, each from its own pieces."""
+    scan = _scan()
+    r = GEO.bore_radius_mm
+    a = _bent_line((math.radians(195.0) * r, 72.0), 5.0, 20.0, bends=(0.0, 0.0))
+    b = _bent_line((math.radians(195.0) * r, 72.5), 5.0, 20.0, bends=(0.0, 0.0))
+    c = _bent_line((math.radians(209.0) * r, 66.0), 85.0, 12.0)
+    sightings = _sightings(scan, [a, b, c])
+    chains, rest = scan.join_scratches(sightings)
+    assert len(chains) == 3 and rest == []
+    lengths = sorted(_run(scan.measure_joined(ch)).length_mm for ch in chains)
+    truths = sorted(_truth(x, r)[0] for x in (a, b, c))
+    assert np.allclose(lengths, truths, atol=0.05), (lengths, truths)
+
+
+def test_a_scratch_one_frame_saw_whole_is_left_to_the_merge():
+    """A scratch across a seam that the neighbouring frame sees whole (the frames overlap
+    by 0.6 mm) is not joined: the merge takes the whole sighting, as for a pore."""
+    scan = _scan()
+    plan = scan.plan
+    fh = GEO.height_px * GEO.mm_per_px
+    top_of_first = plan.axials_mm[0] + fh / 2.0  # the first ring's frames end here
+    u = math.radians(plan.angles_deg[1]) * GEO.bore_radius_mm
+    line = _bent_line((u, top_of_first - 1.0), 80.0, 1.3)  # runs past the first ring's edge, inside the second's
+    assert line[-1, 1] > top_of_first and line[0, 1] > plan.axials_mm[1] - fh / 2.0 + 0.1
+    sightings = _sightings(scan, [line])
+    assert {sg.defect.partial for sg in sightings} == {False, True}
+    chains, rest = scan.join_scratches(sightings)
+    assert chains == [] and len(rest) == len(sightings)
+
+
+def test_a_scratch_running_out_of_the_band_is_measured_as_far_as_the_band_shows_and_says_so():
+    scan = _scan()
+    lo, hi = scan.plan.band_mm
+    r = GEO.bore_radius_mm
+    line = _bent_line((math.radians(40.0) * r, hi - 14.0), 75.0, 20.0)
+    sightings = _sightings(scan, [line])
+    chains, _rest = scan.join_scratches(sightings)
+    assert len(chains) == 1
+    d = _run(scan.measure_joined(chains[0]))
+    inside = line[line[:, 1] <= hi]
+    assert abs(d.length_mm - _truth(inside, r)[0]) <= 0.3
+    assert any("runs out of the scanned band" in n for n in scan.notes), scan.notes
