@@ -8,7 +8,7 @@ The plan (after the holes, so burrs and chips are put at the holes the scan foun
    frame and on into the next ring while Z steps (a helix of stops: C never reverses, so
    its backlash is taken up once). Neighbouring frames overlap by ``overlap_mm`` (more
    than the largest pore), so every pore is whole in some frame; a scratch longer than
-   that may be cut by the frames' edges and is joined across them.
+   a frame is cut by the frames' edges and is joined across them (3.).
 2. **Each frame's defects** (``MeasureSurface``: ``station.vision.defects``), analysed
    while the axes move to the next frame, are placed on the part as the holes are
    (``scan.py``): where compensation put the detection point, moved by what the grating
@@ -22,7 +22,11 @@ The plan (after the holes, so burrs and chips are put at the holes the scan foun
    without a calibration, every defect, is measured again in a frame centred on it
    (compensated as any move), where the distortion is below a few um
    (``recentre_reach_px``). Defects near each other share a re-centred frame, and
-   defects too close to merge apart are told apart in the frame that measures them.
+   defects too close to merge apart are told apart in the frame that measures them. A
+   scratch that no frame sees whole is joined from its pieces first
+   (:meth:`_SurfaceScan.join_scratches`): its centre line fitted to the pieces' middles
+   and directions, its length along that line, its place the line's middle; without a
+   calibration its ends and middle are read again re-centred.
 4. **The picture.** Each frame, flat-fielded (its own smooth level divided out, so the
    vignetting and the light's blotches do not tile) and reduced to ``picture_mm_per_px``,
    fills the cell of the unrolled wall nearest its centre (``station.inspection.surface``
@@ -64,19 +68,21 @@ class SurfaceSettings:
     #: longer's length of each other (the distortion moves a corner's sighting ~0.2 mm)
     merge_mm: float = 0.35
     #: pieces of one scratch longer than a frame, each cut by a frame's border, are
-    #: joined when they meet: overlapping along the furrow or apart by at most
-    #: ``join_gap_mm``, their directions within ``join_angle_deg`` and their lines where
-    #: they meet within ``join_offset_mm`` plus the wider's width plus ``join_bend_share``
-    #: of the longer piece. A piece is measured as one straight chord, and a scratch bends
-    #: (the renderer's two modes of 1.2 % of its length each): a 12 mm piece's chord
-    #: strays from the furrow by up to ~0.3 mm and turns by up to ~6 deg from its
-    #: neighbour's. Without the lens's calibration a piece's end at a frame's border is
-    #: off by up to ``join_lens_mm`` (2.7 % of the offset at a corner), which the gap and
-    #: the offset allow as well.
+    #: joined when they overlap along the furrow or are apart by at most
+    #: ``join_gap_mm``, their directions agree within ``join_angle_deg``, and each one's
+    #: middle lies where the other's middle and the two chords' mean slope put it, within
+    #: ``join_offset_mm`` plus the wider's width plus ``join_bend_share`` of the distance
+    #: between the middles (:meth:`_SurfaceScan.misfit`). A scratch bends: the renderer's
+    #: two modes of 1.2 % RMS of its length each left a misfit of 0.55 mm between two
+    #: pieces 10 mm apart on a strongly bent 24 mm scratch, their chords ~8 deg apart
+    #: (dev seeds 23700-23704). Pieces that follow each other are joined only as each
+    #: other's best fit on the side they meet (:meth:`join_scratches`). Without the lens's calibration a piece's place
+    #: off a frame's centre is off by up to ``join_lens_mm`` (2.7 % of the offset at a
+    #: corner), which the gap and the offset allow as well.
     join_gap_mm: float = 0.35
     join_offset_mm: float = 0.06
-    join_angle_deg: float = 10.0
-    join_bend_share: float = 0.03
+    join_angle_deg: float = 25.0
+    join_bend_share: float = 0.06
     join_lens_mm: float = 0.2
     #: a cut scratch's end this near (px) a frame's border was cut there: the detector
     #: reads a furrow's end from a strip across it, which the border cuts short
@@ -436,42 +442,49 @@ class _SurfaceScan:
     def width_mm(self, d) -> float:
         return float(d.width_mm if d.width_mm is not None else d.width_px * self.geo.mm_per_px)
 
-    def meet(self, p: _Piece, q: _Piece) -> bool:
-        """Whether two pieces from different frames, one of them cut by its frame's
-        border, are one furrow: along one direction, overlapping or nearly touching, and
-        on one line where they meet."""
+    def misfit(self, p: _Piece, q: _Piece) -> tuple[float, float, float, float, float] | None:
+        """How far two pieces are from being one bent furrow and how far they may be (mm),
+        the share of the shorter that the two overlap along the furrow, and on which side
+        of each (+1: along its chord's sense, -1: against) the other's middle lies; None
+        when they cannot be one (one frame, neither cut, crossing, or apart along their
+        direction by more than ``join_gap_mm``).
+
+        A piece fixes its centre line's middle (a point on the bent line) and its chord's
+        direction (the line's mean slope over the piece), not its ends across the line
+        (they are off it by the piece's own bend). Along a smooth line the offset across
+        between two middles is the distance along times the mean of the two slopes
+        (exact for a parabola): the misfit is what the second middle lies off that, and a
+        bend that is no parabola over the stretch adds ``join_bend_share`` of it."""
         if p.sighting.frame == q.sighting.frame:
-            return False
+            return None
         if not (getattr(p.sighting.defect, "partial", False) or getattr(q.sighting.defect, "partial", False)):
-            return False
+            return None
         cfg = self.cfg
         lens = 0.0 if self.lens is not None else cfg.join_lens_mm
-        o = p.ends[0]
-        p0, p1 = (self.wall_vec(o, e) for e in p.ends)
-        q0, q1 = (self.wall_vec(o, e) for e in q.ends)
-        lp, lq = float(np.hypot(*(p1 - p0))), float(np.hypot(*(q1 - q0)))
+        o = (p.sighting.axial_mm, p.sighting.angle_deg)
+        vp, vq = self.wall_vec(*p.ends), self.wall_vec(*q.ends)
+        lp, lq = float(np.hypot(*vp)), float(np.hypot(*vq))
         if lp <= 0.0 or lq <= 0.0:
-            return False
-        up, uq = (p1 - p0) / lp, (q1 - q0) / lq
+            return None
+        up, uq = vp / lp, vq / lq
         cos_turn = float(up @ uq)
         if math.degrees(math.acos(min(1.0, abs(cos_turn)))) > cfg.join_angle_deg:
-            return False
+            return None
         u = up + (uq if cos_turn >= 0.0 else -uq)
         u /= np.hypot(*u)
         n = np.array([-u[1], u[0]])
-        tp, tq = sorted((float(p0 @ u), float(p1 @ u))), sorted((float(q0 @ u), float(q1 @ u)))
+        tp = sorted(float(self.wall_vec(o, e) @ u) for e in p.ends)
+        tq = sorted(float(self.wall_vec(o, e) @ u) for e in q.ends)
         if max(tq[0] - tp[1], tp[0] - tq[1]) > cfg.join_gap_mm + lens:
-            return False
-
-        def across(a: np.ndarray, b: np.ndarray, t: float) -> float:  # the segment's offset at t along u
-            ta, tb = float(a @ u), float(b @ u)
-            k = 0.5 if tb == ta else (t - ta) / (tb - ta)
-            return float((a + k * (b - a)) @ n)
-
-        t_meet = (max(tp[0], tq[0]) + min(tp[1], tq[1])) / 2.0  # the overlap's middle (or the gap's)
+            return None
+        mq = self.wall_vec(o, (q.sighting.axial_mm, q.sighting.angle_deg))
+        dt = float(mq @ u)
+        slope_p, slope_q = float(vp @ n) / float(vp @ u), float(vq @ n) / float(vq @ u)
+        misfit = float(mq @ n) - dt * 0.5 * (slope_p + slope_q)
         reach = cfg.join_offset_mm + max(self.width_mm(p.sighting.defect), self.width_mm(q.sighting.defect)) + lens \
-            + cfg.join_bend_share * max(lp, lq)
-        return abs(across(p0, p1, t_meet) - across(q0, q1, t_meet)) <= reach
+            + cfg.join_bend_share * abs(dt)
+        overlap = (min(tp[1], tq[1]) - max(tp[0], tq[0])) / max(min(lp, lq), 1e-9)
+        return misfit, reach, overlap, float(np.sign(dt * float(up @ u))), float(np.sign(-dt * float(uq @ u)))
 
     def join_scratches(self, sightings: list[_Sighting]) -> tuple[list[list[_Piece]], list[_Sighting]]:
         """Scratches longer than a frame: pieces that meet (:meth:`meet`) across frames'
@@ -488,10 +501,29 @@ class _SurfaceScan:
                 i = parent[i]
             return i
 
+        # a piece and another frame's view of the same stretch (overlapping by half the
+        # shorter) are one; pieces that follow each other are joined only as each other's
+        # best fit on the side they meet, so two parallel scratches a bend's allowance
+        # apart, both cut by one border, are joined each to its own continuation
+        best: dict[tuple[int, float], tuple[float, int]] = {}
+        follow = []
         for i in range(len(pieces)):
             for j in range(i):
-                if root(i) != root(j) and self.meet(pieces[i], pieces[j]):
+                r = self.misfit(pieces[i], pieces[j])
+                if r is None or abs(r[0]) > r[1]:
+                    continue
+                misfit, reach, overlap, side_i, side_j = r
+                if overlap >= 0.5:
                     parent[root(i)] = root(j)
+                    continue
+                score = abs(misfit) / reach
+                for key, other in (((i, side_i), j), ((j, side_j), i)):
+                    if key not in best or score < best[key][0]:
+                        best[key] = (score, other)
+                follow.append((i, j, side_i, side_j))
+        for i, j, side_i, side_j in follow:
+            if best[(i, side_i)][1] == j and best[(j, side_j)][1] == i:
+                parent[root(i)] = root(j)
         comps: dict[int, list[_Piece]] = {}
         for i, pc in enumerate(pieces):
             comps.setdefault(root(i), []).append(pc)

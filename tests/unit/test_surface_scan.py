@@ -313,17 +313,18 @@ def _truth(line: np.ndarray, r: float) -> tuple[float, float, float]:
     return arc, float(v), math.degrees(u / r) % 360.0
 
 
-@pytest.mark.parametrize("start, orientation, length", [
-    ((math.radians(195.0) * 11.1, 72.0), 5.0, 20.0),    # round the bore across three columns' seams
-    ((math.radians(100.0) * 11.1, 68.5), 80.0, 15.0),   # along it across two rings' seams
-    ((math.radians(340.0) * 11.1, 64.0), 40.0, 14.0),   # across a corner where four frames meet, and 0 deg
-], ids=["round", "along", "diagonal"])
-def test_a_scratch_longer_than_a_frame_is_joined_from_its_pieces(start, orientation, length):
+@pytest.mark.parametrize("start, orientation, length, bends", [
+    ((math.radians(195.0) * 11.1, 72.0), 5.0, 20.0, (0.012, -0.01)),   # round the bore across three columns' seams
+    ((math.radians(100.0) * 11.1, 68.5), 80.0, 15.0, (0.012, -0.01)),  # along it across two rings' seams
+    ((math.radians(340.0) * 11.1, 64.0), 40.0, 14.0, (0.012, -0.01)),  # across a corner of four frames, and 0 deg
+    ((math.radians(150.0) * 11.1, 62.5), 65.0, 24.0, (0.03, 0.03)),    # bent hard (2.5 sigma of the twin's modes)
+], ids=["round", "along", "diagonal", "bent"])
+def test_a_scratch_longer_than_a_frame_is_joined_from_its_pieces(start, orientation, length, bends):
     """A bent scratch that no frame sees whole: its pieces, each a straight chord of what
     one frame shows with its cut ends read short, are joined into one scratch whose
     length and place are the line's (the chords miss the bend by a few hundredths)."""
     scan = _scan()
-    line = _bent_line(start, orientation, length)
+    line = _bent_line(start, orientation, length, bends)
     sightings = _sightings(scan, [line])
     assert len({sg.frame for sg in sightings}) >= 3 and all(sg.defect.length_mm < 13.0 for sg in sightings)
     chains, rest = scan.join_scratches(sightings)
@@ -341,12 +342,13 @@ def test_a_scratch_longer_than_a_frame_is_joined_from_its_pieces(start, orientat
 
 
 def test_pieces_of_other_scratches_are_not_joined():
-    """Two parallel scratches 0.5 mm apart and one crossing them, all across the same
-    seams: three scratches, each from its own pieces."""
+    """Two parallel scratches 0.4 mm apart (within what a bend may put between two pieces
+    of one) and one crossing them, all across the same seams: three scratches, each from
+    its own pieces."""
     scan = _scan()
     r = GEO.bore_radius_mm
     a = _bent_line((math.radians(195.0) * r, 72.0), 5.0, 20.0, bends=(0.0, 0.0))
-    b = _bent_line((math.radians(195.0) * r, 72.5), 5.0, 20.0, bends=(0.0, 0.0))
+    b = _bent_line((math.radians(195.0) * r, 72.4), 5.0, 20.0, bends=(0.0, 0.0))
     c = _bent_line((math.radians(209.0) * r, 66.0), 85.0, 12.0)
     sightings = _sightings(scan, [a, b, c])
     chains, rest = scan.join_scratches(sightings)
