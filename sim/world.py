@@ -453,7 +453,9 @@ def match_defects(world: "World", found) -> list[tuple[Any, dict | None]]:
     ``length_mm``) with the world's defect it is (ground truth: an annotation for tests
     and benches): the nearest true defect of the same family (wall: pore, scratch; rim:
     burr, chip) whose centroid lies within half its length (at least 0.3 mm) of the
-    report, each true defect taken at most once; None when there is none."""
+    report, each true defect taken at most once; None when there is none. A scratch's
+    also says how far the report lies from its centre line's middle (``middle_error_mm``,
+    :func:`scratch_middle`), where the station places a scratch."""
     part = world.part
     r = part.bore_diameter_mm / 2.0
     truths = [(t, defect_truth_place(part, t)) for t in part.defects]
@@ -476,9 +478,9 @@ def match_defects(world: "World", found) -> list[tuple[Any, dict | None]]:
         length, width = rendered_size(part, t)
         out[i] = {"name": t.name, "kind": t.kind, "axial_mm": round(ax, 5), "angle_deg": round(an, 5),
                   "length_mm": round(length, 5), "width_mm": round(width, 5), "place_error_mm": round(dist, 5)}
-        if t.kind == "scratch":
+        if t.kind == "scratch":  # where the station places a scratch: its centre line's middle
             d = found[i]
             mx, mn = scratch_middle(part, t)
-            out[i]["middle_error_mm"] = round(math.hypot(d.axial_mm - mx, math.radians((d.angle_deg - mn + 180.0) % 360.0
-                                                                                        - 180.0) * r), 5)
+            off = math.radians((d.angle_deg - mn + 180.0) % 360.0 - 180.0) * r
+            out[i]["middle_error_mm"] = round(math.hypot(d.axial_mm - mx, off), 5)
     return [(d, out.get(i)) for i, d in enumerate(found)]

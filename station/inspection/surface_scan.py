@@ -76,9 +76,10 @@ class SurfaceSettings:
     #: two modes of 1.2 % RMS of its length each left a misfit of 0.55 mm between two
     #: pieces 10 mm apart on a strongly bent 24 mm scratch, their chords ~8 deg apart
     #: (dev seeds 23700-23704). Pieces that follow each other are joined only as each
-    #: other's best fit on the side they meet (:meth:`join_scratches`). Without the lens's calibration a piece's place
-    #: off a frame's centre is off by up to ``join_lens_mm`` (2.7 % of the offset at a
-    #: corner), which the gap and the offset allow as well.
+    #: other's best fit on the side they meet (:meth:`_SurfaceScan.join_scratches`).
+    #: Without the lens's calibration a piece's place off a frame's centre is off by up
+    #: to ``join_lens_mm`` (2.7 % of the offset at a corner), which the gap and the
+    #: offset allow as well.
     join_gap_mm: float = 0.35
     join_offset_mm: float = 0.06
     join_angle_deg: float = 25.0
@@ -492,8 +493,9 @@ class _SurfaceScan:
         return misfit, reach, overlap, float(np.sign(dt * float(up @ u))), float(np.sign(-dt * float(uq @ u)))
 
     def join_scratches(self, sightings: list[_Sighting]) -> tuple[list[list[_Piece]], list[_Sighting]]:
-        """Scratches longer than a frame: pieces that meet (:meth:`meet`) across frames'
-        borders, as chains to measure joined, and the sightings left to merge. A chain
+        """Scratches longer than a frame: pieces that fit one furrow (:meth:`misfit`)
+        across frames' borders, as chains to measure joined, and the sightings left to
+        merge. A chain
         that one frame saw whole (a whole piece as long as the chain) is left to the
         merge as any defect seen by overlapping frames."""
         pieces = [self.piece(sg) for sg in sightings
@@ -669,8 +671,8 @@ class _SurfaceScan:
                                      float(pc.sighting.defect.angle_deg) + 90.0, pc.sighting.defect.width_px / 2.0)
                   for pc in chain]
         width = float(np.average(widths, weights=weights)) if sum(weights) > 0 else float(np.mean(widths))
-        # the place: its ends' and, as for a whole scratch (:meth:`defect`), the centroid's
-        # own term, here for how far the pieces' straight chords miss the bend
+        # the place: its ends' and the centroid's own term of a whole scratch of that
+        # length (:meth:`defect`)
         u_centroid = cfg.centroid_u_px * s + cfg.centroid_u_share * length
         u_pos = 2.0 * math.sqrt(u_centroid ** 2 + (ua ** 2 + ub ** 2) / 4.0) + st.evidence_bound_um * 1e-3
         frames = len({pc.sighting.frame for pc in chain})

@@ -386,3 +386,29 @@ def test_a_scratch_running_out_of_the_band_is_measured_as_far_as_the_band_shows_
     inside = line[line[:, 1] <= hi]
     assert abs(d.length_mm - _truth(inside, r)[0]) <= 0.3
     assert any("runs out of the scanned band" in n for n in scan.notes), scan.notes
+
+
+def test_the_surface_bench_draws_long_scratches_in_the_band_clear_of_the_holes_and_across_the_hatch():
+    """``station bench surface --long-scratches``: scratches of 3-25 mm, wholly in the band,
+    1.5 mm clear of every hole's rim and 1 mm of each other, at least 10 deg off the hatch."""
+    from sim.world import STANDARD_SAMPLE
+    from station.bench.surface import LONG_SCRATCH_MM, random_defects
+
+    band = (0.0, 120.0)
+    r = STANDARD_SAMPLE.bore_diameter_mm / 2.0
+    drawn = [d for seed in range(6) for d in random_defects(np.random.default_rng(seed), STANDARD_SAMPLE, band, 2, 1,
+                                                             n_long=4) if d.name.startswith("long_")]
+    assert len(drawn) >= 20
+    assert max(d.length_mm for d in drawn) > 12.8  # longer than a frame
+    for d in drawn:
+        assert LONG_SCRATCH_MM[0] <= d.length_mm <= LONG_SCRATCH_MM[1] and d.kind == "scratch"
+        t = np.linspace(-0.5, 0.5, 201) * d.length_mm
+        axial = d.axial_mm + t * math.sin(math.radians(d.orientation_deg))
+        arc = t * math.cos(math.radians(d.orientation_deg))
+        assert band[0] < axial.min() and axial.max() < band[1]
+        for h in STANDARD_SAMPLE.holes:
+            du = (math.radians((d.angle_deg - h.angle_deg + 180) % 360 - 180) * r) + arc
+            assert np.hypot(axial - h.axial_mm, du).min() > 1.5 + h.diameter_mm / 2 - 0.01
+        off = min(abs((d.orientation_deg - g + 90) % 180 - 90) for g in (STANDARD_SAMPLE.hatch_deg,
+                                                                           180 - STANDARD_SAMPLE.hatch_deg))
+        assert off >= 10.0 - 1e-9
