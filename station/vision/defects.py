@@ -135,6 +135,10 @@ class DefectConfig:
     line_length_quarter_px: int = 10
     line_seed_k: float = 6.0
     line_grow_k: float = 3.0
+    #: a furrow of a candidate that holds several (two scratches crossing: ``_furrows``)
+    #: is examined within this many px of its line: half the widest scratch (0.06 mm)
+    #: and the blur's reach beyond its edge
+    furrow_half_band_px: float = 8.0
     #: at most this many candidates per frame are examined (the most significant):
     #: a bound on the time of a pathological frame, far above a real wall's count
     max_candidates: int = 40
@@ -551,6 +555,80 @@ def _seed_in_box(labels: np.ndarray, label: int, box: tuple[int, int, int, int])
     sub = up[y0 - 2 * hy0:, x0 - 2 * hx0:][: y1 - y0, : x1 - x0]
     out[: sub.shape[0], : sub.shape[1]] = sub
     return out
+
+
+def _furrows(seed: np.ndarray, band_px: float = 3.0, min_len_px: float = 40.0, min_turn_deg: float = 15.0,
+             max_lines: int = 3) -> list[tuple[float, float, float, float]]:
+    """The straight furrows a candidate's seed holds when it holds more than one (two
+    scratches crossing, an X or a V of them: one connected candidate), as lines (a point
+    x, y, a direction in rad, and how far a bend of 2.5 % of its length may carry the
+    furrow off it: box px); [] when it is one mark. Found one after another
+    by a Hough transform of the seed's half-resolution pixels: the line with most pixels
+    within ``band_px`` (half-res px), then the next among those left, at least
+    ``min_turn_deg`` off every line before; each must run ``min_len_px`` (full px), and
+    together they must hold 85 % of the seed (a pore's blob holds many lines)."""
+    yy, xx = np.nonzero(seed[::2, ::2])  # the seed is the half-res candidate, doubled
+    if yy.size < 2 * min_len_px / 2.0:
+        return []
+    pts = np.column_stack([xx, yy]).astype(np.float64)
+    # one mark first (most candidates): its principal axis holds it, bent as a scratch
+    # may be (2.5 % of its length)
+    c = pts - pts.mean(axis=0)
+    _w, v = np.linalg.eigh(c.T @ c)
+    if np.mean(np.abs(c @ v[:, 0]) <= band_px + 0.025 * float(np.ptp(c @ v[:, 1]))) >= 0.85:
+        return []
+    th = np.deg2rad(np.arange(0.0, 180.0, 2.0))
+    cs = np.column_stack([np.cos(th), np.sin(th)])
+    lines: list[tuple[float, float, float, float]] = []
+    left = np.ones(len(pts), bool)
+    for _ in range(max_lines):
+        p = pts[left]
+        if len(p) < min_len_px / 2.0:
+            break
+        rho = p @ cs.T  # (n, angles): the distance along each normal
+        lo = rho.min()
+        nb = int(np.ceil((rho.max() - lo) / band_px)) + 2
+        idx = (np.arange(th.size)[None, :] * nb + np.floor((rho - lo) / band_px).astype(int)).ravel()
+        counts = np.bincount(idx, minlength=th.size * nb).reshape(th.size, nb)
+        pair = counts[:, :-1] + counts[:, 1:]  # a band of two bins: a furrow astride a bin's edge
+        allowed = np.ones(th.size, bool)
+        for _x, _y, a, _bend in lines:  # a line's normal is its direction less 90 deg
+            d = np.abs((np.rad2deg(th) - np.rad2deg(a - np.pi / 2.0) + 90.0) % 180.0 - 90.0)
+            allowed &= d >= min_turn_deg
+        pair[~allowed] = 0
+        k, b = np.unravel_index(int(np.argmax(pair)), pair.shape)
+        r0 = lo + (b + 1.0) * band_px  # the band's middle
+        near = np.abs(rho[:, k] - r0) <= band_px
+        along = p[near] @ np.array([-cs[k, 1], cs[k, 0]])
+        if near.sum() < max(min_len_px / 2.0, 0.1 * len(pts)) or (np.ptp(along) + 1.0) * 2.0 < min_len_px:
+            break  # too short, or too little of the seed to be a furrow of its own
+        # the furrow's chord: the band's pixels, widened by what a bend of 2.5 % of its
+        # length puts off it, fitted by their principal axis (the band at the transform's
+        # 2 deg steps may hold only a chord of part of a bent scratch), twice
+        bend = 0.025 * float(np.ptp(along))
+        holds = np.abs(rho[:, k] - r0) <= band_px + bend
+        for _ in range(2):
+            q = p[holds]
+            centre = q.mean(axis=0)
+            _w, v = np.linalg.eigh((q - centre).T @ (q - centre))
+            t_, n_ = v[:, 1], v[:, 0]
+            bend = 0.025 * float(np.ptp((q - centre) @ t_))
+            holds = np.abs((p - centre) @ n_) <= band_px + bend
+        a = float(np.arctan2(t_[1], t_[0]))  # the line's direction
+        lines.append((2.0 * centre[0] + 0.5, 2.0 * centre[1] + 0.5, a, 2.0 * bend))
+        idx_left = np.flatnonzero(left)
+        left[idx_left[holds]] = False
+    # furrows explain the seed; a blob (a pore) holds many lines and is none of them
+    return lines if len(lines) >= 2 and left.mean() <= 0.15 else []
+
+
+def _band(shape: tuple[int, int], offset: tuple[int, int], line: tuple[float, float, float, float],
+          half_px: float) -> np.ndarray:
+    """The pixels of a box (``shape``, its corner at ``offset`` in the frame) within
+    ``half_px`` plus the line's bend allowance of a line (``_furrows``'s, frame px)."""
+    x, y, a, bend = line
+    yy, xx = np.mgrid[0:shape[0], 0:shape[1]]
+    return np.abs((xx + offset[0] - x) * -np.sin(a) + (yy + offset[1] - y) * np.cos(a)) <= half_px + bend
 
 
 def _group_collinear(candidates, max_gap_half_px: float = 20.0) -> list[list[int]]:
@@ -2044,15 +2122,22 @@ def detect_defects(image: np.ndarray, mm_per_px: float, *, holes=None, blur_px: 
             seed |= _seed_in_box(candidates[i][0], candidates[i][1], box)
         if claimed[box[1]:box[3], box[0]:box[2]][seed].mean() > 0.5:
             continue  # already measured as part of another candidate's defect
-        ex = _examine(img, box, seed, zone, wall.angles_deg, level_full, cfg, blur_hint, max_width_px)
-        if ex.defect is None:
-            continue
-        rb = ex.box or box
-        if ex.cover is not None and claimed[rb[1]:rb[3], rb[0]:rb[2]][ex.cover].mean() > 0.5:
-            continue  # grown along its line into a scratch already measured (groove residue beside it)
-        claimed[rb[1]:rb[3], rb[0]:rb[2]] |= ex.region if ex.cover is None else ex.region | ex.cover
-        claimed_regions[rb[1]:rb[3], rb[0]:rb[2]] |= ex.region
-        examined.append(ex)
+        # two scratches crossing are one candidate (an X, a V): each furrow is examined on
+        # its own, its region confined to its line, the other's pixels left out of the wall
+        # model (one candidate's measurement read the X's bisector and neither scratch)
+        furrows = [(fx + box[0], fy + box[1], fa, bend) for fx, fy, fa, bend in _furrows(seed)]
+        for line in furrows or [None]:
+            part = seed if line is None else seed & _band(seed.shape, box[:2], line, cfg.furrow_half_band_px)
+            ex = _examine(img, box, part, zone, wall.angles_deg, level_full, cfg, blur_hint, max_width_px,
+                          excl=seed, confine=line)
+            if ex.defect is None:
+                continue
+            rb = ex.box or box
+            if ex.cover is not None and claimed[rb[1]:rb[3], rb[0]:rb[2]][ex.cover].mean() > 0.5:
+                continue  # grown along its line into a scratch already measured (groove residue beside it)
+            claimed[rb[1]:rb[3], rb[0]:rb[2]] |= ex.region if ex.cover is None else ex.region | ex.cover
+            claimed_regions[rb[1]:rb[3], rb[0]:rb[2]] |= ex.region
+            examined.append(ex)
     examined = _drop_scratch_pieces(examined)
     found: list[Defect] = [ex.defect for ex in examined if ex.defect is not None]
     others = [_hole_zone(img.shape, [h for j, h in enumerate(holes) if j != i], reach_px) for i in range(len(holes))]
@@ -2139,7 +2224,8 @@ def _drop_scratch_pieces(examined: list["_Examined"]) -> list["_Examined"]:
 
 
 def _examine(img: np.ndarray, box, seed: np.ndarray, zone: np.ndarray, angles_deg, wall_level: np.ndarray,
-             cfg: DefectConfig, blur_hint: float | None, max_width_px: float) -> _Examined:
+             cfg: DefectConfig, blur_hint: float | None, max_width_px: float, excl: np.ndarray | None = None,
+             confine: tuple[float, float, float, float] | None = None) -> _Examined:
     """One candidate at full resolution: the local wall model, its region, its kind,
     its measurement and the tests it must pass.
 
@@ -2152,14 +2238,17 @@ def _examine(img: np.ndarray, box, seed: np.ndarray, zone: np.ndarray, angles_de
     other (``_square_end``): the wall model's grooves along its line took the rest of it
     in, and the line is left out of them the second time. What a scratch covers, its
     centre line and blur, is claimed with its region, so that its other pieces are not
-    measured again."""
+    measured again.
+
+    ``excl``: what the first wall model leaves out besides the seed (a crossing furrow);
+    ``confine``: a line the region keeps to (one furrow of several, ``_furrows``)."""
     hh, ww = img.shape
-    excl = seed
+    excl = seed if excl is None else (seed | excl)
     ex = None
     box0 = tuple(box)
     for attempt in range(3):
         again, m, kind = _examine_once(img, box, seed, excl, zone, angles_deg, wall_level, cfg, blur_hint,
-                                       max_width_px)
+                                       max_width_px, confine)
         if ex is not None and again.defect is None and not (box0[0] == 0 or box0[1] == 0 or box0[2] == ww
                                                              or box0[3] == hh):
             # the grown patch lost it (bench frames: short scratches of 0.14-0.17 mm, taken for
@@ -2193,9 +2282,11 @@ def _examine(img: np.ndarray, box, seed: np.ndarray, zone: np.ndarray, angles_de
 
 
 def _examine_once(img: np.ndarray, box, seed: np.ndarray, excl: np.ndarray, zone: np.ndarray, angles_deg,
-                  wall_level: np.ndarray, cfg: DefectConfig, blur_hint: float | None, max_width_px: float):
+                  wall_level: np.ndarray, cfg: DefectConfig, blur_hint: float | None, max_width_px: float,
+                  confine: tuple[float, float, float, float] | None = None):
     """``_examine`` in one patch: (the examined candidate, its measurement, its kind).
-    ``excl``: what the local wall model leaves out (the seed, or more)."""
+    ``excl``: what the local wall model leaves out (the seed, or more); ``confine``: the
+    line the region keeps to (``_examine``)."""
     patch = _local_patch(img, box, excl, zone, angles_deg, wall_level)
     x0, y0, x1, y1 = box
     empty = np.zeros((y1 - y0, x1 - x0), bool)
@@ -2208,6 +2299,8 @@ def _examine_once(img: np.ndarray, box, seed: np.ndarray, excl: np.ndarray, zone
     # grown down to the noise, or to a share of the peak for a dark mark: a pore must not
     # run out along a groove's faint residue that touches it
     grow = (rs > max(cfg.grow_k * noise_s, cfg.grow_share * peak)) & ~zone[y0:y1, x0:x1]
+    if confine is not None:
+        grow &= _band(grow.shape, (x0, y0), confine, cfg.furrow_half_band_px)
     n_lab, labels = cv2.connectedComponents(grow.astype(np.uint8), connectivity=8)
     hit = np.unique(labels[seed & grow])
     hit = hit[hit > 0]
