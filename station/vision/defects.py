@@ -558,7 +558,7 @@ def _seed_in_box(labels: np.ndarray, label: int, box: tuple[int, int, int, int])
 
 
 def _furrows(seed: np.ndarray, band_px: float = 3.0, min_len_px: float = 40.0, min_turn_deg: float = 15.0,
-             max_lines: int = 3) -> list[tuple[float, float, float, float]]:
+             max_lines: int = 3, max_solidity: float = 0.6) -> list[tuple[float, float, float, float]]:
     """The straight furrows a candidate's seed holds when it holds more than one (two
     scratches crossing, an X or a V of them: one connected candidate), as lines (a point
     x, y, a direction in rad, and how far a bend of 2.5 % of its length may carry the
@@ -566,7 +566,9 @@ def _furrows(seed: np.ndarray, band_px: float = 3.0, min_len_px: float = 40.0, m
     by a Hough transform of the seed's half-resolution pixels: the line with most pixels
     within ``band_px`` (half-res px), then the next among those left, at least
     ``min_turn_deg`` off every line before; each must run ``min_len_px`` (full px), and
-    together they must hold 85 % of the seed (a pore's blob holds many lines)."""
+    together they must hold 85 % of the seed. A seed that fills more than
+    ``max_solidity`` of its convex hull is a blob (a pore: any band through it holds
+    pixels), not furrows."""
     yy, xx = np.nonzero(seed[::2, ::2])  # the seed is the half-res candidate, doubled
     if yy.size < 2 * min_len_px / 2.0:
         return []
@@ -576,6 +578,11 @@ def _furrows(seed: np.ndarray, band_px: float = 3.0, min_len_px: float = 40.0, m
     c = pts - pts.mean(axis=0)
     _w, v = np.linalg.eigh(c.T @ c)
     if np.mean(np.abs(c @ v[:, 0]) <= band_px + 0.025 * float(np.ptp(c @ v[:, 1]))) >= 0.85:
+        return []
+    # ... and a blob (a pore) fills its convex hull, where crossing furrows leave most of
+    # it empty (an X of 1.5 mm scratches: ~0.2 of it; a round pore: ~0.9)
+    hull = cv2.convexHull(pts.astype(np.float32))
+    if len(pts) >= max_solidity * cv2.contourArea(hull):
         return []
     th = np.deg2rad(np.arange(0.0, 180.0, 2.0))
     cs = np.column_stack([np.cos(th), np.sin(th)])
