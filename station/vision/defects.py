@@ -2132,11 +2132,20 @@ def detect_defects(image: np.ndarray, mm_per_px: float, *, holes=None, blur_px: 
         # two scratches crossing are one candidate (an X, a V): each furrow is examined on
         # its own, its region confined to its line, the other's pixels left out of the wall
         # model (one candidate's measurement read the X's bisector and neither scratch)
+        # (kept only when they are scratches: a pore with deep grooves' residue attached
+        # holds bands too, and its pieces were read as pores; it is examined whole)
+        results = []
         furrows = [(fx + box[0], fy + box[1], fa, bend) for fx, fy, fa, bend in _furrows(seed)]
-        for line in furrows or [None]:
-            part = seed if line is None else seed & _band(seed.shape, box[:2], line, cfg.furrow_half_band_px)
-            ex = _examine(img, box, part, zone, wall.angles_deg, level_full, cfg, blur_hint, max_width_px,
-                          excl=seed, confine=line)
+        if furrows:
+            results = [_examine(img, box, seed & _band(seed.shape, box[:2], line, cfg.furrow_half_band_px), zone,
+                                wall.angles_deg, level_full, cfg, blur_hint, max_width_px, excl=seed, confine=line)
+                       for line in furrows]
+            if not any(ex.defect is not None for ex in results) or \
+                    any(ex.defect is not None and ex.defect.kind != "scratch" for ex in results):
+                results = []
+        if not results:
+            results = [_examine(img, box, seed, zone, wall.angles_deg, level_full, cfg, blur_hint, max_width_px)]
+        for ex in results:
             if ex.defect is None:
                 continue
             rb = ex.box or box
