@@ -570,7 +570,7 @@ def _furrows(seed: np.ndarray, band_px: float = 3.0, min_len_px: float = 40.0, m
     ``max_solidity`` of its convex hull is a blob (a pore: any band through it holds
     pixels), not furrows."""
     yy, xx = np.nonzero(seed[::2, ::2])  # the seed is the half-res candidate, doubled
-    if yy.size < 2 * min_len_px / 2.0:
+    if yy.size < min_len_px:  # fewer half-res pixels than two furrows' least length
         return []
     pts = np.column_stack([xx, yy]).astype(np.float64)
     # one mark first (most candidates): its principal axis holds it, bent as a scratch
@@ -632,7 +632,8 @@ def _furrows(seed: np.ndarray, band_px: float = 3.0, min_len_px: float = 40.0, m
 def _band(shape: tuple[int, int], offset: tuple[int, int], line: tuple[float, float, float, float],
           half_px: float) -> np.ndarray:
     """The pixels of a box (``shape``, its corner at ``offset`` in the frame) within
-    ``half_px`` plus the line's bend allowance of a line (``_furrows``'s, frame px)."""
+    ``half_px`` of a line (``_furrows``'s, frame px), widened by the line's allowance for
+    a bend."""
     x, y, a, bend = line
     yy, xx = np.mgrid[0:shape[0], 0:shape[1]]
     return np.abs((xx + offset[0] - x) * -np.sin(a) + (yy + offset[1] - y) * np.cos(a)) <= half_px + bend
@@ -2131,9 +2132,10 @@ def detect_defects(image: np.ndarray, mm_per_px: float, *, holes=None, blur_px: 
             continue  # already measured as part of another candidate's defect
         # two scratches crossing are one candidate (an X, a V): each furrow is examined on
         # its own, its region confined to its line, the other's pixels left out of the wall
-        # model (one candidate's measurement read the X's bisector and neither scratch)
-        # (kept only when they are scratches: a pore with deep grooves' residue attached
-        # holds bands too, and its pieces were read as pores; it is examined whole)
+        # model (one candidate's measurement read the X's bisector and neither scratch).
+        # The furrows are kept only when they are scratches: a pore with deep grooves'
+        # residue attached holds bands too, and its pieces were read as pores; such a
+        # seed is examined whole
         results = []
         furrows = [(fx + box[0], fy + box[1], fa, bend) for fx, fy, fa, bend in _furrows(seed)]
         if furrows:
