@@ -41,7 +41,9 @@ def random_defects(rng: np.random.Generator, part, band_mm: tuple[float, float],
     """``n_wall`` pores and scratches anywhere in the band (at least 1.5 mm from any
     hole, 1 mm from each other and from the band's ends; scratches off the part's honing,
     ``PartTruth.hatch_deg``) and ``n_rim`` burrs and chips at the holes' rims (0.5 mm
-    apart along a rim), as the world's ``SurfaceDefect``s."""
+    apart along a rim), as the world's ``SurfaceDefect``s; first, ``n_long`` scratches of
+    ``LONG_SCRATCH_MM`` (``long_<i>``), wholly in the band, 1.5 mm clear of the holes'
+    rims and 1 mm of each other and of the other defects."""
     from sim.camera.defects import RANDOM_SIZES_MM, SCRATCH_MIN_ELONGATION, random_scratch_angle
     from sim.world import SurfaceDefect
 
