@@ -439,11 +439,7 @@ def scratch_middle(part: PartTruth, d: SurfaceDefect, mm_per_px: float = 0.01) -
     s = mm_per_px
     spec = DefectSpec(d.kind, 0.0, 0.0, d.length_mm / s, d.width_mm / s, -d.orientation_deg, d.reflectance, None,
                       d.seed)
-    g = geometry(spec, [])._scratch
-    i = len(g["sg"]) // 2
-    tx, ty, nx, ny = g["t"]
-    x = g["ox"] + g["sg"][i] * tx + g["bend"][i] * nx  # ideal px from the centroid: +x round, +y against the axis
-    y = g["oy"] + g["sg"][i] * ty + g["bend"][i] * ny
+    x, y = geometry(spec, []).scratch_middle_px()  # ideal px from the centroid: +x round, +y against the axis
     r = part.bore_diameter_mm / 2.0
     return d.axial_mm - y * s, (d.angle_deg + math.degrees(x * s / r)) % 360.0
 

@@ -205,6 +205,14 @@ class DefectGeometry:
         return dict(th=th, r=r, ox=ox, oy=oy, t=t, area=area, length=length, width=width, direction=direction,
                      outline=(fx, fy))
 
+    def scratch_middle_px(self) -> tuple[float, float]:
+        """A scratch's centre line's middle, as it is bent (ideal px)."""
+        g = self._scratch
+        i = len(g["sg"]) // 2
+        tx, ty, nx, ny = g["t"]
+        return (float(g["ox"] + g["sg"][i] * tx + g["bend"][i] * nx),
+                float(g["oy"] + g["sg"][i] * ty + g["bend"][i] * ny))
+
     @cached_property
     def _scratch(self):
         s = self.spec
