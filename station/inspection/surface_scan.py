@@ -154,6 +154,14 @@ class _Sighting:
     centre: tuple[float, float] | None = None
 
 
+def _root(parent: list[int], i: int) -> int:
+    """Union-find: the root of ``i``'s set, the path halved on the way."""
+    while parent[i] != i:
+        parent[i] = parent[parent[i]]
+        i = parent[i]
+    return i
+
+
 @dataclass
 class _Piece:
     """A scratch's sighting as a segment on the part: its two ends (axial mm, angle deg,
@@ -406,10 +414,7 @@ class _SurfaceScan:
         parent = list(range(len(sightings)))
 
         def root(i: int) -> int:
-            while parent[i] != i:
-                parent[i] = parent[parent[i]]
-                i = parent[i]
-            return i
+            return _root(parent, i)
 
         for i, a in enumerate(sightings):
             for j in range(i):
@@ -503,10 +508,7 @@ class _SurfaceScan:
         parent = list(range(len(pieces)))
 
         def root(i: int) -> int:
-            while parent[i] != i:
-                parent[i] = parent[parent[i]]
-                i = parent[i]
-            return i
+            return _root(parent, i)
 
         # a piece and another frame's view of the same stretch (overlapping by half the
         # shorter) are one; pieces that follow each other are joined only as each other's
