@@ -85,6 +85,11 @@ class SurfaceSettings:
     join_angle_deg: float = 25.0
     join_bend_share: float = 0.06
     join_lens_mm: float = 0.2
+    #: a scratch's end that a frame's border cut and no neighbouring frame's piece
+    #: continued is followed in a frame centred on it (:meth:`_SurfaceScan.
+    #: follow_scratches`): so many rounds, so many frames per scan at most
+    follow_rounds: int = 3
+    follow_max_looks: int = 12
     #: standard uncertainty (mm) of a joined scratch's end beside what its piece's fit
     #: says: mostly an end is right to ~0.01 mm, but now and then the detector loses an
     #: end that fades into a groove by 0.1-0.4 mm. Set on dev seeds 23600-23602 and
@@ -172,6 +177,9 @@ class _Piece:
     ends: tuple[tuple[float, float], tuple[float, float]]
     ends_px: tuple[tuple[float, float], tuple[float, float]]
     cut: tuple[bool, bool]
+    #: the centre line's points on the part (axial mm, angle deg), end to end; None when
+    #: the detector gave no line
+    line: tuple[tuple[float, float], ...] | None = None
 
 
 @dataclass
@@ -383,6 +391,7 @@ class _SurfaceScan:
         if pending is not None:
             defects = yield m.MeasureSurface(pending[2])
             analysed(pending[0], pending[1], list(defects or []))
+        sightings += yield from self.follow_scratches(sightings)
         chains, rest = self.join_scratches(sightings)
         groups = self.merge(rest)
         yield m.Note(f"surface: {len(sightings)} sightings, {len(groups) + len(chains)} defect(s) to measure"
@@ -439,16 +448,23 @@ class _SurfaceScan:
         return origin[0] + float(v[1]), (origin[1] + math.degrees(float(v[0]) / self.radius)) % 360.0
 
     def piece(self, sg: _Sighting) -> _Piece:
-        """A scratch's sighting as a segment on the part: its centre line's ends (the
-        centre +/- half its length along its direction), each placed as a defect is."""
+        """A scratch's sighting as a segment on the part: its centre line's ends, each
+        placed as a defect is (the line's own ends when the detector gives the line, else
+        the centre +/- half its length along its direction), and the line's points."""
         d = sg.defect
-        h = d.length_px / 2.0
-        c, s_ = math.cos(math.radians(d.angle_deg)), math.sin(math.radians(d.angle_deg))
-        px = ((d.x_px - h * c, d.y_px - h * s_), (d.x_px + h * c, d.y_px + h * s_))
+        line_px = getattr(d, "line_px", None)
+        if line_px is not None and len(line_px) >= 2:
+            px = (tuple(line_px[0]), tuple(line_px[-1]))
+        else:
+            h = d.length_px / 2.0
+            c, s_ = math.cos(math.radians(d.angle_deg)), math.sin(math.radians(d.angle_deg))
+            px = ((d.x_px - h * c, d.y_px - h * s_), (d.x_px + h * c, d.y_px + h * s_))
+            line_px = None
         b, w, hh = self.cfg.border_px, self.geo.width_px, self.geo.height_px
         cut = tuple(bool(getattr(d, "partial", False)) and (x <= b or y <= b or x >= w - 1 - b or y >= hh - 1 - b)
                     for x, y in px)
-        return _Piece(sg, (self.place(sg.centre, *px[0]), self.place(sg.centre, *px[1])), px, cut)
+        line = None if line_px is None else tuple(self.place(sg.centre, float(x), float(y)) for x, y in line_px)
+        return _Piece(sg, (self.place(sg.centre, *px[0]), self.place(sg.centre, *px[1])), px, cut, line)
 
     def width_mm(self, d) -> float:
         return float(d.width_mm if d.width_mm is not None else d.width_px * self.geo.mm_per_px)
@@ -490,19 +506,60 @@ class _SurfaceScan:
             return None
         mq = self.wall_vec(o, (q.sighting.axial_mm, q.sighting.angle_deg))
         dt = float(mq @ u)
+        overlap = (min(tp[1], tq[1]) - max(tp[0], tq[0])) / max(min(lp, lq), 1e-9)
+        sides = float(np.sign(dt * float(up @ u))), float(np.sign(-dt * float(uq @ u)))
+        width = max(self.width_mm(p.sighting.defect), self.width_mm(q.sighting.defect))
+        if p.line is not None and q.line is not None:
+            lined = self.line_misfit(p, q, o, u, n)
+            if lined is not None:
+                misfit, gap = lined
+                reach = cfg.join_offset_mm + width + lens + cfg.join_bend_share * gap
+                return (misfit, reach, overlap) + sides
         slope_p, slope_q = float(vp @ n) / float(vp @ u), float(vq @ n) / float(vq @ u)
         misfit = float(mq @ n) - dt * 0.5 * (slope_p + slope_q)
-        reach = cfg.join_offset_mm + max(self.width_mm(p.sighting.defect), self.width_mm(q.sighting.defect)) + lens \
-            + cfg.join_bend_share * abs(dt)
-        overlap = (min(tp[1], tq[1]) - max(tp[0], tq[0])) / max(min(lp, lq), 1e-9)
-        return misfit, reach, overlap, float(np.sign(dt * float(up @ u))), float(np.sign(-dt * float(uq @ u)))
+        reach = cfg.join_offset_mm + width + lens + cfg.join_bend_share * abs(dt)
+        return (misfit, reach, overlap) + sides
 
-    def join_scratches(self, sightings: list[_Sighting]) -> tuple[list[list[_Piece]], list[_Sighting]]:
-        """Scratches longer than a frame: pieces that fit one furrow (:meth:`misfit`)
-        across frames' borders, as chains to measure joined, and the sightings left to
-        merge. A chain
-        that one frame saw whole (a whole piece as long as the chain) is left to the
-        merge as any defect seen by overlapping frames."""
+    def line_misfit(self, p: _Piece, q: _Piece, o: tuple[float, float], u: np.ndarray,
+                    n: np.ndarray) -> tuple[float, float] | None:
+        """Two pieces' centre lines (the detector's) against one furrow, along ``u``
+        across ``n`` from ``o``: where they overlap along the furrow, the RMS of their
+        offsets across it over the overlap; where they do not, how far the second's near
+        end lies off the first's end continued across the gap at the mean of the two ends'
+        slopes (over each line's last ~1 mm). Returns (misfit mm, gap mm), or None when a
+        line does not run along ``u``."""
+        lines = []
+        for pc in (p, q):
+            v = np.array([self.wall_vec(o, pt) for pt in pc.line])
+            t, off = v @ u, v @ n
+            if t[-1] < t[0]:
+                t, off = t[::-1], off[::-1]
+            if np.any(np.diff(t) <= 0.0):
+                return None
+            lines.append((t, off))
+        (tp, op), (tq, oq) = lines
+        lo, hi = max(tp[0], tq[0]), min(tp[-1], tq[-1])
+        if hi - lo >= 0.05:
+            ts = np.linspace(lo, hi, 25)
+            d = np.interp(ts, tp, op) - np.interp(ts, tq, oq)
+            return float(np.sqrt(np.mean(d * d))), 0.0
+        if tp[-1] > tq[-1]:
+            (tp, op), (tq, oq) = (tq, oq), (tp, op)  # p before q along u
+
+        def end_slope(t: np.ndarray, off: np.ndarray, last: bool) -> float:
+            sel = t >= t[-1] - 1.0 if last else t <= t[0] + 1.0
+            if sel.sum() < 2:
+                sel = np.zeros(t.size, bool)
+                sel[[-2, -1] if last else [0, 1]] = True
+            return float(np.polyfit(t[sel], off[sel], 1)[0])
+
+        gap = float(tq[0] - tp[-1])
+        slope = 0.5 * (end_slope(tp, op, True) + end_slope(tq, oq, False))
+        return float(oq[0] - op[-1] - gap * slope), max(gap, 0.0)
+
+    def scratch_components(self, sightings: list[_Sighting]) -> list[list[_Piece]]:
+        """The scratch sightings as pieces, in sets that fit one furrow (:meth:`misfit`)
+        across frames' borders: a lone piece is a set of its own."""
         pieces = [self.piece(sg) for sg in sightings
                   if sg.defect.kind == "scratch" and sg.centre is not None and sg.defect.length_px > 0]
         parent = list(range(len(pieces)))
@@ -536,8 +593,15 @@ class _SurfaceScan:
         comps: dict[int, list[_Piece]] = {}
         for i, pc in enumerate(pieces):
             comps.setdefault(root(i), []).append(pc)
+        return list(comps.values())
+
+    def join_scratches(self, sightings: list[_Sighting]) -> tuple[list[list[_Piece]], list[_Sighting]]:
+        """Scratches longer than a frame: pieces that fit one furrow
+        (:meth:`scratch_components`) as chains to measure joined, and the sightings left
+        to merge. A chain that one frame saw whole (a whole piece as long as the chain)
+        is left to the merge as any defect seen by overlapping frames."""
         chains, used = [], set()
-        for comp in comps.values():
+        for comp in self.scratch_components(sightings):
             if len(comp) < 2:
                 continue
             a, b, _ = self.chain_ends(comp)
@@ -549,6 +613,63 @@ class _SurfaceScan:
             chains.append(comp)
             used.update(id(pc.sighting) for pc in comp)
         return chains, [sg for sg in sightings if id(sg) not in used]
+
+    def follow_scratches(self, sightings: list[_Sighting]):
+        """Where a scratch leaves a frame and no neighbouring frame's piece continues it
+        (an outer end of its pieces cut by a frame's border, inside the band), the
+        neighbour lost it: a deep groove's residue across it, or a stretch that bends
+        along the hatch, which the detector drops where the border cuts both its ends
+        (``station.vision.defects``: a groove's piece at the border ends as square as a
+        scratch's). A frame is taken centred on that end, where the scratch runs through
+        the middle (with the stretch the coverage frame saw), and its scratches join the
+        pieces; again from any end still cut, up to ``follow_rounds`` times. Returns the
+        followed frames' sightings that joined a coverage frame's piece."""
+        cfg = self.cfg
+        lo, hi = self.plan.band_mm
+        reach_mm = cfg.recentre_reach_px * self.geo.mm_per_px * 0.5
+        extra: list[_Sighting] = []
+        looked: list[tuple[float, float]] = []
+        harvested: set[int] = set()
+        for _ in range(cfg.follow_rounds):
+            todo = []
+            for comp in self.scratch_components(sightings + extra):
+                if not any(any(pc.cut) for pc in comp):
+                    continue
+                (a, pa, ka), (b, pb, kb), _u = self.chain_ends(comp)
+                for place, pc, k in ((a, pa, ka), (b, pb, kb)):
+                    if not pc.cut[k] or min(abs(place[0] - lo), abs(place[0] - hi)) <= cfg.overlap_mm + 0.5:
+                        continue  # a true end, or one where the scratch leaves the band
+                    if any(self.wall_mm(place, q) <= reach_mm for q in looked + todo):
+                        continue
+                    todo.append(place)
+            todo = todo[:max(cfg.follow_max_looks - len(looked), 0)]
+            if not todo:
+                break
+            for place in todo:
+                looked.append(place)
+                look = yield from self.recentred_look(place, "surface scratch followed")
+                idx = next(i for i, lk in enumerate(self.looks) if lk is look)
+                if idx in harvested:
+                    continue
+                harvested.add(idx)
+                centre = (look.axial_mm, look.angle_deg)
+                cx, cy = self.geo.centre_px
+                for d in look.defects:
+                    if d.kind == "scratch" and d.length_px > 0:
+                        ax, an = self.place(centre, d.x_px, d.y_px)
+                        extra.append(_Sighting(d, ax, an, math.hypot(d.x_px - cx, d.y_px - cy), -1 - idx, centre))
+        if not extra:
+            return []
+        # a followed frame's scratch counts only as a piece of one a coverage frame saw
+        ours = {id(sg) for sg in extra}
+        keep = set()
+        for comp in self.scratch_components(sightings + extra):
+            if any(id(pc.sighting) not in ours for pc in comp):
+                keep.update(id(pc.sighting) for pc in comp if id(pc.sighting) in ours)
+        if looked:
+            self.notes.append(f"surface: {len(looked)} frame(s) taken to follow scratches that a frame's border cut "
+                              f"and no neighbouring frame continued")
+        return [sg for sg in extra if id(sg) in keep]
 
     def chain_ends(self, chain: list[_Piece]):
         """The chain's outer ends, each as (place, piece, which end), and the direction
@@ -702,6 +823,17 @@ class _SurfaceScan:
         chord they are right, and give the line's extent."""
         n = np.array([-e[1], e[0]])
         rows, rhs = [], []
+        if all(pc.line is not None for pc in chain):
+            # the detector's centre lines: a polynomial of degree 5 through their points
+            # (a dragged chip's path bends in up to two modes, an S included, over the
+            # whole chain)
+            pts = np.array([self.wall_vec(a, pt) for pc in chain for pt in pc.line])
+            t, off = pts @ e, pts @ n
+            deg = int(min(5, max(len(pts) - 1, 0)))
+            line = _CentreLine(length, np.zeros(deg + 1))
+            basis = np.array([line.basis(float(x)) for x in t])
+            coef, *_ = np.linalg.lstsq(basis, off, rcond=None)
+            return _CentreLine(length, coef)
         deg = 3 if len(chain) >= 3 else 2
         line = _CentreLine(length, np.zeros(deg + 1))
 

@@ -272,6 +272,19 @@ class DefectConfig:
     model_u_px: tuple[tuple[str, float, float], ...] = (("pore", 0.7, 0.7), ("scratch", 1.0, 0.7),
                                                          ("burr", 1.0, 0.6), ("chip", 1.0, 0.6))
     scratch_length_u_share: float = 0.03
+    #: two scratches of one frame are one furrow (``_scratch_gap``) when an end of each
+    #: faces the other within this gap (px) and turn (deg), and the raw darkness along
+    #: the gap holds this share of the pieces' own
+    scratch_join_gap_px: float = 200.0
+    scratch_join_turn_deg: float = 20.0
+    scratch_join_dark_share: float = 0.5
+    #: a scratch's furrow followed past its measured end (``_track_on``): at most so far
+    #: (px), turning at most so much across per 2 px step (px), taken when its first
+    #: ``track_min_px`` keep ``track_run_share`` of the scratch's own raw contrast
+    track_max_px: float = 800.0
+    track_turn_px: float = 0.1
+    track_min_px: float = 12.0
+    track_run_share: float = 0.7
 
 
 @dataclass(frozen=True)
@@ -304,9 +317,12 @@ class Defect:
     size_mm: float | None = None
     size_u_mm: float | None = None
     width_u_mm: float | None = None
+    #: a scratch's centre line, end to end (image px, a point every ~10 px): how the
+    #: whole-surface scan joins a scratch's pieces from several frames (not printed)
+    line_px: tuple[tuple[float, float], ...] | None = None
 
     def to_dict(self) -> dict:
-        return {k: v for k, v in asdict(self).items() if v is not None}
+        return {k: v for k, v in asdict(self).items() if v is not None and k != "line_px"}
 
 
 # ---------------------------------------------------------------- helpers
@@ -2157,7 +2173,10 @@ def detect_defects(image: np.ndarray, mm_per_px: float, *, holes=None, blur_px: 
             claimed_regions[rb[1]:rb[3], rb[0]:rb[2]] |= ex.region
             examined.append(ex)
     examined = _drop_scratch_pieces(examined)
-    found: list[Defect] = [ex.defect for ex in examined if ex.defect is not None]
+    examined = _track_scratches(img, level_full, examined, cfg)
+    examined = _join_scratch_pieces(img, level_full, examined, cfg)
+    found: list[Defect] = [ex.defect if ex.line is None else replace(ex.defect, line_px=_line_points(ex.line))
+                           for ex in examined if ex.defect is not None]
     others = [_hole_zone(img.shape, [h for j, h in enumerate(holes) if j != i], reach_px) for i in range(len(holes))]
     blur_rim = blur_hint if blur_hint is not None else BLUR_PRIOR_PX[0]
     marks = _marks_mask(img.shape, found, blur_rim) if holes else None
@@ -2210,6 +2229,9 @@ class _Examined:
     #: a scratch's cover over the same box: its centre line, half its width plus the blur's
     #: reach either side (claimed too; None: the region alone)
     cover: np.ndarray | None = None
+    #: a scratch's centre line (frame px, (n, 2), end to end) and its blur (px)
+    line: np.ndarray | None = None
+    blur: float | None = None
 
 
 def _cover_share(a: "_Examined", b: "_Examined") -> float:
@@ -2239,6 +2261,358 @@ def _drop_scratch_pieces(examined: list["_Examined"]) -> list["_Examined"]:
                 drop.add(id(a))
                 break
     return [ex for ex in examined if id(ex) not in drop]
+
+
+def _end_tangent(line: np.ndarray, k: int, back_px: float = 20.0) -> np.ndarray:
+    """The unit direction out of a centre line's end ``k`` (0 or -1), from the point
+    ``back_px`` along it inside the end."""
+    pts = line if k == -1 else line[::-1]
+    seg = np.hypot(*np.diff(pts, axis=0).T)
+    acc = np.concatenate([[0.0], np.cumsum(seg[::-1])])[::-1]  # distance to the end
+    i = int(np.argmin(np.abs(acc - min(back_px, acc[0]))))
+    v = pts[-1] - pts[i]
+    n = float(np.hypot(*v))
+    return v / n if n > 0 else np.zeros(2)
+
+
+def _furrow_contrast(img: np.ndarray, level: np.ndarray, pts: np.ndarray, tangents: np.ndarray,
+                     core: float) -> np.ndarray:
+    """At each point of a path (frame px, with its unit tangents), the raw relative
+    darkness ``1 - img / level`` (the grooves kept) over the core ``|n| <= core`` less
+    that of flanks 2-6 px beyond it; NaN where the frame does not hold it."""
+    off = np.arange(-(core + 6.0), core + 6.0 + 0.25, 0.5)
+    in_core, in_flank = np.abs(off) <= core, np.abs(off) >= core + 2.0
+    nx, ny = -tangents[:, 1], tangents[:, 0]
+    mx = pts[None, :, 0] + off[:, None] * nx[None, :]
+    my = pts[None, :, 1] + off[:, None] * ny[None, :]
+    hh, ww = img.shape
+    bx0, by0 = int(max(np.floor(mx.min()) - 1, 0)), int(max(np.floor(my.min()) - 1, 0))
+    bx1, by1 = int(min(np.ceil(mx.max()) + 2, ww)), int(min(np.ceil(my.max()) + 2, hh))
+    if bx1 - bx0 < 2 or by1 - by0 < 2:
+        return np.full(pts.shape[0], np.nan)
+    dark = (1.0 - img[by0:by1, bx0:bx1].astype(np.float32) / np.maximum(level[by0:by1, bx0:bx1], 1.0))
+    st = cv2.remap(dark.astype(np.float32), (mx - bx0).astype(np.float32), (my - by0).astype(np.float32),
+                   cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=float("nan"))
+    with np.errstate(all="ignore"):
+        return np.nanmean(st[in_core], axis=0) - np.nanmean(st[in_flank], axis=0)
+
+
+def _gap_path(pa: np.ndarray, ta: np.ndarray, pb: np.ndarray, tb: np.ndarray, step: float = 1.0):
+    """The smooth path (a cubic Hermite curve) from end ``pa`` leaving along ``ta`` to end
+    ``pb`` arriving against ``tb`` (both unit, outwards from their pieces): its points
+    every ~``step`` px and their unit tangents."""
+    g = float(np.hypot(*(pb - pa)))
+    n = max(int(np.ceil(g / step)), 1) + 1
+    t = np.linspace(0.0, 1.0, n)[:, None]
+    m0, m1 = ta * g, -tb * g
+    h00, h10, h01, h11 = 2 * t**3 - 3 * t**2 + 1, t**3 - 2 * t**2 + t, -2 * t**3 + 3 * t**2, t**3 - t**2
+    pts = h00 * pa + h10 * m0 + h01 * pb + h11 * m1
+    d = (6 * t**2 - 6 * t) * pa + (3 * t**2 - 4 * t + 1) * m0 + (-6 * t**2 + 6 * t) * pb + (3 * t**2 - 2 * t) * m1
+    d /= np.maximum(np.hypot(d[:, 0], d[:, 1]), 1e-9)[:, None]
+    return pts, d
+
+
+def _scratch_gap(img: np.ndarray, level: np.ndarray, a: "_Examined", b: "_Examined",
+                 cfg: DefectConfig) -> tuple[float, int, int, np.ndarray] | None:
+    """Whether two scratches of one frame are one furrow with a stretch between them that
+    was not measured, and how well: (the gap, a's end, b's end, the gap's path), or None.
+
+    Along the hatch the wall model's grooves take a scratch's darkness in (their means
+    along the groove lines are the scratch's own), so a bent scratch whose middle runs
+    near a groove direction is found as two pieces, its middle lost (a fresh whole-surface
+    part: a 16.6 mm scratch reported as 7.9 and 7.4 mm, ~0.9 mm lost between). Two
+    pieces are joined when an end of each faces the other (the gap no longer than
+    ``scratch_join_gap_px``, each end's direction within ``scratch_join_turn_deg`` of
+    the gap's and of the other's), their widths agree, and the raw darkness along a
+    smooth path between the ends (the grooves not removed), core less flanks, is at
+    least ``scratch_join_dark_share`` of what it is along the pieces' own last 40 px
+    over nearly all of the gap: a groove's residue does not carry it, the furrow does."""
+    da, db = a.defect, b.defect
+    if max(da.width_px, db.width_px) > 2.5 * max(min(da.width_px, db.width_px), 1.0) + 2.0:
+        return None
+    best = None
+    for ka in (0, -1):
+        for kb in (0, -1):
+            pa, pb = a.line[ka], b.line[kb]
+            g = float(np.hypot(*(pb - pa)))
+            if best is None or g < best[0]:
+                best = (g, ka, kb)
+    g, ka, kb = best
+    if g > cfg.scratch_join_gap_px:
+        return None
+    far = float(np.hypot(*(a.line[-1 - ka] - b.line[-1 - kb])))
+    if far < max(da.length_px, db.length_px) + 0.5 * g:
+        return None  # side by side, not end to end
+    pa, pb = a.line[ka], b.line[kb]
+    ta, tb = _end_tangent(a.line, ka), _end_tangent(b.line, kb)
+    cos_max = np.cos(np.deg2rad(cfg.scratch_join_turn_deg))
+    if float(ta @ -tb) < cos_max:
+        return None
+    blur = float(np.clip(np.nanmean([a.blur or BLUR_PRIOR_PX[0], b.blur or BLUR_PRIOR_PX[0]]), 0.7, 2.8))
+    core = max(0.5 * max(da.width_px, db.width_px) + blur, 1.5)
+    if g > 2.0 and float((pb - pa) @ ta) < 0.0:
+        # overlapping ends: two measurements of one stretch, when each end lies on the
+        # other's centre line
+        if max(float(np.min(np.hypot(*(a.line - pb).T))), float(np.min(np.hypot(*(b.line - pa).T)))) > core + 4.0:
+            return None
+        return -g, ka, kb, np.vstack([pa, pb])
+    if g > 2.0:
+        u = (pb - pa) / g
+        if float(ta @ u) < cos_max or float(-tb @ u) < cos_max:
+            return None
+    path, tang = _gap_path(pa, ta, pb, tb)
+    if g > 2.0:
+        own = []
+        for ex, k in ((a, ka), (b, kb)):
+            pts = ex.line if k == -1 else ex.line[::-1]
+            seg = np.hypot(*np.diff(pts, axis=0).T)
+            to_end = np.concatenate([[0.0], np.cumsum(seg[::-1])])[::-1]
+            near = pts[(to_end <= 40.0) & (to_end >= 2.0 * blur)]
+            if len(near) < 2:
+                near = pts[-2:]
+            dense_t = np.linspace(0.0, 1.0, max(int(np.hypot(*(near[-1] - near[0]))), 2))
+            dense = near[0] + dense_t[:, None] * (near[-1] - near[0])
+            tv = (near[-1] - near[0]) / max(float(np.hypot(*(near[-1] - near[0]))), 1e-9)
+            own.append(np.nanmedian(_furrow_contrast(img, level, dense, np.tile(tv, (len(dense), 1)), core)))
+        ref = float(np.nanmin(own)) if np.isfinite(own).any() else np.nan
+        if not (ref > 0):
+            return None
+        c = _furrow_contrast(img, level, path, tang, core)
+        c = gaussian_filter1d(np.nan_to_num(c, nan=-1.0), 1.5)
+        if float(np.median(c)) < cfg.scratch_join_dark_share * ref or \
+                float(np.mean(c >= 0.5 * cfg.scratch_join_dark_share * ref)) < 0.9:
+            return None
+    return g, ka, kb, path
+
+
+def _own_contrast(img: np.ndarray, level: np.ndarray, line: np.ndarray, k: int, core: float, blur: float) -> float:
+    """The raw furrow contrast (``_furrow_contrast``) along a centre line's last 40 px
+    inside its end ``k`` (clear of the end's blur): the median."""
+    pts = line if k == -1 else line[::-1]
+    seg = np.hypot(*np.diff(pts, axis=0).T)
+    to_end = np.concatenate([[0.0], np.cumsum(seg[::-1])])[::-1]
+    near = pts[(to_end <= 40.0) & (to_end >= 2.0 * blur)]
+    if len(near) < 2:
+        near = pts[-2:]
+    span = float(np.hypot(*(near[-1] - near[0])))
+    if span <= 0:
+        return float("nan")
+    dense = near[0] + np.linspace(0.0, 1.0, max(int(span), 2))[:, None] * (near[-1] - near[0])
+    tv = (near[-1] - near[0]) / span
+    return float(np.nanmedian(_furrow_contrast(img, level, dense, np.tile(tv, (len(dense), 1)), core)))
+
+
+def _track_on(img: np.ndarray, level: np.ndarray, line: np.ndarray, k: int, width: float, blur: float,
+              cfg: DefectConfig) -> np.ndarray | None:
+    """A furrow that runs on past a scratch's measured end ``k``: the path that follows
+    its ridge (frame px, from the end outwards; its last point where the darkness has
+    fallen to half), or None when the end is a cut.
+
+    The measurement reads the darkness with the wall model's grooves removed, and where a
+    bent scratch turns along a groove direction those grooves take its darkness in: a
+    16.6 mm scratch bent in an S was measured to where it met the hatch, 3 mm short of
+    the frame's border (a fresh whole-surface part). The raw darkness (``1 - img /
+    level``, the grooves kept), core less flanks, shows the furrow on. From the end the
+    path steps ``2 px`` along its direction, moves at most ``track_turn_px`` across per
+    step towards the darkest line of a short cross profile (a scratch turns slowly: the
+    twin's modes bend a 16 mm scratch by under 3 deg per 50 px), and stops where the
+    raw contrast falls below half the scratch's own there. A run on is taken only when
+    the first ``track_min_px`` past the end keep ``track_run_share`` of that contrast: a
+    cut's darkness steps down within the blur."""
+    core = max(0.5 * width + blur, 1.5)
+    ref = _own_contrast(img, level, line, k, core, blur)
+    if not (ref > 0):
+        return None
+    pts = line if k == -1 else line[::-1]
+    t = _end_tangent(line, k, 30.0)
+    if not np.any(t):
+        return None
+    hh, ww = img.shape
+    step = 2.0
+    p = pts[-1].astype(float)
+    path = [p.copy()]
+    contrast = []
+    n = np.array([-t[1], t[0]])
+    offs = np.arange(-3.0, 3.0 + 0.25, 0.5)
+    below = 0
+    for _ in range(int(cfg.track_max_px / step)):
+        q = p + step * t
+        if not (2.0 <= q[0] <= ww - 3.0 and 2.0 <= q[1] <= hh - 3.0):
+            break
+        # the cross profile's darkest line within 3 px, each candidate read over 6 px along
+        cand = q[None, :] + offs[:, None] * n[None, :]
+        seg = cand[:, None, :] + np.array([-3.0, -1.5, 0.0, 1.5, 3.0])[None, :, None] * t[None, None, :]
+        c = _furrow_contrast(img, level, seg.reshape(-1, 2), np.tile(t, (seg.shape[0] * seg.shape[1], 1)), core)
+        c = np.nanmean(c.reshape(seg.shape[0], seg.shape[1]), axis=1)
+        if not np.isfinite(c).any():
+            break
+        j = int(np.nanargmax(c))
+        shift = float(np.clip(offs[j], -cfg.track_turn_px, cfg.track_turn_px))
+        q = q + shift * n
+        here = float(c[int(np.argmin(np.abs(offs - shift)))])
+        contrast.append(here)
+        path.append(q.copy())
+        # the direction: the path's last 30 px (the piece's end before the path has them)
+        back = np.vstack([pts[-16:], np.array(path)])[-16:]
+        v = back[-1] - back[0]
+        if np.hypot(*v) > 0:
+            t_new = v / np.hypot(*v)
+            if float(t_new @ t) > 0.0:
+                t = t_new
+                n = np.array([-t[1], t[0]])
+        p = q
+        below = below + 1 if here < 0.5 * ref else 0
+        if below >= 3:
+            break
+    cs = np.array(contrast)
+    first = max(int(cfg.track_min_px / step), 1)
+    if cs.size < first or float(np.median(cs[:first])) < cfg.track_run_share * ref:
+        return None
+    # the end: where the contrast (smoothed) last falls through half of the scratch's own
+    sm = gaussian_filter1d(cs, 1.0)
+    keep = np.flatnonzero(sm >= 0.5 * ref)
+    if keep.size == 0:
+        return None
+    last = int(keep[-1])
+    out = np.array(path[:last + 2])
+    if last + 1 < cs.size and sm[last] != sm[last + 1]:
+        f = (sm[last] - 0.5 * ref) / (sm[last] - sm[last + 1])
+        out[-1] = path[last + 1] + float(np.clip(f, 0.0, 1.0)) * (path[last + 2] - path[last + 1]) \
+            if last + 2 < len(path) else path[last + 1]
+    if float(np.hypot(*np.diff(out, axis=0).T).sum()) < cfg.track_min_px:
+        return None
+    return out
+
+
+def _track_scratches(img: np.ndarray, level: np.ndarray, examined: list["_Examined"],
+                     cfg: DefectConfig) -> list["_Examined"]:
+    """Each scratch's ends followed where the furrow runs on (``_track_on``): its centre
+    line, length, place and direction take the stretch in, and it is ``partial`` when
+    the stretch reaches the frame's border."""
+    out = []
+    hh, ww = img.shape
+    for ex in examined:
+        d = ex.defect
+        if d is None or d.kind != "scratch" or ex.line is None or len(ex.line) < 2:
+            out.append(ex)
+            continue
+        blur = float(np.clip(ex.blur or BLUR_PRIOR_PX[0], 0.7, 2.8))
+        line = ex.line
+        partial = d.partial
+        grown = False
+        for k in (0, -1):
+            on = _track_on(img, level, line, k, d.width_px, blur, cfg)
+            if on is None:
+                continue
+            grown = True
+            line = np.vstack([on[::-1], line[1:]]) if k == 0 else np.vstack([line[:-1], on])
+            e = on[-1]
+            if e[0] <= 4.0 or e[1] <= 4.0 or e[0] >= ww - 5.0 or e[1] >= hh - 5.0:
+                partial = True
+        if not grown:
+            out.append(ex)
+            continue
+        seg = np.hypot(*np.diff(line, axis=0).T)
+        acc = np.concatenate([[0.0], np.cumsum(seg)])
+        x = float(np.interp(0.5 * acc[-1], acc, line[:, 0]))
+        y = float(np.interp(0.5 * acc[-1], acc, line[:, 1]))
+        chord = line[-1] - line[0]
+        angle = float(np.degrees(np.arctan2(chord[1], chord[0])) % 180.0)
+        length = d.length_px + float(acc[-1]) - float(np.hypot(*np.diff(ex.line, axis=0).T).sum())
+        nd = Defect(**{**asdict(d), "x_px": x, "y_px": y, "length_px": length, "angle_deg": angle,
+                       "partial": bool(partial)})
+        out.append(_Examined(nd, ex.region, ex.box, ex.cover, line, ex.blur))
+    # a piece whose centre line the other's followed stretch now runs along is the same
+    # furrow twice: the shorter goes
+    items = [ex for ex in out if ex.defect is not None and ex.defect.kind == "scratch" and ex.line is not None]
+    drop = set()
+    for a in items:
+        for b in items:
+            if a is b or id(b) in drop or b.defect.length_px < a.defect.length_px or \
+                    (b.defect.length_px == a.defect.length_px and id(a) < id(b)):
+                continue
+            tol = 0.5 * max(a.defect.width_px, b.defect.width_px) + 3.0
+            dense = _dense(a.line)
+            near = np.min(np.hypot(dense[:, None, 0] - b.line[None, :, 0], dense[:, None, 1] - b.line[None, :, 1]),
+                          axis=1) if len(dense) * len(b.line) <= 4_000_000 else np.full(len(dense), np.inf)
+            if float(np.mean(near <= tol + _spacing(b.line))) >= 0.8:
+                drop.add(id(a))
+                break
+    return [ex for ex in out if id(ex) not in drop]
+
+
+def _line_points(line: np.ndarray, step: float = 10.0) -> tuple[tuple[float, float], ...]:
+    """A centre line as points every ~``step`` px, its two ends kept."""
+    pts = _dense(line, step) if len(line) > 1 else line
+    return tuple((round(float(x), 2), round(float(y), 2)) for x, y in pts)
+
+
+def _spacing(line: np.ndarray) -> float:
+    """Half the largest step between a polyline's points (px)."""
+    return 0.5 * float(np.max(np.hypot(*np.diff(line, axis=0).T))) if len(line) > 1 else 0.0
+
+
+def _dense(line: np.ndarray, step: float = 2.0) -> np.ndarray:
+    """A polyline's points every ~``step`` px along it."""
+    seg = np.hypot(*np.diff(line, axis=0).T)
+    acc = np.concatenate([[0.0], np.cumsum(seg)])
+    at = np.linspace(0.0, acc[-1], max(int(acc[-1] / step), 1) + 1)
+    return np.column_stack([np.interp(at, acc, line[:, 0]), np.interp(at, acc, line[:, 1])])
+
+
+def _join_scratch_pieces(img: np.ndarray, level: np.ndarray, examined: list["_Examined"],
+                         cfg: DefectConfig) -> list["_Examined"]:
+    """Scratches of one frame that are pieces of one furrow (``_scratch_gap``) as one:
+    its centre line the pieces' and the gap's path, its length theirs along it, its
+    place that line's middle, its width the pieces' length-weighted mean."""
+    while True:
+        items = [ex for ex in examined if ex.defect is not None and ex.defect.kind == "scratch"
+                 and ex.line is not None and len(ex.line) >= 2]
+        best = None
+        for i, a in enumerate(items):
+            for b in items[i + 1:]:
+                r = _scratch_gap(img, level, a, b, cfg)
+                if r is not None and (best is None or r[0] < best[0]):
+                    best = (r[0], a, b, r)
+        if best is None:
+            return examined
+        _, a, b, (g, ka, kb, path) = best
+        la = a.line if ka == -1 else a.line[::-1]
+        lb = b.line if kb == 0 else b.line[::-1]
+        if g < 0:
+            # overlapping: b's line from where it passes a's end on
+            ta = _end_tangent(a.line, ka)
+            lb = lb[(lb - la[-1]) @ ta > 0.0]
+            line = np.vstack([la, lb])
+        else:
+            line = np.vstack([la, path[1:-1], lb])
+        da, db = a.defect, b.defect
+        seg = np.hypot(*np.diff(line, axis=0).T)
+        acc = np.concatenate([[0.0], np.cumsum(seg)])
+        length = float(acc[-1])
+        half = 0.5 * acc[-1]
+        x = float(np.interp(half, acc, line[:, 0]))
+        y = float(np.interp(half, acc, line[:, 1]))
+        chord = line[-1] - line[0]
+        angle = float(np.degrees(np.arctan2(chord[1], chord[0])) % 180.0)
+        wa, wb = da.length_px, db.length_px
+        width = (da.width_px * wa + db.width_px * wb) / (wa + wb)
+        width_u = (da.width_u_px * wa + db.width_u_px * wb) / (wa + wb)
+        sig = float(np.hypot(da.significance, db.significance))
+        d = Defect("scratch", x, y, length, width, _confidence(sig, cfg.min_significance), angle,
+                   float(np.hypot(da.length_u_px, db.length_u_px) / np.sqrt(2.0)), width_u, sig,
+                   bool(da.partial or db.partial))
+        x0, y0 = min(a.box[0], b.box[0]), min(a.box[1], b.box[1])
+        x1, y1 = max(a.box[2], b.box[2]), max(a.box[3], b.box[3])
+        region = np.zeros((y1 - y0, x1 - x0), bool)
+        cover = np.zeros_like(region)
+        for ex in (a, b):
+            bx0, by0, bx1, by1 = ex.box
+            region[by0 - y0:by1 - y0, bx0 - x0:bx1 - x0] |= ex.region
+            if ex.cover is not None:
+                cover[by0 - y0:by1 - y0, bx0 - x0:bx1 - x0] |= ex.cover
+        joined = _Examined(d, region, (x0, y0, x1, y1), cover, line, float(np.mean([a.blur or 0, b.blur or 0])))
+        examined = [ex for ex in examined if ex is not a and ex is not b] + [joined]
 
 
 def _examine(img: np.ndarray, box, seed: np.ndarray, zone: np.ndarray, angles_deg, wall_level: np.ndarray,
@@ -2375,6 +2749,8 @@ def _examine_once(img: np.ndarray, box, seed: np.ndarray, excl: np.ndarray, zone
         pts = np.round(np.column_stack(m["line"])).astype(np.int32)
         cv2.polylines(lines, [pts], False, 1, int(2 * m["half_band"] + 1))
         cover = lines.astype(bool)
+        line = np.column_stack(m["line"]) + np.array([x0, y0], float)
+        return _Examined(defect, region, tuple(box), cover, line, float(m["blur"])), m, kind
     return _Examined(defect, region, tuple(box), cover), m, kind
 
 
