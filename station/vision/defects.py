@@ -2293,7 +2293,8 @@ def _furrow_contrast(img: np.ndarray, level: np.ndarray, pts: np.ndarray, tangen
     dark = (1.0 - img[by0:by1, bx0:bx1].astype(np.float32) / np.maximum(level[by0:by1, bx0:bx1], 1.0))
     st = cv2.remap(dark.astype(np.float32), (mx - bx0).astype(np.float32), (my - by0).astype(np.float32),
                    cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=float("nan"))
-    with np.errstate(all="ignore"):
+    with warnings.catch_warnings():  # a point the frame does not hold: NaN, no warning
+        warnings.simplefilter("ignore", RuntimeWarning)
         return np.nanmean(st[in_core], axis=0) - np.nanmean(st[in_flank], axis=0)
 
 
@@ -2356,25 +2357,19 @@ def _scratch_gap(img: np.ndarray, level: np.ndarray, a: "_Examined", b: "_Examin
         if max(float(np.min(np.hypot(*(a.line - pb).T))), float(np.min(np.hypot(*(b.line - pa).T)))) > core + 4.0:
             return None
         return -g, ka, kb, np.vstack([pa, pb])
-    if g > 2.0:
-        u = (pb - pa) / g
-        if float(ta @ u) < cos_max or float(-tb @ u) < cos_max:
+    # end to end: each end off the other's continued line by no more than the core and
+    # the turn allowed over the gap (a centre line's last px bend as its fit likes: two
+    # pieces 9 px apart met with a 3 px jog, the gap 25 deg off their lines)
+    slack = np.tan(np.deg2rad(cfg.scratch_join_turn_deg))
+    for p0, t0, p1 in ((pa, ta, pb), (pb, tb, pa)):
+        w = p1 - p0
+        along = float(w @ t0)
+        if abs(float(t0[0] * w[1] - t0[1] * w[0])) > core + 2.0 + slack * max(along, 0.0):
             return None
     path, tang = _gap_path(pa, ta, pb, tb)
     if g > 2.0:
-        own = []
-        for ex, k in ((a, ka), (b, kb)):
-            pts = ex.line if k == -1 else ex.line[::-1]
-            seg = np.hypot(*np.diff(pts, axis=0).T)
-            to_end = np.concatenate([[0.0], np.cumsum(seg[::-1])])[::-1]
-            near = pts[(to_end <= 40.0) & (to_end >= 2.0 * blur)]
-            if len(near) < 2:
-                near = pts[-2:]
-            dense_t = np.linspace(0.0, 1.0, max(int(np.hypot(*(near[-1] - near[0]))), 2))
-            dense = near[0] + dense_t[:, None] * (near[-1] - near[0])
-            tv = (near[-1] - near[0]) / max(float(np.hypot(*(near[-1] - near[0]))), 1e-9)
-            own.append(np.nanmedian(_furrow_contrast(img, level, dense, np.tile(tv, (len(dense), 1)), core)))
-        ref = float(np.nanmin(own)) if np.isfinite(own).any() else np.nan
+        own = [_own_contrast(img, level, ex.line, k, core, blur) for ex, k in ((a, ka), (b, kb))]
+        ref = float(np.nanmin(own)) if np.isfinite(own).any() else float("nan")
         if not (ref > 0):
             return None
         c = _furrow_contrast(img, level, path, tang, core)
@@ -2399,7 +2394,8 @@ def _own_contrast(img: np.ndarray, level: np.ndarray, line: np.ndarray, k: int, 
         return float("nan")
     dense = near[0] + np.linspace(0.0, 1.0, max(int(span), 2))[:, None] * (near[-1] - near[0])
     tv = (near[-1] - near[0]) / span
-    return float(np.nanmedian(_furrow_contrast(img, level, dense, np.tile(tv, (len(dense), 1)), core)))
+    c = _furrow_contrast(img, level, dense, np.tile(tv, (len(dense), 1)), core)
+    return float(np.median(c[np.isfinite(c)])) if np.isfinite(c).any() else float("nan")
 
 
 def _track_on(img: np.ndarray, level: np.ndarray, line: np.ndarray, k: int, width: float, blur: float,
@@ -2443,9 +2439,12 @@ def _track_on(img: np.ndarray, level: np.ndarray, line: np.ndarray, k: int, widt
         cand = q[None, :] + offs[:, None] * n[None, :]
         seg = cand[:, None, :] + np.array([-3.0, -1.5, 0.0, 1.5, 3.0])[None, :, None] * t[None, None, :]
         c = _furrow_contrast(img, level, seg.reshape(-1, 2), np.tile(t, (seg.shape[0] * seg.shape[1], 1)), core)
-        c = np.nanmean(c.reshape(seg.shape[0], seg.shape[1]), axis=1)
+        c = c.reshape(seg.shape[0], seg.shape[1])
         if not np.isfinite(c).any():
             break
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            c = np.nanmean(c, axis=1)
         j = int(np.nanargmax(c))
         shift = float(np.clip(offs[j], -cfg.track_turn_px, cfg.track_turn_px))
         q = q + shift * n

@@ -244,12 +244,14 @@ def _bent_line(start_mm: tuple[float, float], orientation_deg: float, length_mm:
                             start_mm[1] + t * math.sin(a) + bend * math.cos(a)])
 
 
-def _seen(line: np.ndarray, centre: tuple[float, float], width_mm: float = 0.04, cut_short_px: float = 20.0):
+def _seen(line: np.ndarray, centre: tuple[float, float], width_mm: float = 0.04, cut_short_px: float = 20.0,
+          with_line: bool = False):
     """What a frame centred at ``centre`` (axial mm, angle deg) reports of a scratch along
     ``line``: each run of it inside the frame as one straight piece (its centre line's
     middle, its chord's direction, its arc length), ``partial`` where the border cuts it, a cut end
     read ``cut_short_px`` short of the border (the detector reads an end from a strip
-    across the furrow, which the border cuts)."""
+    across the furrow, which the border cuts). ``with_line``: each piece carries its
+    centre line (``Defect.line_px``, a point every ~10 px), as the detector reports it."""
     from station.vision.defects import Defect
 
     s, r = GEO.mm_per_px, GEO.bore_radius_mm
@@ -275,12 +277,17 @@ def _seen(line: np.ndarray, centre: tuple[float, float], width_mm: float = 0.04,
         mid = int(np.searchsorted(arc[keep] - arc[keep][0], length / 2.0))  # its middle, on the bent line
         ang = math.degrees(math.atan2(ys[-1] - ys[0], xs[-1] - xs[0])) % 180.0
         u_len = math.hypot(1.5 * 0.5, 1.0, 0.03 * length)  # the detector's: its fit, its model, a share
+        pts = None
+        if with_line:
+            k = np.unique(np.r_[np.arange(0, xs.size, 10), xs.size - 1])
+            pts = tuple((float(a), float(b)) for a, b in zip(xs[k], ys[k]))
         out.append(Defect("scratch", float(xs[mid]), float(ys[mid]), length, width_mm / s, 0.9, ang, u_len, 0.3,
-                          20.0, bool(cut_lo or cut_hi), None, length * s, width_mm, length * s, u_len * s, 0.003))
+                          20.0, bool(cut_lo or cut_hi), None, length * s, width_mm, length * s, u_len * s, 0.003,
+                          pts))
     return out
 
 
-def _sightings(scan, lines):
+def _sightings(scan, lines, with_line: bool = False):
     from station.inspection.surface_scan import _Sighting
 
     cx, cy = GEO.centre_px
@@ -289,7 +296,7 @@ def _sightings(scan, lines):
     for axial in scan.plan.axials_mm:
         for angle in scan.plan.angles_deg:
             for line in lines:
-                for d in _seen(line, (axial, angle)):
+                for d in _seen(line, (axial, angle), with_line=with_line):
                     ax, an = scan.place((axial, angle), d.x_px, d.y_px)
                     out.append(_Sighting(d, ax, an, math.hypot(d.x_px - cx, d.y_px - cy), k, (axial, angle)))
             k += 1
@@ -319,13 +326,15 @@ def _truth(line: np.ndarray, r: float) -> tuple[float, float, float]:
     ((math.radians(340.0) * 11.1, 64.0), 40.0, 14.0, (0.012, -0.01)),  # across a corner of four frames, and 0 deg
     ((math.radians(150.0) * 11.1, 62.5), 65.0, 24.0, (0.03, 0.03)),    # bent hard (2.5 sigma of the twin's modes)
 ], ids=["round", "along", "diagonal", "bent"])
-def test_a_scratch_longer_than_a_frame_is_joined_from_its_pieces(start, orientation, length, bends):
+@pytest.mark.parametrize("with_line", [False, True], ids=["chords", "centre lines"])
+def test_a_scratch_longer_than_a_frame_is_joined_from_its_pieces(start, orientation, length, bends, with_line):
     """A bent scratch that no frame sees whole: its pieces, each a straight chord of what
-    one frame shows with its cut ends read short, are joined into one scratch whose
-    length and place are the line's (the chords miss the bend by a few hundredths)."""
+    one frame shows with its cut ends read short (or, as the detector reports them, with
+    their centre lines), are joined into one scratch whose length and place are the
+    line's (the chords miss the bend by a few hundredths)."""
     scan = _scan()
     line = _bent_line(start, orientation, length, bends)
-    sightings = _sightings(scan, [line])
+    sightings = _sightings(scan, [line], with_line)
     assert len({sg.frame for sg in sightings}) >= 3 and all(sg.defect.length_mm < 13.0 for sg in sightings)
     chains, rest = scan.join_scratches(sightings)
     assert len(chains) == 1 and rest == [], (len(chains), len(rest))
@@ -341,7 +350,8 @@ def test_a_scratch_longer_than_a_frame_is_joined_from_its_pieces(start, orientat
     assert not scan.notes
 
 
-def test_pieces_of_other_scratches_are_not_joined():
+@pytest.mark.parametrize("with_line", [False, True], ids=["chords", "centre lines"])
+def test_pieces_of_other_scratches_are_not_joined(with_line):
     """Two parallel scratches 0.4 mm apart (within what a bend may put between two pieces
     of one) and one crossing them, all across the same seams: three scratches, each from
     its own pieces."""
@@ -350,12 +360,34 @@ def test_pieces_of_other_scratches_are_not_joined():
     a = _bent_line((math.radians(195.0) * r, 72.0), 5.0, 20.0, bends=(0.0, 0.0))
     b = _bent_line((math.radians(195.0) * r, 72.4), 5.0, 20.0, bends=(0.0, 0.0))
     c = _bent_line((math.radians(209.0) * r, 66.0), 85.0, 12.0)
-    sightings = _sightings(scan, [a, b, c])
+    sightings = _sightings(scan, [a, b, c], with_line)
     chains, rest = scan.join_scratches(sightings)
     assert len(chains) == 3 and rest == []
     lengths = sorted(_run(scan.measure_joined(ch)).length_mm for ch in chains)
     truths = sorted(_truth(x, r)[0] for x in (a, b, c))
     assert np.allclose(lengths, truths, atol=0.05), (lengths, truths)
+
+
+def test_a_scratch_bent_in_an_s_is_joined_by_its_pieces_centre_lines():
+    """A long scratch bent in an S (3.5 % of its length in the second mode, as on a fresh
+    whole-surface part where it was reported as two): the pieces' chords and middles miss
+    one parabola by more than the bend allows, their centre lines agree where they overlap
+    and continue each other across the gaps. Joined from the lines, its length and middle
+    are the line's."""
+    scan = _scan()
+    r = GEO.bore_radius_mm
+    line = _bent_line((math.radians(300.0) * r, 70.0), 15.0, 17.0, bends=(0.004, 0.035))
+    chords = _sightings(scan, [line])
+    chains, rest = scan.join_scratches(chords)
+    assert not (len(chains) == 1 and rest == [])  # the chords' rule does not hold it together
+    sightings = _sightings(scan, [line], with_line=True)
+    chains, rest = scan.join_scratches(sightings)
+    assert len(chains) == 1 and rest == [], (len(chains), len(rest))
+    d = _run(scan.measure_joined(chains[0]))
+    arc, axial, angle = _truth(line, r)
+    assert abs(d.length_mm - arc) <= max(0.005 * arc, 0.03), (d.length_mm, arc)
+    err = math.hypot(d.axial_mm - axial, math.radians((d.angle_deg - angle + 180) % 360 - 180) * r)
+    assert err <= 0.05, err
 
 
 def test_a_scratch_one_frame_saw_whole_is_left_to_the_merge():
