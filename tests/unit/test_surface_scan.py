@@ -444,3 +444,53 @@ def test_the_surface_bench_draws_long_scratches_in_the_band_clear_of_the_holes_a
         off = min(abs((d.orientation_deg - g + 90) % 180 - 90) for g in (STANDARD_SAMPLE.hatch_deg,
                                                                            180 - STANDARD_SAMPLE.hatch_deg))
         assert off >= 10.0 - 1e-9
+
+
+def test_a_scratch_a_frame_lost_is_followed_from_its_cut_ends_and_joined_whole():
+    """The coverage frames lose the middle of a long scratch (on the twin: a stretch bent
+    along the hatch, both its ends at a frame's border). Its neighbours' pieces end at
+    their borders with nothing to continue them, so the scan takes a frame centred on each
+    such end (``follow_scratches``): there the scratch runs through the middle, and its
+    pieces join the rest into one scratch of the line's length. Without the followed
+    frames the pieces stay apart."""
+    from station.inspection.surface_scan import _Sighting
+
+    scan = _scan()
+    r = GEO.bore_radius_mm
+    line = _bent_line((math.radians(282.0) * r, 70.0), 6.0, 24.0, bends=(0.004, 0.02))
+    sightings = _sightings(scan, [line], with_line=True)
+    # the column of frames that holds its middle loses it (each ring's frame there)
+    middle = min(sightings, key=lambda sg: scan.wall_mm((sg.axial_mm, sg.angle_deg), _truth(line, r)[1:]))
+    lost = [sg for sg in sightings if sg.centre[1] != middle.centre[1]]
+    chains, rest = scan.join_scratches(lost)
+    assert len(chains) + len([sg for sg in rest if sg.defect.kind == "scratch"]) >= 2  # broken where it was lost
+
+    looks = []
+
+    def move(axial, angle, forward=False):
+        looks.append((axial, angle % 360.0))
+        return looks[-1]
+        yield  # a generator, as the station's move is
+
+    def frame():
+        return None, _seen(line, looks[-1], with_line=True)
+        yield
+
+    scan.move, scan.frame = move, frame
+    gen = scan.follow_scratches(lost)
+    try:
+        while True:
+            msg = next(gen)
+            assert type(msg).__name__ == "Checkpoint", msg
+    except StopIteration as stop:
+        extra = stop.value
+    assert extra and all(isinstance(sg, _Sighting) and sg.frame < 0 for sg in extra)
+    assert 1 <= len(looks) <= scan.cfg.follow_max_looks
+    assert any("follow" in n for n in scan.notes)
+    chains, rest = scan.join_scratches(lost + extra)
+    assert len(chains) == 1 and [sg for sg in rest if sg.defect.kind == "scratch"] == []
+    d = _run(scan.measure_joined(chains[0]))
+    arc, axial, angle = _truth(line, r)
+    assert abs(d.length_mm - arc) <= max(0.005 * arc, 0.03), (d.length_mm, arc)
+    err = math.hypot(d.axial_mm - axial, math.radians((d.angle_deg - angle + 180) % 360 - 180) * r)
+    assert err <= 0.05, err
