@@ -17,7 +17,7 @@ import pytest
 from typer.testing import CliRunner
 
 from sim.camera.defects import DefectSpec, geometry, random_defect_frame
-from sim.camera.render import FrameParams, HoleSpec, random_frame, render_frame
+from sim.camera.render import FrameParams, HoleSpec, random_frame, render_frame, wall_patch
 from station.bench.defects import match
 from station.cli import app
 from station.vision.defects import _groove_profiles, detect_defects, honing_directions
@@ -892,6 +892,52 @@ def test_the_walls_level_is_raised_only_where_it_reads_brighter_beyond_the_rim()
     before, after, clean = crossing(share[:, 130]), crossing(lifted[:, 130]), crossing(share[:, 20])
     assert clean - before > 0.5  # the brighter wall moved the crossing in
     assert after == pytest.approx(clean, abs=0.02)
+
+
+def _with_groove_stretch(wall: np.ndarray, x0: float, y0: float, angle_deg: float, length_px: float,
+                         depth: float, width_px: float = 4.0, fade: float = 0.3) -> np.ndarray:
+    """The wall's radiance with a deep groove's stretch cut in it: from (x0, y0) along
+    ``angle_deg`` for ``length_px``, ``depth`` dark at its start and fading out over the
+    last ``fade`` of its length (a groove whose depth the frame's wall model, a mean
+    along the groove's whole line, does not hold)."""
+    h, w = wall.shape
+    yy, xx = np.mgrid[0:h, 0:w].astype(np.float32)
+    ux, uy = np.cos(np.deg2rad(angle_deg)), np.sin(np.deg2rad(angle_deg))
+    t = (xx - x0) * ux + (yy - y0) * uy
+    n = -(xx - x0) * uy + (yy - y0) * ux
+    along = np.where((t >= 0) & (t <= length_px), np.clip((1.0 - t / length_px) / fade, 0.0, 1.0), 0.0)
+    return wall * (1.0 - depth * along * np.exp(-0.5 * (n / (width_px / 2)) ** 2)).astype(np.float32)
+
+
+@pytest.mark.parametrize("case", range(5))
+def test_a_pore_in_line_with_a_deep_grooves_stretch_is_found_alone_and_measured(case):
+    """A deep groove's stretch that ends 8-25 px short of a pore and points at it is a
+    candidate in line with the pore's, and the two are grouped (as a faint scratch's pieces
+    are). The pore was measured with the stretch: on the surface bench's seed 24203 a
+    0.31 mm pore of contrast ~0.6 was lost (its frame's only defect); here one of these five
+    was lost (the 30 deg stretch 15 px off) and two read 35 and 42 px for 30, their places
+    7-8 px off. A pore is one cavity: the region's part round its peak is measured, and a
+    region taken for a piece of groove is looked at again for a dark compact core. Each is
+    found once, in place and within the tolerance; the stretch alone is nothing. (A
+    stretch 8 px off the pore, whose skirt joins the pore's region, still narrows it 1.8
+    px, 13 % of 24: a known limit, not tested here.)"""
+    angle, gap = [(150.0, 10.0), (30.0, 15.0), (150.0, 20.0), (330.0, 12.0), (210.0, 25.0)][case]
+    p = FrameParams(wall_level_dn=140.0, hole_level_dn=45.0, groove_depth=0.07, grain=0.03, blotch=0.03,
+                    blur_sigma_px=1.4, gain_e_per_dn=30.0, read_noise_dn=1.5, vignetting=0.2, **SMALL)
+    cx, cy = 320.3, 260.6
+    ux, uy = np.cos(np.deg2rad(angle)), np.sin(np.deg2rad(angle))
+    wall = _with_groove_stretch(wall_patch(p, 70 + case), cx + (15 + gap) * ux, cy + (15 + gap) * uy, angle,
+                                150.0, 0.35)
+    pore = DefectSpec("pore", cx, cy, 30.0, 22.0, 20.0 * case, 0.35, shape_seed=50 + case)
+    f = render_frame(p, [], seed=90 + case, wall=wall, defects=[pore])
+    (truth,) = [d.with_scale(MM_PER_PX) for d in f.defects]
+    found = detect_defects(f.image, MM_PER_PX)
+    assert [d.kind for d in found] == ["pore"], found
+    (d,) = found
+    assert np.hypot(d.x_px - truth.x_px, d.y_px - truth.y_px) < 2.0, (d.x_px, d.y_px)
+    assert _within(d.length_mm, truth.length_mm), (d.length_px, truth.length_px)
+    assert _within(d.width_mm, truth.width_mm), (d.width_px, truth.width_px)
+    assert detect_defects(render_frame(p, [], seed=90 + case, wall=wall).image, MM_PER_PX) == []
 
 
 def test_a_broad_faint_mark_at_a_crossing_of_deep_grooves_is_no_pore():
