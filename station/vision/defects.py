@@ -2750,22 +2750,30 @@ def _examine_once(img: np.ndarray, box, seed: np.ndarray, excl: np.ndarray, zone
             # a piece of groove the wall model left, or a pore with such a piece attached
             return _core_pore(patch, rs, seed, region, zone[y0:y1, x0:x1], peak, box, at_border_of(region),
                               angles_deg, cfg, max_width_px, blur_hint)
-    beside = None
-    if not elongated:
-        region, beside = _peak_part(region, rs, seed)
-    at_border = at_border_of(region)
+
+    def as_pore(reg: np.ndarray, allow_scratch: bool = True):
+        # a pore is one cavity: of a region in parts, the part round the peak when it
+        # passes as a pore alone (``_peak_part``); else the whole region, as it stood
+        part, beside = _peak_part(reg, rs, seed)
+        if beside is not None:
+            mp = _measure_pore(patch, part, cfg, blur_hint=blur_hint, beside=beside)
+            if mp is not None and not mp.get("scratch") and \
+                    _accept(mp, "pore", box, at_border_of(part), angles_deg, cfg, max_width_px) is not None:
+                return part, mp
+        return reg, _measure_pore(patch, reg, cfg, allow_scratch=allow_scratch, blur_hint=blur_hint)
+
     if elongated:
         m = _measure_scratch(patch, region, blur_hint)
     else:
-        m = _measure_pore(patch, region, cfg, blur_hint=blur_hint, beside=beside)
+        region, m = as_pore(region)
     if m is not None and m.get("scratch"):
         elongated = True
         m = _measure_scratch(patch, region, blur_hint)
     kind = "scratch" if elongated else "pore"
     if kind == "scratch" and m is not None and m["length"] < cfg.scratch_elongation * m["width"]:
-        region, beside = _peak_part(region, rs, seed)  # short, broad: a pore, one cavity
-        at_border = at_border_of(region)
-        kind, m = "pore", _measure_pore(patch, region, cfg, allow_scratch=False, blur_hint=blur_hint, beside=beside)
+        region, m = as_pore(region, allow_scratch=False)  # short, broad
+        kind = "pore"
+    at_border = at_border_of(region)
     if kind == "scratch" and m is not None:
         m["along_share"] = _along_share(rs, region, m["angle"], angles_deg)
         if any(_circ_diff_deg(m["angle"], g) < cfg.groove_alignment_deg for g in angles_deg):
