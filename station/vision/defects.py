@@ -2783,8 +2783,11 @@ def _examine_once(img: np.ndarray, box, seed: np.ndarray, excl: np.ndarray, zone
             m["square_end"], m["runs_on"] = _square_end(img, wall_level, x0, y0, m, cfg)
     defect = _accept(m, kind, box, at_border, angles_deg, cfg, max_width_px)
     if defect is None:
-        return _core_pore(patch, rs, seed, region, zone[y0:y1, x0:x1], peak, box, at_border, angles_deg, cfg,
+        core = _core_pore(patch, rs, seed, region, zone[y0:y1, x0:x1], peak, box, at_border, angles_deg, cfg,
                           max_width_px, blur_hint)
+        if core[0].defect is not None:
+            return core
+        # else as it stood: a cut scratch that failed is examined again in a grown patch
     cover = None
     if defect is not None and kind == "scratch":
         # what the scratch covers: its centre line, its half width and blur either side
@@ -2829,9 +2832,9 @@ def _core_pore(patch: _Patch, rs: np.ndarray, seed: np.ndarray, region: np.ndarr
     if peak < cfg.core_min_peak or at_border or not seed.any():
         return none
     dark = (rs > cfg.core_share * peak) & region & ~zone
-    n_lab, labels = cv2.connectedComponents(dark.astype(np.uint8), connectivity=8)
-    if n_lab < 2:
+    if not (seed & dark).any():
         return none
+    n_lab, labels = cv2.connectedComponents(dark.astype(np.uint8), connectivity=8)
     at = np.unravel_index(int(np.argmax(np.where(seed & dark, rs, -np.inf))), rs.shape)
     core = labels == labels[at]
     n = int(core.sum())
