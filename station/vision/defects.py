@@ -2287,8 +2287,7 @@ def _end_tangent(line: np.ndarray, k: int, back_px: float = 20.0) -> np.ndarray:
     """The unit direction out of a centre line's end ``k`` (0 or -1), from the point
     ``back_px`` along it inside the end."""
     pts = line if k == -1 else line[::-1]
-    seg = np.hypot(*np.diff(pts, axis=0).T)
-    acc = np.concatenate([[0.0], np.cumsum(seg[::-1])])[::-1]  # distance to the end
+    acc = _to_end(pts)
     i = int(np.argmin(np.abs(acc - min(back_px, acc[0]))))
     v = pts[-1] - pts[i]
     n = float(np.hypot(*v))
@@ -2404,8 +2403,7 @@ def _own_contrast(img: np.ndarray, level: np.ndarray, line: np.ndarray, k: int, 
     """The raw furrow contrast (``_furrow_contrast``) along a centre line's last 40 px
     inside its end ``k`` (clear of the end's blur): the median."""
     pts = line if k == -1 else line[::-1]
-    seg = np.hypot(*np.diff(pts, axis=0).T)
-    to_end = np.concatenate([[0.0], np.cumsum(seg[::-1])])[::-1]
+    to_end = _to_end(pts)
     near = pts[(to_end <= 40.0) & (to_end >= 2.0 * blur)]
     if len(near) < 2:
         near = pts[-2:]
@@ -2534,13 +2532,8 @@ def _track_scratches(img: np.ndarray, level: np.ndarray, examined: list["_Examin
         if not grown:
             out.append(ex)
             continue
-        seg = np.hypot(*np.diff(line, axis=0).T)
-        acc = np.concatenate([[0.0], np.cumsum(seg)])
-        x = float(np.interp(0.5 * acc[-1], acc, line[:, 0]))
-        y = float(np.interp(0.5 * acc[-1], acc, line[:, 1]))
-        chord = line[-1] - line[0]
-        angle = float(np.degrees(np.arctan2(chord[1], chord[0])) % 180.0)
-        length = d.length_px + float(acc[-1]) - float(np.hypot(*np.diff(ex.line, axis=0).T).sum())
+        along, x, y, angle = _line_place(line)
+        length = d.length_px + along - _line_place(ex.line)[0]
         nd = Defect(**{**asdict(d), "x_px": x, "y_px": y, "length_px": length, "angle_deg": angle,
                        "partial": bool(partial)})
         out.append(_Examined(nd, ex.region, ex.box, ex.cover, line, ex.blur))
@@ -2561,6 +2554,22 @@ def _track_scratches(img: np.ndarray, level: np.ndarray, examined: list["_Examin
                 drop.add(id(a))
                 break
     return [ex for ex in out if id(ex) not in drop]
+
+
+def _line_place(line: np.ndarray) -> tuple[float, float, float, float]:
+    """A centre line's length along it, its middle (x, y: halfway along) and its chord's
+    direction (deg, 0-180): (length, x, y, angle)."""
+    acc = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(line, axis=0).T))])
+    half = 0.5 * acc[-1]
+    chord = line[-1] - line[0]
+    return (float(acc[-1]), float(np.interp(half, acc, line[:, 0])), float(np.interp(half, acc, line[:, 1])),
+            float(np.degrees(np.arctan2(chord[1], chord[0])) % 180.0))
+
+
+def _to_end(pts: np.ndarray) -> np.ndarray:
+    """Each polyline point's distance along it to its last point (px)."""
+    seg = np.hypot(*np.diff(pts, axis=0).T)
+    return np.concatenate([[0.0], np.cumsum(seg[::-1])])[::-1]
 
 
 def _line_points(line: np.ndarray, step: float = 10.0) -> tuple[tuple[float, float], ...]:
@@ -2609,14 +2618,7 @@ def _join_scratch_pieces(img: np.ndarray, level: np.ndarray, examined: list["_Ex
         else:
             line = np.vstack([la, path[1:-1], lb])
         da, db = a.defect, b.defect
-        seg = np.hypot(*np.diff(line, axis=0).T)
-        acc = np.concatenate([[0.0], np.cumsum(seg)])
-        length = float(acc[-1])
-        half = 0.5 * acc[-1]
-        x = float(np.interp(half, acc, line[:, 0]))
-        y = float(np.interp(half, acc, line[:, 1]))
-        chord = line[-1] - line[0]
-        angle = float(np.degrees(np.arctan2(chord[1], chord[0])) % 180.0)
+        length, x, y, angle = _line_place(line)
         wa, wb = da.length_px, db.length_px
         width = (da.width_px * wa + db.width_px * wb) / (wa + wb)
         width_u = (da.width_u_px * wa + db.width_u_px * wb) / (wa + wb)
@@ -2732,10 +2734,8 @@ def _examine_once(img: np.ndarray, box, seed: np.ndarray, excl: np.ndarray, zone
 
     yy, xx = np.nonzero(region)
     wts = np.clip(rs[region], 1e-6, None)
-    mx_, my_, ang, cov = _weighted_pca(xx.astype(float), yy.astype(float), wts)
+    mx_, my_, ang, ext_l, ext_w = _extents(xx, yy, wts)
     ca, sa = np.cos(ang), np.sin(ang)
-    ext_l = float(np.ptp(xx * ca + yy * sa)) + 1.0
-    ext_w = float(np.ptp(-xx * sa + yy * ca)) + 1.0
     elongated = ext_l >= cfg.scratch_elongation * ext_w and ext_l >= 12.0
     if elongated and any(_circ_diff_deg(float(np.rad2deg(ang) % 180.0), g) < cfg.groove_alignment_deg
                          for g in angles_deg):
@@ -2800,6 +2800,22 @@ def _examine_once(img: np.ndarray, box, seed: np.ndarray, excl: np.ndarray, zone
     return _Examined(defect, region, tuple(box), cover), m, kind
 
 
+def _round_peak(mask: np.ndarray, rs: np.ndarray, seed: np.ndarray) -> tuple[np.ndarray, int]:
+    """The connected part (8-connected) of ``mask`` round the seed's darkest pixel in it
+    (the seed must meet the mask), and how many parts the mask has."""
+    n_lab, labels = cv2.connectedComponents(mask.astype(np.uint8), connectivity=8)
+    at = np.unravel_index(int(np.argmax(np.where(seed & mask, rs, -np.inf))), rs.shape)
+    return labels == labels[at], n_lab - 1
+
+
+def _extents(xx: np.ndarray, yy: np.ndarray, wts: np.ndarray) -> tuple[float, float, float, float, float]:
+    """Pixels' weighted centre, principal direction (rad) and their extents along it and
+    across it (px, end pixels included): (mx, my, angle, along, across)."""
+    mx, my, ang, _ = _weighted_pca(xx.astype(float), yy.astype(float), wts)
+    ca, sa = np.cos(ang), np.sin(ang)
+    return mx, my, ang, float(np.ptp(xx * ca + yy * sa)) + 1.0, float(np.ptp(-xx * sa + yy * ca)) + 1.0
+
+
 def _peak_part(region: np.ndarray, rs: np.ndarray, seed: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
     """Of a region in several parts, the part round the seed's darkest pixel, and the
     rest (None: one part): a pore is one cavity. A deep groove's stretch in line with a
@@ -2807,11 +2823,11 @@ def _peak_part(region: np.ndarray, rs: np.ndarray, seed: np.ndarray) -> tuple[np
     scratch's pieces), and the pore was measured with the stretch beside it (a 30 px pore
     20 px from a stretch's end read 42 px, its place 8 px off; the surface bench's seed
     24203 lost a 0.31 mm pore so, read with the stretch as one broad faint mark)."""
-    n_lab, labels = cv2.connectedComponents(region.astype(np.uint8), connectivity=8)
-    if n_lab <= 2 or not (seed & region).any():
+    if not (seed & region).any():
         return region, None
-    at = np.unravel_index(int(np.argmax(np.where(seed & region, rs, -np.inf))), rs.shape)
-    part = labels == labels[at]
+    part, parts = _round_peak(region, rs, seed)
+    if parts <= 1:
+        return region, None
     return part, region & ~part
 
 
@@ -2834,17 +2850,12 @@ def _core_pore(patch: _Patch, rs: np.ndarray, seed: np.ndarray, region: np.ndarr
     dark = (rs > cfg.core_share * peak) & region & ~zone
     if not (seed & dark).any():
         return none
-    n_lab, labels = cv2.connectedComponents(dark.astype(np.uint8), connectivity=8)
-    at = np.unravel_index(int(np.argmax(np.where(seed & dark, rs, -np.inf))), rs.shape)
-    core = labels == labels[at]
+    core, _ = _round_peak(dark, rs, seed)
     n = int(core.sum())
     if n < 8 or n > cfg.core_max_share * int(region.sum()):
         return none  # no core, or the region is its core: measured as it stood
     yy, xx = np.nonzero(core)
-    _, _, ang, _ = _weighted_pca(xx.astype(float), yy.astype(float), np.clip(rs[core], 1e-6, None))
-    ca, sa = np.cos(ang), np.sin(ang)
-    ext_l = float(np.ptp(xx * ca + yy * sa)) + 1.0
-    ext_w = float(np.ptp(-xx * sa + yy * ca)) + 1.0
+    *_, ext_l, ext_w = _extents(xx, yy, np.clip(rs[core], 1e-6, None))
     if ext_l >= cfg.scratch_elongation * ext_w:
         return none  # a line: the furrows' and the scratches' business, not a pore's
     m = _measure_pore(patch, core, cfg, allow_scratch=False, blur_hint=blur_hint)
