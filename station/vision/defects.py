@@ -188,6 +188,19 @@ class DefectConfig:
     #: the whole-surface scan's one false scratch (station bench surface, seed 23300);
     #: the defect bench's recall and sizes are the same at 6 and 8 (seed 80000)
     groove_alignment_deg: float = 7.5
+    #: ... and crosses no more of the family's lines than this over its length (px across
+    #: them: the chord's length x sin of its angle off the family). A groove is a line of
+    #: its family and its residue runs along it (clean frames: 76 of 77 station, 332 of
+    #: 345 wide and 158 of 176 twin pieces within 4 px; 3 at the frame's edge, where the
+    #: endoscope's distortion bends the grooves, 8.5-17 px), where a scratch a few degrees
+    #: off the hatch crosses the lines (a 2 mm scratch 4.7 deg off: 16 px). A mark that
+    #: crosses more is judged as any scratch is (session 49)
+    hatch_cross_px: float = 8.0
+    #: ... but only when the two families read are mirrored about the bore's axis within
+    #: this (deg), as a hatch is: a long dark scratch a few degrees off the hatch can draw
+    #: the frame's reading of a family to itself (a 640 x 512 frame: 24.3 and 150.0 deg
+    #: read for a 30 deg hatch), and the true grooves then cross "the family" by 10-50 px
+    hatch_mirror_deg: float = 1.0
     #: ... unless it ends in cuts: a scratch is a furrow and ends in a step of its darkness
     #: blurred by the camera alone, where a groove fades along its length over tens of px
     #: (the renderer's amplitude field, ~96 px cells; worn stones) and runs on. At each end
@@ -358,6 +371,21 @@ def _confidence(significance: float, threshold: float) -> float:
 
 def _circ_diff_deg(a: float, b: float, period: float = 180.0) -> float:
     return abs((a - b + period / 2) % period - period / 2)
+
+
+def _along_hatch(angle_deg: float, length_px: float, angles_deg, cfg: "DefectConfig") -> bool:
+    """Whether a mark of direction ``angle_deg`` and length ``length_px`` runs along a
+    groove family (``angles_deg``, the frame's two): within ``cfg.groove_alignment_deg``
+    of one and, when the two are mirrored about the bore's axis as a hatch is (within
+    ``cfg.hatch_mirror_deg``), crossing no more than ``cfg.hatch_cross_px`` of its lines
+    over its length."""
+    near = [g for g in angles_deg if _circ_diff_deg(angle_deg, g) < cfg.groove_alignment_deg]
+    if not near:
+        return False
+    if len(angles_deg) != 2 or _circ_diff_deg(float(angles_deg[0]), -float(angles_deg[1])) > cfg.hatch_mirror_deg:
+        return True  # the families read are not a mirrored pair: no line to cross is known
+    g = min(near, key=lambda a: _circ_diff_deg(angle_deg, a))
+    return bool(length_px * np.sin(np.deg2rad(_circ_diff_deg(angle_deg, g))) <= cfg.hatch_cross_px)
 
 
 # ---------------------------------------------------------------- the wall, whole frame
@@ -2737,8 +2765,7 @@ def _examine_once(img: np.ndarray, box, seed: np.ndarray, excl: np.ndarray, zone
     mx_, my_, ang, ext_l, ext_w = _extents(xx, yy, wts)
     ca, sa = np.cos(ang), np.sin(ang)
     elongated = ext_l >= cfg.scratch_elongation * ext_w and ext_l >= 12.0
-    if elongated and any(_circ_diff_deg(float(np.rad2deg(ang) % 180.0), g) < cfg.groove_alignment_deg
-                         for g in angles_deg):
+    if elongated and _along_hatch(float(np.rad2deg(ang) % 180.0), ext_l, angles_deg, cfg):
         # along the hatch: most such marks are the grooves' residue, and measuring each as a
         # scratch cost the twin's frames 1.26x their time; the ends' test on the region's
         # own axis first (loosely: a piece that runs on may be a longer scratch's)
@@ -2776,10 +2803,12 @@ def _examine_once(img: np.ndarray, box, seed: np.ndarray, excl: np.ndarray, zone
     at_border = at_border_of(region)
     if kind == "scratch" and m is not None:
         m["along_share"] = _along_share(rs, region, m["angle"], angles_deg)
+        m["along_hatch"] = _along_hatch(m["angle"], m["length"], angles_deg, cfg)
         if any(_circ_diff_deg(m["angle"], g) < cfg.groove_alignment_deg for g in angles_deg):
-            # along the hatch: a scratch if it ends in cuts (``_accept``); one cut end and the
-            # other running on is a piece of a longer scratch (the wall model's grooves along
-            # its line took the rest in), measured again along it (``_examine``)
+            # near the hatch: along it, a scratch if it ends in cuts (``_accept``); one cut end
+            # and the other running on is a piece of a longer scratch (the wall model's
+            # grooves along its line took the rest in), measured again along it (``_examine``),
+            # as is a piece of one that crosses the lines (``_along_hatch``)
             m["square_end"], m["runs_on"] = _square_end(img, wall_level, x0, y0, m, cfg)
     defect = _accept(m, kind, box, at_border, angles_deg, cfg, max_width_px)
     if defect is None:
@@ -2981,7 +3010,7 @@ def _accept(m: dict | None, kind: str, box, at_border: bool, angles_deg, cfg: De
         return None  # broad and faint: the cross-hatch's residue, not a cavity
     if kind == "scratch" and (m["contrast"] < cfg.min_scratch_contrast or m["blur"] > cfg.max_edge_blur_px
                               or m["width"] > max_width_px or m["length"] < cfg.scratch_elongation * m["width"]
-                              or (any(_circ_diff_deg(m["angle"], g) < cfg.groove_alignment_deg for g in angles_deg)
+                              or (m.get("along_hatch", False)
                                   and (not m.get("square_end", False)
                                        or m["contrast"] < cfg.aligned_min_scratch_contrast))
                               or m.get("along_share", 1.0) < cfg.min_scratch_along_share):
