@@ -406,6 +406,39 @@ def test_a_scratch_one_frame_saw_whole_is_left_to_the_merge():
     assert chains == [] and len(rest) == len(sightings)
 
 
+def test_a_pore_beside_a_long_scratch_is_merged_apart_from_it():
+    """Sightings of one defect lie within ``merge_mm`` plus half the longer's length of
+    each other; a pore and a scratch, within ``merge_mm`` plus half the shorter's. With
+    the longer's, a 0.28 mm pore 2.6 mm from a 4.9 mm scratch's middle (and clear of the
+    scratch) was grouped with it and measured as the scratch alone (whole-surface seed
+    24405). A pore read where a short scratch was seen from the next frame is still one
+    defect with it; two sightings of the long scratch are one."""
+    from station.inspection.surface_scan import _Sighting
+    from station.vision.defects import Defect
+
+    scan = _scan()
+
+    def sighting(kind, axial, angle, length_mm, frame):
+        n = length_mm / GEO.mm_per_px
+        d = Defect(kind, 640.0, 512.0, n, 3.0, 0.9, 90.0, 1.0, 0.3, 20.0, False, None, length_mm, 0.03,
+                   length_mm, 0.01, 0.003)
+        return _Sighting(d, axial, angle, 300.0, frame, (axial, angle))
+
+    def groups(sgs):
+        return sorted(sorted((sg.defect.kind, sg.frame) for sg in g) for g in scan.merge(sgs))
+
+    per_deg = math.radians(1.0) * GEO.bore_radius_mm
+    long_a = sighting("scratch", 57.34, 221.50, 4.81, 40)
+    long_b = sighting("scratch", 57.34 + 0.1, 221.50 + 0.1 / per_deg, 4.80, 41)
+    pore_a = sighting("pore", 54.87, 226.44, 0.27, 34)
+    pore_b = sighting("pore", 54.89, 226.43, 0.26, 40)
+    assert groups([long_a, long_b, pore_a, pore_b]) == [[("pore", 34), ("pore", 40)],
+                                                        [("scratch", 40), ("scratch", 41)]]
+    short = sighting("scratch", 30.0, 100.0, 0.40, 10)
+    read_as_pore = sighting("pore", 30.05, 100.0 + 0.1 / per_deg, 0.30, 11)
+    assert groups([short, read_as_pore]) == [[("pore", 11), ("scratch", 10)]]
+
+
 def test_a_scratch_running_out_of_the_band_is_measured_as_far_as_the_band_shows_and_says_so():
     scan = _scan()
     lo, hi = scan.plan.band_mm
