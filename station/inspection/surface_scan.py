@@ -66,9 +66,11 @@ class SurfaceSettings:
     recentre_reach_px: float = 200.0
     #: sightings of one defect from overlapping frames lie within this (mm) plus half the
     #: longer's length of each other (the distortion moves a corner's sighting ~0.2 mm);
-    #: a pore's and a scratch's, within it plus half the *shorter's*: the longer's half
-    #: length took in a 0.28 mm pore 2.6 mm from a 4.9 mm scratch's middle, and the group
-    #: was measured as the scratch alone (whole-surface seed 24405, session 49)
+    #: a pore's and a scratch's, within it plus half the *shorter's*, or the pore within it
+    #: of the scratch's chord: the longer's half length took in a 0.28 mm pore 1.3 mm
+    #: beside a 4.9 mm scratch, and the group was measured as the scratch alone
+    #: (whole-surface seed 24405), while a long scratch's end that a frame's border cuts
+    #: reads as a small pore on its line (seed 24402; session 49)
     merge_mm: float = 0.35
     #: pieces of one scratch longer than a frame, each cut by a frame's border, are
     #: joined when they overlap along the furrow or are apart by at most
@@ -423,7 +425,8 @@ class _SurfaceScan:
     def merge(self, sightings: list[_Sighting]) -> list[list[_Sighting]]:
         """Sightings of one defect (within ``merge_mm`` plus half the longer's length of
         each other, the same family: wall or rim; a pore and a scratch within ``merge_mm``
-        plus half the shorter's) as one group."""
+        plus half the shorter's, or the pore within ``merge_mm`` of the scratch's chord:
+        :meth:`on_scratch`) as one group."""
         parent = list(range(len(sightings)))
 
         def root(i: int) -> int:
@@ -435,13 +438,28 @@ class _SurfaceScan:
                 if self.family(a.defect.kind) != self.family(b.defect.kind):
                     continue
                 la, lb = a.defect.length_mm or 0.0, b.defect.length_mm or 0.0
-                reach = self.cfg.merge_mm + 0.5 * (max(la, lb) if a.defect.kind == b.defect.kind else min(la, lb))
-                if self.wall_mm((a.axial_mm, a.angle_deg), (b.axial_mm, b.angle_deg)) <= reach:
+                same = a.defect.kind == b.defect.kind
+                reach = self.cfg.merge_mm + 0.5 * (max(la, lb) if same else min(la, lb))
+                if self.wall_mm((a.axial_mm, a.angle_deg), (b.axial_mm, b.angle_deg)) <= reach or \
+                        (not same and self.on_scratch(a, b)):
                     parent[root(i)] = root(j)
         groups: dict[int, list[_Sighting]] = {}
         for i, s in enumerate(sightings):
             groups.setdefault(root(i), []).append(s)
         return list(groups.values())
+
+    def on_scratch(self, a: _Sighting, b: _Sighting) -> bool:
+        """Whether, of a scratch's sighting and another kind's, the other lies within
+        ``merge_mm`` of the scratch's chord (its end cut by a frame's border reads as a
+        small pore there: whole-surface seed 24402)."""
+        sc, other = (a, b) if a.defect.kind == "scratch" else (b, a)
+        if sc.defect.kind != "scratch":
+            return False
+        p0, p1 = self.piece(sc).ends
+        v = self.wall_vec(p0, p1)
+        w = self.wall_vec(p0, (other.axial_mm, other.angle_deg))
+        t = float(np.clip((w @ v) / max(float(v @ v), 1e-12), 0.0, 1.0))
+        return float(np.hypot(*(w - t * v))) <= self.cfg.merge_mm
 
     # -------------------------------------------------------------- scratches longer than a frame
     def wall_vec(self, a: tuple[float, float], b: tuple[float, float]) -> np.ndarray:

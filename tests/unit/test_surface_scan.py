@@ -412,7 +412,8 @@ def test_a_pore_beside_a_long_scratch_is_merged_apart_from_it():
     the longer's, a 0.28 mm pore 2.6 mm from a 4.9 mm scratch's middle (and clear of the
     scratch) was grouped with it and measured as the scratch alone (whole-surface seed
     24405). A pore read where a short scratch was seen from the next frame is still one
-    defect with it; two sightings of the long scratch are one."""
+    defect with it, as is one on a long scratch's line at its end (a frame's border cut
+    the end: seed 24402); two sightings of the long scratch are one."""
     from station.inspection.surface_scan import _Sighting
     from station.vision.defects import Defect
 
@@ -434,6 +435,9 @@ def test_a_pore_beside_a_long_scratch_is_merged_apart_from_it():
     pore_b = sighting("pore", 54.89, 226.43, 0.26, 40)
     assert groups([long_a, long_b, pore_a, pore_b]) == [[("pore", 34), ("pore", 40)],
                                                         [("scratch", 40), ("scratch", 41)]]
+    # a frame's border cutting the long scratch's end leaves a small "pore" on its line
+    end = sighting("pore", 57.34 - 2.45, 221.50 + 0.05 / per_deg, 0.18, 30)
+    assert groups([long_a, pore_a, end]) == [[("pore", 30), ("scratch", 40)], [("pore", 34)]]
     short = sighting("scratch", 30.0, 100.0, 0.40, 10)
     read_as_pore = sighting("pore", 30.05, 100.0 + 0.1 / per_deg, 0.30, 11)
     assert groups([short, read_as_pore]) == [[("pore", 11), ("scratch", 10)]]
