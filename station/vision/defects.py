@@ -2692,7 +2692,7 @@ def _examine(img: np.ndarray, box, seed: np.ndarray, zone: np.ndarray, angles_de
     box0 = tuple(box)
     for attempt in range(3):
         again, m, kind = _examine_once(img, box, seed, excl, zone, angles_deg, wall_level, cfg, blur_hint,
-                                       max_width_px, confine)
+                                       max_width_px, confine, line_out=attempt > 0)
         if ex is not None and again.defect is None and not (box0[0] == 0 or box0[1] == 0 or box0[2] == ww
                                                              or box0[3] == hh):
             # the grown patch lost it (bench frames: short scratches of 0.14-0.17 mm, taken for
@@ -2727,10 +2727,11 @@ def _examine(img: np.ndarray, box, seed: np.ndarray, zone: np.ndarray, angles_de
 
 def _examine_once(img: np.ndarray, box, seed: np.ndarray, excl: np.ndarray, zone: np.ndarray, angles_deg,
                   wall_level: np.ndarray, cfg: DefectConfig, blur_hint: float | None, max_width_px: float,
-                  confine: tuple[float, float, float, float] | None = None):
+                  confine: tuple[float, float, float, float] | None = None, line_out: bool = False):
     """``_examine`` in one patch: (the examined candidate, its measurement, its kind).
     ``excl``: what the local wall model leaves out (the seed, or more); ``confine``: the
-    line the region keeps to (``_examine``)."""
+    line the region keeps to (``_examine``); ``line_out``: ``excl`` holds the mark's line
+    (an examination again along it)."""
     patch = _local_patch(img, box, excl, zone, angles_deg, wall_level)
     x0, y0, x1, y1 = box
     empty = np.zeros((y1 - y0, x1 - x0), bool)
@@ -2810,6 +2811,13 @@ def _examine_once(img: np.ndarray, box, seed: np.ndarray, excl: np.ndarray, zone
             # grooves along its line took the rest in), measured again along it (``_examine``),
             # as is a piece of one that crosses the lines (``_along_hatch``)
             m["square_end"], m["runs_on"] = _square_end(img, wall_level, x0, y0, m, cfg)
+            if line_out and not m["square_end"]:
+                # measured again with its line left out of the grooves (``_examine``): its ends
+                # read on the residual too, where a groove it ran into is modelled from beside
+                # its line rather than read as the mark running on (dev frames within 7.5 deg
+                # of the hatch: 2 more of 114 scratches; none of the clean frames' pieces)
+                res_img = (1.0 - patch.residual).astype(np.float32)
+                m["square_end"] = _square_end(res_img, np.ones_like(res_img), 0, 0, m, cfg)[0]
     defect = _accept(m, kind, box, at_border, angles_deg, cfg, max_width_px)
     if defect is None:
         core = _core_pore(patch, rs, seed, region, zone[y0:y1, x0:x1], peak, box, at_border, angles_deg, cfg,
