@@ -426,11 +426,20 @@ class _SurfaceScan:
         """Sightings of one defect (within ``merge_mm`` plus half the longer's length of
         each other, the same family: wall or rim; a pore and a scratch within ``merge_mm``
         plus half the shorter's, or the pore within ``merge_mm`` of the scratch's chord:
-        :meth:`on_scratch`) as one group."""
+        :meth:`on_chord`) as one group."""
         parent = list(range(len(sightings)))
+        chords: dict[int, tuple] = {}  # a scratch sighting's chord ends, once each
 
         def root(i: int) -> int:
             return _root(parent, i)
+
+        def on_scratch(i: int, j: int) -> bool:
+            k, other = (i, j) if sightings[i].defect.kind == "scratch" else (j, i)
+            if sightings[k].defect.kind != "scratch":
+                return False
+            if k not in chords:
+                chords[k] = self.piece(sightings[k]).ends
+            return self.on_chord(chords[k], sightings[other])
 
         for i, a in enumerate(sightings):
             for j in range(i):
@@ -441,21 +450,18 @@ class _SurfaceScan:
                 same = a.defect.kind == b.defect.kind
                 reach = self.cfg.merge_mm + 0.5 * (max(la, lb) if same else min(la, lb))
                 if self.wall_mm((a.axial_mm, a.angle_deg), (b.axial_mm, b.angle_deg)) <= reach or \
-                        (not same and self.on_scratch(a, b)):
+                        (not same and on_scratch(i, j)):
                     parent[root(i)] = root(j)
         groups: dict[int, list[_Sighting]] = {}
         for i, s in enumerate(sightings):
             groups.setdefault(root(i), []).append(s)
         return list(groups.values())
 
-    def on_scratch(self, a: _Sighting, b: _Sighting) -> bool:
-        """Whether, of a scratch's sighting and another kind's, the other lies within
-        ``merge_mm`` of the scratch's chord (its end cut by a frame's border reads as a
-        small pore there: whole-surface seed 24402)."""
-        sc, other = (a, b) if a.defect.kind == "scratch" else (b, a)
-        if sc.defect.kind != "scratch":
-            return False
-        p0, p1 = self.piece(sc).ends
+    def on_chord(self, ends: tuple[tuple[float, float], tuple[float, float]], other: _Sighting) -> bool:
+        """Whether ``other`` lies within ``merge_mm`` of a scratch's chord (``ends``: its
+        places on the part; its end cut by a frame's border reads as a small pore there:
+        whole-surface seed 24402)."""
+        p0, p1 = ends
         v = self.wall_vec(p0, p1)
         w = self.wall_vec(p0, (other.axial_mm, other.angle_deg))
         t = float(np.clip((w @ v) / max(float(v @ v), 1e-12), 0.0, 1.0))

@@ -373,18 +373,24 @@ def _circ_diff_deg(a: float, b: float, period: float = 180.0) -> float:
     return abs((a - b + period / 2) % period - period / 2)
 
 
+def _near_hatch(angle_deg: float, angles_deg, cfg: "DefectConfig") -> float | None:
+    """The groove family (of ``angles_deg``) within ``cfg.groove_alignment_deg`` of
+    ``angle_deg`` nearest it, or None."""
+    near = [g for g in angles_deg if _circ_diff_deg(angle_deg, g) < cfg.groove_alignment_deg]
+    return min(near, key=lambda g: _circ_diff_deg(angle_deg, g)) if near else None
+
+
 def _along_hatch(angle_deg: float, length_px: float, angles_deg, cfg: "DefectConfig") -> bool:
     """Whether a mark of direction ``angle_deg`` and length ``length_px`` runs along a
     groove family (``angles_deg``, the frame's two): within ``cfg.groove_alignment_deg``
     of one and, when the two are mirrored about the bore's axis as a hatch is (within
     ``cfg.hatch_mirror_deg``), crossing no more than ``cfg.hatch_cross_px`` of its lines
     over its length."""
-    near = [g for g in angles_deg if _circ_diff_deg(angle_deg, g) < cfg.groove_alignment_deg]
-    if not near:
+    g = _near_hatch(angle_deg, angles_deg, cfg)
+    if g is None:
         return False
     if len(angles_deg) != 2 or _circ_diff_deg(float(angles_deg[0]), -float(angles_deg[1])) > cfg.hatch_mirror_deg:
         return True  # the families read are not a mirrored pair: no line to cross is known
-    g = min(near, key=lambda a: _circ_diff_deg(angle_deg, a))
     return bool(length_px * np.sin(np.deg2rad(_circ_diff_deg(angle_deg, g))) <= cfg.hatch_cross_px)
 
 
@@ -552,7 +558,7 @@ def _line_response(wall: _Wall, cfg: DefectConfig) -> np.ndarray:
     v = cv2.resize(wall.valid.astype(np.float32)[: h4 * 2, : w4 * 2], (w4, h4), interpolation=cv2.INTER_AREA)
     best = np.zeros((h4, w4), np.float32)
     for a in np.arange(0.0, 180.0, 15.0):
-        if any(_circ_diff_deg(a, g) < cfg.groove_alignment_deg for g in wall.angles_deg):
+        if _near_hatch(float(a), wall.angles_deg, cfg) is not None:
             continue
         mean = _family_mean(q, (v > 0.99).astype(np.float32), float(a), cfg.line_length_quarter_px)
         inside = v > 0.99
@@ -2805,7 +2811,7 @@ def _examine_once(img: np.ndarray, box, seed: np.ndarray, excl: np.ndarray, zone
     if kind == "scratch" and m is not None:
         m["along_share"] = _along_share(rs, region, m["angle"], angles_deg)
         m["along_hatch"] = _along_hatch(m["angle"], m["length"], angles_deg, cfg)
-        if any(_circ_diff_deg(m["angle"], g) < cfg.groove_alignment_deg for g in angles_deg):
+        if _near_hatch(m["angle"], angles_deg, cfg) is not None:
             # near the hatch: along it, a scratch if it ends in cuts (``_accept``); one cut end
             # and the other running on is a piece of a longer scratch (the wall model's
             # grooves along its line took the rest in), measured again along it (``_examine``),
