@@ -828,6 +828,25 @@ def test_a_finer_cameras_large_pores_keep_their_size():
     assert checked == 3  # one such pore in each frame
 
 
+def test_the_wall_beside_a_measured_pore_is_modelled_without_it():
+    """Each candidate's local wall model leaves out what the defects measured before it
+    cover: a 0.43 mm and a 0.48 mm pore within a few px of a fainter candidate's patch
+    pulled its grooves' fit, and the wall beside each stood as a false 0.31 / 0.24 mm
+    pore (station bench frames 70078 and 70097; the old code reported both). Only the
+    measured defects, not every candidate: most candidates are the grooves' residue, and
+    a deep groove left out of its own profile's fit read its crossing with another as a
+    0.31 mm pore on a clean wide frame (1078051), which must stay clean."""
+    for seed, envelope, n_true in ((70078, "station", 7), (70097, "station", 1), (1078051, "wide", 0)):
+        f = random_defect_frame(seed, {} if n_true == 0 else None, mm_per_px=MM_PER_PX, envelope=envelope)
+        assert len(f.defects) == n_true
+        found = detect_defects(f.image, MM_PER_PX)
+        pairs, false = match(f.defects, found, MM_PER_PX)
+        assert not false, (seed, [(found[k].kind, found[k].x_px, found[k].y_px, found[k].length_mm) for k in false])
+        for t, d in pairs:
+            assert d is not None and d.kind == t.kind, (seed, t)
+            assert _within(d.length_mm, t.length_mm), (seed, t.kind, d.length_mm, t.length_mm)
+
+
 def test_a_large_pore_with_a_ragged_outline_is_not_taken_for_a_soft_shading():
     """At 0.005 mm/px, with the wall's texture drawn at that scale, a 0.31 x 0.22 mm pore
     (62 x 43 px) of ragged outline fitted a blurred ellipse whose edge blur was 2.9 px (1.4
