@@ -281,7 +281,10 @@ class DefectConfig:
     #: (3 of 5 false chips; the other two, 1.5-1.7 px shallow dents, 0.28-0.30).  Since
     #: session 40 the upper quartile of the lines through the notch, not the darkest line:
     #: 128 true chips (wide seeds 82000-82149 and 78000-78059 at a 22 deg hatch) at most
-    #: 0.29; the deep grooves left by the other tests 0.48 and 0.77
+    #: 0.29; the deep grooves left by the other tests 0.48 and 0.77.  Since session 50 the
+    #: lines start where each leaves the notch: 153 true chips (wide seeds 82000-82059,
+    #: 74000-74059, 78000-78059 at 22 deg, station 60000-60059) at most 0.22 (0.29 before),
+    #: a deep groove meeting the rim obliquely 1.0 (0.11), two in a V 0.45 (0.19)
     chip_groove_share: float = 0.4
     #: standard uncertainties from the fits' and integrals' noise are multiplied by this,
     #: the factor the hole measurement's white-noise u took until round 12 of the vision
@@ -1964,11 +1967,11 @@ def _groove_run_on(img: np.ndarray, wall_level: np.ndarray, others: np.ndarray, 
     share of the hole's own darkness (both 1 - I / W, W the frame's level ``wall_level``).
 
     For each groove direction that leaves the rim outwards (at least 0.2 of it radial),
-    lines in that direction through the notch's arc (1 px apart, across its length and
-    1 px beyond each end) are read over 24 px, starting where they are 3 blur + 2 px
-    radially past the notch's outer end (clear of the rim's blurred step), at least 6 px
-    along; each line's median darkness, and the upper quartile of the lines' (the
-    darkest direction's).  A chip's notch ends and the wall beyond is the wall (a
+    lines in that direction from the notch's mouth on the rim (1 px apart, across its
+    length and 1 px beyond each end) are read over 24 px, starting where each leaves the
+    notch (through its depth or its side) and then 3 blur + 2 px further radially (clear
+    of the blurred step), at least 6 px along; each line's median darkness, and the upper
+    quartile of the lines' (the darkest direction's).  A chip's notch ends and the wall beyond is the wall (a
     groove's depth, ~0.05 of the hole's darkness at the median); a deep groove that runs
     into the rim carries its darkness on over the notch it makes, which is as wide as the
     groove (0.48-0.77). The darkest line alone (until session 40) read a deep groove that
@@ -2002,18 +2005,30 @@ def _groove_run_on(img: np.ndarray, wall_level: np.ndarray, others: np.ndarray, 
     hole_dark = float(np.nanmedian(dark_in))
     if hole_dark <= 0.05:
         return 0.0
-    outer = centre + (rad + height) * radial
-    offsets = np.arange(-(length / 2.0 + 1.0), length / 2.0 + 1.0 + 1e-9, 1.0)
+    # lines through the notch's mouth on the rim, 1 px apart across its length and 1 px
+    # beyond each end, in each groove direction, each read from where it leaves the
+    # notch (its depth, or its side): read from the notch's outer end along the radius
+    # (until session 50), the lines missed a deep groove that meets the rim obliquely,
+    # or two that meet at it in a V, whose darkness the notch's depth carries out along
+    # the radius or the bisector, away from the grooves' own lines (wide bench: 0.08-0.18
+    # mm "chips", run-on shares 0.11-0.24)
+    half = length / 2.0 + 1.0
+    offsets = np.arange(-half, half + 1e-9, 1.0)
+    rim = centre + rad * radial
     best = 0.0
     for a in angles_deg:
         u = np.array([np.cos(np.deg2rad(a)), np.sin(np.deg2rad(a))])
         if u @ radial < 0:
             u = -u
-        if u @ radial < 0.2:
+        ur, ut = float(u @ radial), float(u @ tang)
+        if ur < 0.2:
             continue
-        t0 = max(6.0, (3.0 * blur + 2.0) / float(u @ radial))
-        t = np.arange(t0, t0 + 24.0, 1.0)
-        d = darkness(outer[None, None, :] + offsets[:, None, None] * tang + t[None, :, None] * u)
+        leave = np.full(offsets.size, max(height, 0.0) / ur)
+        if abs(ut) > 1e-6:
+            leave = np.minimum(leave, (half - np.sign(ut) * offsets) / abs(ut))
+        t0 = max(6.0, (3.0 * blur + 2.0) / ur)
+        t = leave[:, None] + t0 + np.arange(0.0, 24.0, 1.0)[None, :]
+        d = darkness(rim + offsets[:, None, None] * tang + t[:, :, None] * u)
         read = np.isfinite(d).sum(axis=1) >= 8
         if read.any():
             best = max(best, float(np.percentile(np.nanmedian(d[read], axis=1), 75.0)))
