@@ -315,6 +315,13 @@ class DefectConfig:
     #: ... and the whole stretch this share (a groove's residue that a faint scratch's end
     #: runs into reads 0.76 of it; a scratch's own stretch along the hatch 1.03-1.24)
     track_hold_share: float = 0.9
+    #: ... followed on over a dip below half its contrast as long as this (px): a deep
+    #: groove crossing a thin scratch at the hatch's angle darkens its flanks as much as
+    #: its core over ~2 groove widths, and the furrow on beyond was left unread (6 px
+    #: until session 50: a 17.3 mm scratch's piece stopped 2.4 mm short of a frame's
+    #: border, and the rest, part of the same candidate, was never measured:
+    #: whole-surface part 24602)
+    track_gap_px: float = 24.0
 
 
 @dataclass(frozen=True)
@@ -2487,7 +2494,8 @@ def _track_on(img: np.ndarray, level: np.ndarray, line: np.ndarray, k: int, widt
     path steps ``2 px`` along its direction, moves at most ``track_turn_px`` across per
     step towards the darkest line of a short cross profile (a scratch turns slowly: the
     twin's modes bend a 16 mm scratch by under 3 deg per 50 px), and stops where the
-    raw contrast falls below half the scratch's own there. A run on is taken only when
+    raw contrast stays below half the scratch's own there for ``track_gap_px`` (a deep
+    groove crossing it dips it for a groove's width or two). A run on is taken only when
     the first ``track_min_px`` past the end keep ``track_run_share`` of that contrast (a
     cut's darkness steps down within the blur) and the whole stretch ``track_hold_share``
     (a deep groove that a faint scratch ends on is darker than the wall, but not as dark
@@ -2538,9 +2546,10 @@ def _track_on(img: np.ndarray, level: np.ndarray, line: np.ndarray, k: int, widt
                 n = np.array([-t[1], t[0]])
         p = q
         below = below + 1 if here < 0.5 * ref else 0
-        if below >= 3:
+        if below * step > cfg.track_gap_px:
             break
-    cs = np.array(contrast)
+    # the stretch judged ends 3 steps below half, as it did when a dip that long stopped it
+    cs = np.array(contrast[:len(contrast) - max(below - 3, 0)])
     first = max(int(cfg.track_min_px / step), 1)
     if cs.size < first or float(np.median(cs[:first])) < cfg.track_run_share * ref \
             or float(np.median(cs)) < cfg.track_hold_share * ref:
