@@ -2096,9 +2096,12 @@ def _fit_end(s: np.ndarray, data: np.ndarray, guess: float, blur: float, rising:
         if level <= 0:
             break
         half = level
-        # the crossing nearest the current end, by linear interpolation
+        # the crossing nearest the current end, by linear interpolation, that steps the
+        # way this end does: up into the defect at its start, down out of it at its end
+        # (either way, a ragged chip's end was read on its other side and its length came
+        # out negative: wide bench seed 78008, a 0.086 x 0.072 mm chip lost)
         above = data >= half
-        cross = np.flatnonzero(above[1:] != above[:-1])
+        cross = np.flatnonzero(above[1:] & ~above[:-1] if rising else above[:-1] & ~above[1:])
         if cross.size == 0:
             break
         i = cross[np.argmin(np.abs(s[cross] - end))]

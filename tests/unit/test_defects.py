@@ -811,6 +811,34 @@ def test_a_deep_groove_running_into_a_rim_is_not_a_chip():
     assert true_chips == 1  # seed 85061's
 
 
+def test_a_rim_defects_end_is_read_on_its_own_side():
+    """``_fit_end`` reads the crossing of the local half height that steps the way the
+    end does: up at a defect's start, down at its end. A ragged chip's area-true profile
+    (wide bench seed 78008, hatch 22 deg: a 0.086 x 0.072 mm chip with a shoulder on one
+    side) was read at its far end on the rising side, 2.8 px before its start, and the
+    chip was dropped for a negative length. The profile below is that chip's."""
+    from station.vision.defects import _fit_end
+
+    s = 210.68 + 0.4985 * np.arange(34)
+    data = np.array([-0.02, -0.02, -0.028, -0.034, -0.021, 0.021, 0.094, 0.197, 0.328, 0.503, 0.754, 1.127,
+                     1.666, 2.397, 3.301, 4.291, 5.215, 5.909, 6.253, 6.194, 5.754, 5.051, 4.272, 3.601, 3.127,
+                     2.828, 2.614, 2.386, 2.074, 1.663, 1.187, 0.721, 0.34, 0.084])
+    start, _ = _fit_end(s, data, 217.36, 1.057, rising=True)
+    end, _ = _fit_end(s, data, 220.30, 1.057, rising=False)
+    assert 216.5 < start < 218.0
+    assert 224.0 < end < 226.5  # past the shoulder, where the profile falls to its local half
+    # the same profile mirrored: the same ends, mirrored
+    m_start, _ = _fit_end(-s[::-1], data[::-1], -220.30, 1.057, rising=True)
+    m_end, _ = _fit_end(-s[::-1], data[::-1], -217.36, 1.057, rising=False)
+    assert m_start == pytest.approx(-end, abs=1e-6) and m_end == pytest.approx(-start, abs=1e-6)
+    # and the chip is found, its length within tolerance
+    f = random_defect_frame(78008, None, mm_per_px=MM_PER_PX, envelope="wide", hatch_deg=22.0)
+    found = detect_defects(f.image, MM_PER_PX)
+    pairs, _ = match(f.defects, found, MM_PER_PX)
+    (d,) = [d for t, d in pairs if t.kind == "chip" and abs(t.length_mm - 0.086) < 0.001]
+    assert d is not None and d.kind == "chip" and abs(d.length_mm - 0.086) <= 0.02
+
+
 def test_a_deep_groove_meeting_a_rim_obliquely_or_two_meeting_in_a_v_are_not_a_chip():
     """The run-on lines follow each groove direction from the notch's mouth on the rim,
     each read from where it leaves the notch. Read from the notch's outer end along the
