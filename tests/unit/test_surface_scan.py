@@ -443,6 +443,34 @@ def test_a_pore_beside_a_long_scratch_is_merged_apart_from_it():
     assert groups([short, read_as_pore]) == [[("pore", 11), ("scratch", 10)]]
 
 
+def test_a_mark_seen_only_cut_by_frames_borders_and_not_in_a_frame_centred_on_it_is_not_reported():
+    """A crossing of deep grooves cut by a coverage frame's top edge at its corner read as
+    a 0.33 mm pore (whole-surface part 24703, 631 px off the frame's centre), and the
+    frame centred on it showed nothing there; it was reported all the same, with the
+    corner frame's figures. Seen only cut by borders and not at all centred, it is the
+    border's mark: not reported, and a note says so. Seen whole somewhere, or shown
+    centred (even cut there), it is reported as before."""
+    from station.inspection.surface_scan import _Look, _Sighting
+    from station.vision.defects import Defect
+
+    def pore(partial, x=640.0, y=512.0):
+        return Defect("pore", x, y, 33.0, 15.0, 0.9, 0.0, 1.0, 1.0, 39.0, partial, None, 0.33, 0.15, 0.33, 0.01,
+                      0.01)
+
+    place = (90.0, 140.0)
+    for partial, shown, reported in ((True, [], False), (False, [], True), (True, [pore(True, 640.0, 1020.0)], False),
+                                     (True, [pore(True, 641.0, 513.0)], True)):
+        scan = _scan(calibrated=False)
+        scan.looks.append(_Look(place[0], place[1], shown))
+        sg = _Sighting(pore(partial, 1019.0, 8.0), place[0], place[1], 631.0, 74, (place[0] - 5.0, place[1] - 20.0))
+        out = _run(scan.measure([sg]))
+        assert (len(out) == 1) == reported, (partial, shown)
+        if reported:
+            assert out[0].kind == "pore" and abs(out[0].axial_mm - place[0]) < 0.02
+        else:
+            assert out == [] and any("not reported" in n for n in scan.notes), scan.notes
+
+
 def test_a_scratch_running_out_of_the_band_is_measured_as_far_as_the_band_shows_and_says_so():
     scan = _scan()
     lo, hi = scan.plan.band_mm
