@@ -1978,13 +1978,14 @@ def _groove_run_on(img: np.ndarray, wall_level: np.ndarray, others: np.ndarray, 
     length and 1 px beyond each end) are read over 24 px, starting where each leaves the
     notch (through its depth or its side) and then 3 blur + 2 px further radially (clear
     of the blurred step), at least 6 px along; each line's median darkness, and the upper
-    quartile of the lines' (the darkest direction's).  A chip's notch ends and the wall beyond is the wall (a
-    groove's depth, ~0.05 of the hole's darkness at the median); a deep groove that runs
-    into the rim carries its darkness on over the notch it makes, which is as wide as the
-    groove (0.48-0.77). The darkest line alone (until session 40) read a deep groove that
-    merely crosses a true chip's arc and runs on from it: on a 30 %-contrast hole its
-    darkness is the hole's, and 2 of 37 chips above the limit were lost (wide envelope,
-    22 deg hatch, seed 78000: darkest line 0.65 and 0.88, upper quartile 0.23 and 0.19).
+    quartile of the lines' (the darkest direction's).  A chip's notch ends and the wall
+    beyond is the wall (a groove's depth, ~0.05 of the hole's darkness at the median); a
+    deep groove that runs into the rim carries its darkness on over the notch it makes,
+    which is as wide as the groove (0.48-0.77). The darkest line alone (until session 40)
+    read a deep groove that merely crosses a true chip's arc and runs on from it: on a 30
+    %-contrast hole its darkness is the hole's, and 2 of 37 chips above the limit were
+    lost (wide envelope, 22 deg hatch, seed 78000: darkest line 0.65 and 0.88, upper
+    quartile 0.23 and 0.19).
     Points off the frame or in another hole's zone (``others``) are not read, nor a line
     with fewer than 8 points left.  0 when no direction leaves the rim outwards."""
     hh, ww = img.shape
