@@ -954,6 +954,11 @@ class _SurfaceScan:
         look = yield from self.recentred_look(want, "surface defect")
         fam = self.family(best.defect.kind)
         cx, cy = geo.centre_px
+
+        def near_group(p: tuple[float, float]) -> bool:
+            return any(self.wall_mm(p, (sg.axial_mm, sg.angle_deg)) <= max(0.15, 0.5 * (sg.defect.length_mm or 0.0))
+                       for sg in group)
+
         out = []
         for d in look.defects:
             if self.family(d.kind) != fam or getattr(d, "partial", False):
@@ -962,16 +967,14 @@ class _SurfaceScan:
             if r_px > cfg.recentre_reach_px:
                 continue
             p = self.place((look.axial_mm, look.angle_deg), d.x_px, d.y_px)
-            if any(self.wall_mm(p, (sg.axial_mm, sg.angle_deg)) <= max(0.15, 0.5 * (sg.defect.length_mm or 0.0))
-                   for sg in group):
+            if near_group(p):
                 out.append(self.defect(d, p, r_px, frames))
         if not out:
             d = best.defect
-            near = any(self.family(e.kind) == fam
-                       and self.wall_mm(self.place((look.axial_mm, look.angle_deg), e.x_px, e.y_px),
-                                        (sg.axial_mm, sg.angle_deg)) <= max(0.15, 0.5 * (sg.defect.length_mm or 0.0))
-                       for e in look.defects for sg in group)
-            if not near and all(getattr(sg.defect, "partial", False) for sg in group):
+            shown = any(self.family(e.kind) == fam and near_group(self.place((look.axial_mm, look.angle_deg), e.x_px,
+                                                                             e.y_px))
+                        for e in look.defects)
+            if not shown and all(getattr(sg.defect, "partial", False) for sg in group):
                 # seen only where frames' borders cut it, and a frame centred on it shows nothing
                 # there: the border's cut, not a defect (a crossing of deep grooves cut by a
                 # frame's top edge at its corner read as a 0.33 mm pore: whole-surface part 24703)
