@@ -2299,7 +2299,7 @@ def detect_defects(image: np.ndarray, mm_per_px: float, *, holes=None, blur_px: 
             claimed_regions[rb[1]:rb[3], rb[0]:rb[2]] |= ex.region
             examined.append(ex)
     examined = _drop_scratch_pieces(examined)
-    examined = _track_scratches(img, level_full, examined, cfg)
+    examined = _track_scratches(img, level_full, examined, cfg, wall.angles_deg)
     examined = _join_scratch_pieces(img, level_full, examined, cfg)
     found: list[Defect] = [ex.defect if ex.line is None else replace(ex.defect, line_px=_line_points(ex.line))
                            for ex in examined if ex.defect is not None]
@@ -2612,11 +2612,46 @@ def _track_on(img: np.ndarray, level: np.ndarray, line: np.ndarray, k: int, widt
     return out
 
 
+def _fades_along_a_groove(img: np.ndarray, level: np.ndarray, on: np.ndarray, width: float, blur: float,
+                          angles_deg, cfg: DefectConfig) -> bool:
+    """Whether a scratch's run on (``_track_on``'s path, from its end outwards) is a
+    groove it meets: the path's last 60 px run along a groove family (``_near_hatch``)
+    and its far end, read inside the frame, does not step down as a scratch's does (no
+    wider than ``cfg.square_end_other_max_width_px`` and by ``cfg.square_end_min_height``
+    of the darkness inside it: ``_end_steps``) but fades, as a groove does along its
+    length. A scratch's end that meets a deep groove running on 10 deg from it was
+    followed along the groove to where that faded (the twin's frames, seed 2087087: a
+    1.57 mm scratch reported 4.16 mm long). A scratch that bends along the hatch keeps
+    its stretch when the stretch ends in a cut or at the frame's border (unread)."""
+    seg = np.hypot(*np.diff(on, axis=0).T)
+    if on.shape[0] < 2 or float(seg.sum()) < cfg.track_min_px:
+        return False
+    to_end = np.concatenate([[0.0], np.cumsum(seg[::-1])])[::-1]
+    far = on[to_end <= 60.0]
+    if far.shape[0] < 2:
+        return False
+    chord = far[-1] - far[0]
+    if _near_hatch(float(np.degrees(np.arctan2(chord[1], chord[0])) % 180.0), angles_deg, cfg) is None:
+        return False
+    hh, ww = img.shape
+    e = on[-1]
+    if e[0] <= 4.0 or e[1] <= 4.0 or e[0] >= ww - 5.0 or e[1] >= hh - 5.0:
+        return False
+    steps = _end_steps(img, level, 0, 0, dict(line=(far[:, 0], far[:, 1]), width=width, blur=blur), ends=(-1,))
+    if not steps:
+        return False
+    w, h = steps[0]
+    max_width = max(cfg.square_end_other_max_width_px, cfg.square_end_max_width_px, 2.5 * blur)
+    return not (w <= max_width and h >= cfg.square_end_min_height)
+
+
 def _track_scratches(img: np.ndarray, level: np.ndarray, examined: list["_Examined"],
-                     cfg: DefectConfig) -> list["_Examined"]:
+                     cfg: DefectConfig, angles_deg=()) -> list["_Examined"]:
     """Each scratch's ends followed where the furrow runs on (``_track_on``): its centre
     line, length, place and direction take the stretch in, and it is ``partial`` when
-    the stretch reaches the frame's border."""
+    the stretch reaches the frame's border. A stretch along the hatch (``angles_deg``)
+    that fades at its end is a groove the scratch meets, not taken
+    (``_fades_along_a_groove``)."""
     out = []
     hh, ww = img.shape
     for ex in examined:
@@ -2630,7 +2665,7 @@ def _track_scratches(img: np.ndarray, level: np.ndarray, examined: list["_Examin
         grown = False
         for k in (0, -1):
             on = _track_on(img, level, line, k, d.width_px, blur, cfg)
-            if on is None:
+            if on is None or _fades_along_a_groove(img, level, on, d.width_px, blur, angles_deg, cfg):
                 continue
             grown = True
             line = np.vstack([on[::-1], line[1:]]) if k == 0 else np.vstack([line[:-1], on])
@@ -2988,35 +3023,29 @@ def _core_pore(patch: _Patch, rs: np.ndarray, seed: np.ndarray, region: np.ndarr
     return _Examined(defect, core, tuple(box)), m, "pore"
 
 
-def _square_end(img: np.ndarray, level: np.ndarray, x0: int, y0: int, m: dict,
-                cfg: DefectConfig) -> tuple[bool, bool]:
-    """Whether a scratch measured along a groove direction (``m``, patch offset ``x0``,
-    ``y0``) ends in a cut at both ends, as a furrow does, rather than fading as a groove
-    does. The raw relative darkness ``1 - img / level`` (the grooves kept: the
-    wall model's grooves along such a line may have taken the mark in) is read along the
-    centre line (its chord) from up to 30 px inside each end to 30 px beyond it, the mean
-    across the mark's core less that of its 4 px flanks (the other family's grooves cross
-    both alike), and fitted as a blurred step (height, place, width, offset). An end the
-    frame cuts is not read. Returns (square, runs on): whether both ends are read, both
-    step by at least ``cfg.square_end_min_height`` of the darkness inside, one of them
-    square (no wider than ``cfg.square_end_max_width_px``, or 2.5 of the mark's blur) and
-    the other no wider than ``cfg.square_end_other_max_width_px``; and whether one end is
-    square while another runs on at more than ``cfg.square_end_max_run_on`` of the
-    darkness (a piece of a longer mark)."""
+def _end_steps(img: np.ndarray, level: np.ndarray, x0: int, y0: int, m: dict,
+               ends: tuple[int, ...] = (0, -1)) -> list[tuple[float, float]]:
+    """How a mark measured as a line (``m``: its centre line, width and blur; patch offset
+    ``x0``, ``y0``) steps down at each of its ``ends`` read (0: the first, -1: the last):
+    (the step's width, px; its height as a share of the darkness inside). The raw
+    relative darkness ``1 - img / level`` (the grooves kept) is read along the centre
+    line's chord from up to 30 px inside the end to 30 px beyond it, the mean across the
+    mark's core less that of its 4 px flanks (the other family's grooves cross both
+    alike), and fitted as a blurred step (height, place, width, offset). An end the frame
+    cuts is not read (no entry); a mark no darker inside than beyond reads (inf, 0)."""
     lx, ly = (np.asarray(v, float) for v in m["line"])
     if lx.size < 2:
-        return False, False
+        return []
     px, py = lx + x0, ly + y0
     length = float(np.hypot(px[-1] - px[0], py[-1] - py[0]))
     if length < 4.0:
-        return False, False
+        return []
     blur = float(np.clip(m["blur"], 0.7, 2.8))
     core = max(m["width"] / 2.0 + blur, 1.5)
     off = np.arange(-(core + 6.0), core + 6.0 + 0.25, 0.5)
     in_core, in_flank = np.abs(off) <= core, np.abs(off) >= core + 2.0
     inner = min(30.0, length / 2.0)
     t = np.arange(-inner, 30.0 + 0.25, 0.5)  # along the line, outwards from the end
-    max_width = max(cfg.square_end_max_width_px, 2.5 * blur)
     hh, ww = img.shape
     steps = []  # (width, share of the darkness) of each end read
     # along the chord: the centre line's last few px bend as its polynomial likes, and a
@@ -3024,6 +3053,8 @@ def _square_end(img: np.ndarray, level: np.ndarray, x0: int, y0: int, m: dict,
     # "square end": the twin's frames, 9 false scratches in 50 with this test's first form)
     cux, cuy = (px[-1] - px[0]) / length, (py[-1] - py[0]) / length
     for k, ux, uy in ((0, -cux, -cuy), (-1, cux, cuy)):
+        if k not in ends:
+            continue
         mx = px[k] + t[None, :] * ux - off[:, None] * uy
         my = py[k] + t[None, :] * uy + off[:, None] * ux
         bx0, by0 = int(max(np.floor(mx.min()) - 1, 0)), int(max(np.floor(my.min()) - 1, 0))
@@ -3051,6 +3082,23 @@ def _square_end(img: np.ndarray, level: np.ndarray, x0: int, y0: int, m: dict,
                             np.array([max(h_in - h_out, 0.01), 0.0, 2.0, h_out]), a,
                             np.array([-1.0, -12.0, 0.4, -1.0]), np.array([2.0, 12.0, 30.0, 1.0]), iterations=25)
         steps.append((float(fit.x[2]), float(fit.x[0]) / h_in))
+    return steps
+
+
+def _square_end(img: np.ndarray, level: np.ndarray, x0: int, y0: int, m: dict,
+                cfg: DefectConfig) -> tuple[bool, bool]:
+    """Whether a scratch measured along a groove direction (``m``, patch offset ``x0``,
+    ``y0``) ends in a cut at both ends, as a furrow does, rather than fading as a groove
+    does, each end read on the raw darkness (the grooves kept: the wall model's grooves
+    along such a line may have taken the mark in) by ``_end_steps``. Returns (square,
+    runs on): whether both ends are read, both
+    step by at least ``cfg.square_end_min_height`` of the darkness inside, one of them
+    square (no wider than ``cfg.square_end_max_width_px``, or 2.5 of the mark's blur) and
+    the other no wider than ``cfg.square_end_other_max_width_px``; and whether one end is
+    square while another runs on at more than ``cfg.square_end_max_run_on`` of the
+    darkness (a piece of a longer mark)."""
+    steps = _end_steps(img, level, x0, y0, m)
+    max_width = max(cfg.square_end_max_width_px, 2.5 * float(np.clip(m["blur"], 0.7, 2.8)))
     square = [w <= max_width and h >= cfg.square_end_min_height for w, h in steps]
     ends = [w <= max(cfg.square_end_other_max_width_px, max_width) and h >= cfg.square_end_min_height
             for w, h in steps]

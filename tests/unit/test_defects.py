@@ -359,6 +359,25 @@ def test_a_scratch_whose_region_a_grooves_residue_joins_is_examined_along_its_ow
     assert not false, [found[k] for k in false]
 
 
+def test_a_scratch_that_ends_on_a_deep_groove_is_not_followed_along_the_groove():
+    """A frame of the camera twin (the bench's seed 2087087): a 1.57 mm scratch, 12 deg off
+    the hatch, ends where a deep groove runs on from it. The following of its furrow
+    (``_track_on``, on the raw darkness) turned onto the groove and went along it for
+    2.6 mm, to where the groove faded: one 4.16 mm scratch, the true one unmatched. A run
+    on along the hatch whose far end fades, as a groove does, is not taken."""
+    from station.bench.defects import twin_scratch_frame
+
+    f = twin_scratch_frame(2087087)
+    (t,) = f.defects
+    found = detect_defects(f.image, MM_PER_PX)
+    pairs, false = match([t], found, MM_PER_PX)
+    d = pairs[0][1]
+    assert d is not None and d.kind == "scratch", found
+    assert abs(d.length_mm - t.length_mm) <= 0.1 * t.length_mm, (d.length_mm, t.length_mm)
+    assert np.hypot(d.x_px - t.image_x_px, d.y_px - t.image_y_px) * MM_PER_PX <= 0.05
+    assert not false, [found[k] for k in false]
+
+
 def test_a_mark_runs_along_the_hatch_when_it_crosses_few_of_its_lines_and_the_hatch_is_a_mirrored_pair():
     """``_along_hatch``: within 7.5 deg of a family and crossing at most 8 px of its lines
     over its length; when the two families read are no mirrored pair (a scratch drew one
