@@ -213,6 +213,13 @@ class DefectGeometry:
         return (float(g["ox"] + g["sg"][i] * tx + g["bend"][i] * nx),
                 float(g["oy"] + g["sg"][i] * ty + g["bend"][i] * ny))
 
+    def scratch_ends_px(self) -> tuple[tuple[float, float], tuple[float, float]]:
+        """A scratch's centre line's two ends (ideal px)."""
+        g = self._scratch
+        tx, ty, nx, ny = g["t"]
+        return tuple((float(g["ox"] + g["sg"][i] * tx + g["bend"][i] * nx),
+                      float(g["oy"] + g["sg"][i] * ty + g["bend"][i] * ny)) for i in (0, -1))
+
     @cached_property
     def _scratch(self):
         s = self.spec

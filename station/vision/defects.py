@@ -1229,6 +1229,10 @@ def _largest_piece(coarse: np.ndarray, a: int, b: int, gap_px: float) -> tuple[i
     return a + best[0], a + best[1]
 
 
+#: a scratch's centre line is a quintic, not a cubic, where its peaks span this far (px):
+#: across much of a frame the lens's distortion bends it as well as its own modes
+QUINTIC_BEND_PX = 400.0
+
 #: the camera's blur (Gaussian sigma, px) as a scratch's measurement assumes it before
 #: anything in the frame says more: the middle of the station's envelope (0.8-2 px) and a
 #: standard deviation that spans it. Combined with what the scratch's own cross profile
@@ -1415,6 +1419,12 @@ def _measure_scratch(patch: _Patch, region: np.ndarray, blur_hint: float | None 
     # renderer's: sin(pi u) and sin(2 pi u), 1.2 % of the length each), which a quadratic
     # leaves as a wander of ~1-2 px on a 150 px scratch, smearing its cross profile
     deg = 3 if good.sum() >= 40 else (2 if good.sum() >= 12 else 1)
+    if deg == 3 and float(np.ptp(s[good])) >= QUINTIC_BEND_PX:
+        # a quintic over a long stretch: the lens bends a straight furrow across the frame
+        # as r^3 and r^5 do, and with a long scratch's own modes a cubic over 950 px stood
+        # 2-4.5 px off its last 40 px, where the matched filter then read nothing (a whole-
+        # surface part's 12.2 mm scratch, a frame's piece of it 45 px short)
+        deg = 5
     wts = np.sqrt(col_mass[good])
     for _ in range(4):
         coef = np.polyfit(s[good], centre_n[good], deg, w=wts)

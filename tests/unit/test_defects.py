@@ -378,6 +378,37 @@ def test_a_scratch_that_ends_on_a_deep_groove_is_not_followed_along_the_groove()
     assert not false, [found[k] for k in false]
 
 
+def test_a_scratch_across_the_frame_keeps_its_ends_where_the_lens_bends_it():
+    """The camera twin's lens (barrel, -2.7 % at the corner) bends a straight furrow that
+    crosses the frame away from its centre as r^3 and r^5 do. With a long scratch's own
+    modes, a cubic centre line over ~950 px stood 2-4.5 px off its last 40 px, the matched
+    filter read nothing there, and the end came 45 px short (a whole-surface part's 12.2
+    mm scratch: joined, its middle 0.24 mm off). Beyond ``QUINTIC_BEND_PX`` the line is a
+    quintic: each end where the lens puts the truth's."""
+    from sim.camera.twin import CameraOptics
+
+    p = CameraOptics().params
+    lens = p.lens
+    for seed in range(97000, 97006):
+        rng = np.random.default_rng(seed)
+        length, width = float(rng.uniform(900.0, 1000.0)), float(rng.uniform(2.0, 4.0))
+        angle = float(rng.uniform(-6.0, 6.0))
+        x = 639.5 + float(rng.uniform(-30.0, 30.0))
+        y = 511.5 + (1 if seed % 2 else -1) * float(rng.uniform(300.0, 370.0))
+        spec = DefectSpec("scratch", x, y, length, width, angle, None, None, seed)
+        f = render_frame(p, [], seed=seed, wall=wall_patch(p, seed), defects=[spec])
+        found = [d for d in detect_defects(f.image, MM_PER_PX) if d.kind == "scratch" and d.length_px > 500]
+        assert len(found) == 1, (seed, found)
+        ends = np.array(geometry(spec, []).scratch_ends_px())
+        ex, ey = lens.distort_px(ends[:, 0], ends[:, 1])
+        line = np.array(found[0].line_px)
+        for px, py in zip(ex, ey):
+            if not (2.0 < px < 1277.0):
+                continue  # the frame cuts this end
+            assert float(np.min(np.hypot(line[[0, -1], 0] - px, line[[0, -1], 1] - py))) <= 5.0, \
+                (seed, (px, py), line[[0, -1]])
+
+
 def test_a_mark_runs_along_the_hatch_when_it_crosses_few_of_its_lines_and_the_hatch_is_a_mirrored_pair():
     """``_along_hatch``: within 7.5 deg of a family and crossing at most 8 px of its lines
     over its length; when the two families read are no mirrored pair (a scratch drew one
