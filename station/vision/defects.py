@@ -2258,9 +2258,10 @@ def detect_defects(image: np.ndarray, mm_per_px: float, *, holes=None, blur_px: 
     # rim's groove ring changed its chips: bench seed 80053)
     claimed_regions = np.zeros(img.shape, bool)
     candidates = _candidates(wall, cfg)
-    queue = [(group, False) for group in _group_collinear(candidates)]
+    # (a group; None, or for a member examined on its own what its group's defects claimed)
+    queue = [(group, None) for group in _group_collinear(candidates)]
     while queue:
-        group, alone = queue.pop(0)
+        group, own_group = queue.pop(0)
         bx0 = min(candidates[i][2][0] for i in group)
         by0 = min(candidates[i][2][1] for i in group)
         bx1 = max(candidates[i][2][2] for i in group)
@@ -2271,7 +2272,10 @@ def detect_defects(image: np.ndarray, mm_per_px: float, *, holes=None, blur_px: 
         seed = np.zeros((box[3] - box[1], box[2] - box[0]), bool)
         for i in group:
             seed |= _seed_in_box(candidates[i][0], candidates[i][1], box)
-        if not alone and claimed[box[1]:box[3], box[0]:box[2]][seed].mean() > 0.5:
+        taken = claimed[box[1]:box[3], box[0]:box[2]]
+        if own_group is not None:  # its own group's claim grew over it, not a measurement of it
+            taken = taken & ~own_group[box[1]:box[3], box[0]:box[2]]
+        if taken[seed].mean() > 0.5:
             continue  # already measured as part of another candidate's defect
         # two scratches crossing are one candidate (an X, a V): each furrow is examined on
         # its own, its region confined to its line, the other's pixels left out of the wall
@@ -2323,15 +2327,17 @@ def detect_defects(image: np.ndarray, mm_per_px: float, *, holes=None, blur_px: 
             # pore's seed reaches past its measured region into its skirt, and a member
             # half outside was measured twice (wide seed 79046)
             covered = np.zeros(img.shape, bool)
+            group_claim = np.zeros(img.shape, bool)
             for ex in results:
                 if ex.defect is not None:
                     rb = ex.box or box
                     covered[rb[1]:rb[3], rb[0]:rb[2]] |= ex.region if ex.cover is None else ex.cover
+                    group_claim[rb[1]:rb[3], rb[0]:rb[2]] |= ex.region if ex.cover is None else ex.region | ex.cover
             inside = covered[box[1]:box[3], box[0]:box[2]]
             for i in group:
                 own = _seed_in_box(candidates[i][0], candidates[i][1], box)
                 if own.any() and inside[own].mean() < 0.05:
-                    queue.append(([i], True))
+                    queue.append(([i], group_claim))
     examined = _drop_scratch_pieces(examined)
     examined = _track_scratches(img, level_full, examined, cfg, wall.angles_deg)
     examined = _join_scratch_pieces(img, level_full, examined, cfg)
