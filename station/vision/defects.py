@@ -2652,6 +2652,12 @@ def _track_on(img: np.ndarray, level: np.ndarray, line: np.ndarray, k: int, widt
     return out
 
 
+def _at_frame_border(p: np.ndarray, shape: tuple[int, int]) -> bool:
+    """Whether a followed path's end (x, y) stopped at the frame's border (within 4-5 px)."""
+    hh, ww = shape
+    return bool(p[0] <= 4.0 or p[1] <= 4.0 or p[0] >= ww - 5.0 or p[1] >= hh - 5.0)
+
+
 def _fades_along_a_groove(img: np.ndarray, level: np.ndarray, on: np.ndarray, width: float, blur: float,
                           angles_deg, cfg: DefectConfig) -> bool:
     """Whether a scratch's run on (``_track_on``'s path, from its end outwards) is a
@@ -2673,9 +2679,7 @@ def _fades_along_a_groove(img: np.ndarray, level: np.ndarray, on: np.ndarray, wi
     chord = far[-1] - far[0]
     if _near_hatch(float(np.degrees(np.arctan2(chord[1], chord[0])) % 180.0), angles_deg, cfg) is None:
         return False
-    hh, ww = img.shape
-    e = on[-1]
-    if e[0] <= 4.0 or e[1] <= 4.0 or e[0] >= ww - 5.0 or e[1] >= hh - 5.0:
+    if _at_frame_border(on[-1], img.shape):
         return False
     steps = _end_steps(img, level, 0, 0, dict(line=(far[:, 0], far[:, 1]), width=width, blur=blur), ends=(-1,))
     if not steps:
@@ -2693,7 +2697,6 @@ def _track_scratches(img: np.ndarray, level: np.ndarray, examined: list["_Examin
     that fades at its end is a groove the scratch meets, not taken
     (``_fades_along_a_groove``)."""
     out = []
-    hh, ww = img.shape
     for ex in examined:
         d = ex.defect
         if d is None or d.kind != "scratch" or ex.line is None or len(ex.line) < 2:
@@ -2709,8 +2712,7 @@ def _track_scratches(img: np.ndarray, level: np.ndarray, examined: list["_Examin
                 continue
             grown = True
             line = np.vstack([on[::-1], line[1:]]) if k == 0 else np.vstack([line[:-1], on])
-            e = on[-1]
-            if e[0] <= 4.0 or e[1] <= 4.0 or e[0] >= ww - 5.0 or e[1] >= hh - 5.0:
+            if _at_frame_border(on[-1], img.shape):
                 partial = True
         if not grown:
             out.append(ex)

@@ -338,6 +338,24 @@ def test_a_long_faint_scratch_is_followed_across_the_deep_grooves_that_cross_it(
     assert extra <= 2, extra
 
 
+def _the_twin_scratch_found(seed: int):
+    """A bench frame of the camera twin (``twin_scratch_frame``): its one scratch found as
+    a scratch, its length within 10 % and its place within 0.05 mm, and nothing else
+    reported. (truth, found)."""
+    from station.bench.defects import twin_scratch_frame
+
+    f = twin_scratch_frame(seed)
+    (t,) = f.defects
+    found = detect_defects(f.image, MM_PER_PX)
+    pairs, false = match([t], found, MM_PER_PX)
+    d = pairs[0][1]
+    assert d is not None and d.kind == "scratch", found
+    assert abs(d.length_mm - t.length_mm) <= 0.1 * t.length_mm, (d.length_mm, t.length_mm)
+    assert np.hypot(d.x_px - t.image_x_px, d.y_px - t.image_y_px) * MM_PER_PX <= 0.05
+    assert not false, [found[k] for k in false]
+    return t, d
+
+
 def test_a_scratch_whose_region_a_grooves_residue_joins_is_examined_along_its_own_line():
     """A frame of the camera twin (the bench's seed 2086604): a bent 1.66 mm scratch, plain
     to see, crosses a deep groove that darkens along its length more than the wall model
@@ -345,18 +363,8 @@ def test_a_scratch_whose_region_a_grooves_residue_joins_is_examined_along_its_ow
     was measured as a pore, failed, and the scratch was not reported. A candidate whose
     seed is one furrow and whose region was no defect is examined again confined to its
     own line, and kept only as a scratch."""
-    from station.bench.defects import twin_scratch_frame
-
-    f = twin_scratch_frame(2086604)
-    (t,) = f.defects
-    found = detect_defects(f.image, MM_PER_PX)
-    pairs, false = match([t], found, MM_PER_PX)
-    d = pairs[0][1]
-    assert d is not None and d.kind == "scratch", found
-    assert abs(d.length_mm - t.length_mm) <= 0.1 * t.length_mm, (d.length_mm, t.length_mm)
+    t, d = _the_twin_scratch_found(2086604)
     assert _within(d.width_mm, t.width_mm), (d.width_mm, t.width_mm)
-    assert np.hypot(d.x_px - t.image_x_px, d.y_px - t.image_y_px) * MM_PER_PX <= 0.05
-    assert not false, [found[k] for k in false]
 
 
 def test_a_scratch_that_ends_on_a_deep_groove_is_not_followed_along_the_groove():
@@ -365,17 +373,7 @@ def test_a_scratch_that_ends_on_a_deep_groove_is_not_followed_along_the_groove()
     (``_track_on``, on the raw darkness) turned onto the groove and went along it for
     2.6 mm, to where the groove faded: one 4.16 mm scratch, the true one unmatched. A run
     on along the hatch whose far end fades, as a groove does, is not taken."""
-    from station.bench.defects import twin_scratch_frame
-
-    f = twin_scratch_frame(2087087)
-    (t,) = f.defects
-    found = detect_defects(f.image, MM_PER_PX)
-    pairs, false = match([t], found, MM_PER_PX)
-    d = pairs[0][1]
-    assert d is not None and d.kind == "scratch", found
-    assert abs(d.length_mm - t.length_mm) <= 0.1 * t.length_mm, (d.length_mm, t.length_mm)
-    assert np.hypot(d.x_px - t.image_x_px, d.y_px - t.image_y_px) * MM_PER_PX <= 0.05
-    assert not false, [found[k] for k in false]
+    _the_twin_scratch_found(2087087)
 
 
 def test_a_scratch_across_the_frame_keeps_its_ends_where_the_lens_bends_it():
