@@ -172,6 +172,13 @@ def _twin_scratches(frames: int, seed: int, mm_per_px: float, tick) -> dict:
                        length_mm=round(d.length_mm, 4), significance=round(d.significance, 1)) for s, d in false],
         "misses": [dict(seed=seed + i, length_mm=round(t.length_mm, 4), width_mm=round(t.width_mm, 4))
                    for i, (t, d, _) in enumerate(rows) if d is None],
+        # the frames to look at: a scratch found off its place or outside the size tolerance
+        "outside_tol": [dict(seed=seed + i, length_mm=round(t.length_mm, 4), found_length_mm=round(d.length_mm, 4),
+                             width_mm=round(t.width_mm, 4), found_width_mm=round(d.width_mm, 4),
+                             place_mm=round(p, 4))
+                        for i, (t, d, p) in enumerate(rows) if d is not None
+                        and (p > PLACE_TOL_MM or not _within(d.length_mm - t.length_mm, t.length_mm)
+                             or not _within(d.width_mm - t.width_mm, t.width_mm))],
         "median_cpu_ms_per_frame": statistics.median(cpu) if cpu else None,
     }
 

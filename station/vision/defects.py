@@ -1342,6 +1342,39 @@ def _scratch_blur(nv: np.ndarray, pv: np.ndarray, half_w: float):
     return value, float(1.0 / w.sum())
 
 
+#: how firmly (the slope's t, on 1 px samples) a scratch's amplitude beyond its raw end
+#: must rise with the groove there to be read as the groove's, not the scratch's
+GROOVE_BEYOND_END_T = 3.0
+
+
+def _groove_beyond_end(raw: np.ndarray, groove: np.ndarray, a: int, b: int, step: float) -> bool:
+    """Whether the stretch ``[a, b)`` past a scratch's end on its raw amplitude ``raw``
+    (the residual matched-filtered across, no scaling for the grooves) is the wall
+    model's misfit of a groove there (``groove``: the modelled grooves through the same
+    filter) rather than the scratch running on. The scratch's floor is smooth: where it
+    runs through a groove the residual *dips* by what the model took for the groove,
+    whatever the groove's depth; where it is not, the residual is the model's misfit of
+    the groove, which on a deep groove the model underreads *rises* with it. So a
+    stretch whose amplitude rises with the groove (the least-squares slope over 1 px
+    samples, its t at least ``GROOVE_BEYOND_END_T``) is the groove's. A stretch under
+    4 px, or over which the groove hardly varies, says nothing (False)."""
+    k = max(int(round(1.0 / step)), 1)
+    if b - a < 4 * k:
+        return False
+    y, x = raw[a:b:k], groove[a:b:k]
+    if y.size < 4 or float(np.ptp(x)) <= 0:
+        return False
+    X = np.column_stack([np.ones_like(x), x])
+    coef, *_ = np.linalg.lstsq(X, y, rcond=None)
+    r = y - X @ coef
+    dof = y.size - 2
+    if dof <= 0:
+        return False
+    cov = float(r @ r) / dof * np.linalg.pinv(X.T @ X)
+    se = float(np.sqrt(max(cov[1, 1], 0.0)))
+    return bool(coef[1] > 0 and (se == 0.0 or coef[1] / se >= GROOVE_BEYOND_END_T))
+
+
 def _measure_scratch(patch: _Patch, region: np.ndarray, blur_hint: float | None = None):
     """A scratch: its centre line (a polynomial bend), its extent (``_scratch_extent``)
     and each end at half its local height (``_fit_end``) on its amplitude along it (the
@@ -1517,9 +1550,23 @@ def _measure_scratch(patch: _Patch, region: np.ndarray, blur_hint: float | None 
     # groove then carried the end on (the twin's frames)
     c_eff = float(np.clip(max(c, float(np.nanmax(prof_all))), 0.05, 1.0))
     factor = c_eff / np.maximum(c_eff - grooves, c_eff / 2.5)
+    ext_raw, av_raw = ext, av
     mv, av = profiles(factor)
     ext = _scratch_extent(av, step, gap_px)
     if ext is not None:
+        # ... but an end that the scaling carried on into a groove the scratch ends on is
+        # the raw darkness's: there the scaling lifts the wall model's misfit of the groove
+        # (``_groove_beyond_end``; a whole-surface part's 0.89 mm scratch ending on a deep
+        # groove 30 deg off it read 1.06 mm, its place 0.10 mm off)
+        lo, hi = ext
+        trim = int(np.ceil(2.0 * b / step))  # the raw end's own blurred step
+        if _groove_beyond_end(av_raw, (filt @ grooves) / filt_norm, ext[0], ext_raw[0] - trim, step):
+            lo = ext_raw[0]
+            av[:lo] = av_raw[:lo]
+        if _groove_beyond_end(av_raw, (filt @ grooves) / filt_norm, ext_raw[1] + trim, ext[1], step):
+            hi = ext_raw[1]
+            av[hi:] = av_raw[hi:]
+        ext = (lo, hi)
         s1, s2 = float(sv[ext[0]]), float(sv[ext[1] - 1])
     if blur_hint is None:
         ends = _ends_blur(sv, av, s1, s2)

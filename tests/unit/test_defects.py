@@ -376,6 +376,34 @@ def test_a_scratch_that_ends_on_a_deep_groove_is_not_followed_along_the_groove()
     _the_twin_scratch_found(2087087)
 
 
+def test_a_scratch_ending_on_a_deep_groove_across_it_keeps_its_end():
+    """A frame of a whole-surface scan through the camera twin (bench seed 25300, part 0):
+    a 0.88 mm scratch ends on a deep groove 30 deg off it, which the wall model reads at
+    half its darkness. Scaling the residual for the grooves a scratch's smooth floor cuts
+    away (c / (c - G)) lifted the model's misfit there too, and the end ran on across the
+    groove: 1.06 mm, its middle 9 px off. Past the raw end, an amplitude that rises with
+    the groove is the groove's (``_groove_beyond_end``): the end stays where the furrow
+    stops."""
+    from sim.camera.twin import CameraOptics
+
+    p = CameraOptics().params
+    spec = DefectSpec("scratch", 762.5159943699219, 485.84110074797, 88.40636391653848, 1.648476601492594,
+                      -2.5387004904315402, None, None, 55980413)
+    f = render_frame(p, [], seed=1389828893, wall=wall_patch(p, 1197323378), defects=[spec])
+    truth = f.defects[0]
+    found = [d for d in detect_defects(f.image, MM_PER_PX) if d.kind == "scratch"
+             and np.hypot(d.x_px - truth.image_x_px, d.y_px - truth.image_y_px) < 60.0]
+    assert len(found) == 1, found
+    d = found[0]
+    assert abs(d.length_px - truth.length_px) <= 2.0, (d.length_px, truth.length_px)
+    assert np.hypot(d.x_px - truth.image_x_px, d.y_px - truth.image_y_px) <= 2.0, (d, truth)
+    ends = np.array(geometry(spec, []).scratch_ends_px())
+    ex, ey = p.lens.distort_px(ends[:, 0], ends[:, 1])
+    line = np.array(d.line_px)
+    for px, py in zip(ex, ey):
+        assert float(np.min(np.hypot(line[[0, -1], 0] - px, line[[0, -1], 1] - py))) <= 2.0, ((px, py), line[[0, -1]])
+
+
 def test_a_scratch_across_the_frame_keeps_its_ends_where_the_lens_bends_it():
     """The camera twin's lens (barrel, -2.7 % at the corner) bends a straight furrow that
     crosses the frame away from its centre as r^3 and r^5 do. With a long scratch's own
