@@ -2386,7 +2386,7 @@ def detect_defects(image: np.ndarray, mm_per_px: float, *, holes=None, blur_px: 
                 if own.any() and inside[own].mean() < 0.05:
                     queue.append(([i], group_claim))
     examined = _drop_scratch_pieces(examined)
-    examined = _track_scratches(img, level_full, examined, cfg, wall.angles_deg)
+    examined = _track_scratches(img, level_full, examined, cfg)
     examined = _join_scratch_pieces(img, level_full, examined, cfg)
     found: list[Defect] = [ex.defect if ex.line is None else replace(ex.defect, line_px=_line_points(ex.line))
                            for ex in examined if ex.defect is not None]
@@ -2705,26 +2705,31 @@ def _at_frame_border(p: np.ndarray, shape: tuple[int, int]) -> bool:
     return bool(p[0] <= 4.0 or p[1] <= 4.0 or p[0] >= ww - 5.0 or p[1] >= hh - 5.0)
 
 
-def _fades_along_a_groove(img: np.ndarray, level: np.ndarray, on: np.ndarray, width: float, blur: float,
-                          angles_deg, cfg: DefectConfig) -> bool:
+def _run_on_fades(img: np.ndarray, level: np.ndarray, on: np.ndarray, width: float, blur: float,
+                  cfg: DefectConfig) -> bool:
     """Whether a scratch's run on (``_track_on``'s path, from its end outwards) is a
-    groove it meets: the path's last 60 px run along a groove family (``_near_hatch``)
-    and its far end, read inside the frame, does not step down as a scratch's does (no
-    wider than ``cfg.square_end_other_max_width_px`` and by ``cfg.square_end_min_height``
-    of the darkness inside it: ``_end_steps``) but fades, as a groove does along its
-    length. A scratch's end that meets a deep groove running on 10 deg from it was
-    followed along the groove to where that faded (the twin's frames, seed 2087087: a
-    1.57 mm scratch reported 4.16 mm long). A scratch that bends along the hatch keeps
-    its stretch when the stretch ends in a cut or at the frame's border (unread)."""
+    groove it meets rather than the scratch: its far end, read inside the frame over the
+    path's last 60 px, does not step down as a scratch's end does (no wider than
+    ``cfg.square_end_other_max_width_px`` and by ``cfg.square_end_min_height`` of the
+    darkness inside it: ``_end_steps``) but fades, as a groove does along its length or
+    as a straight path leaves a groove that diverges from it.
+
+    - A scratch's end that meets a deep groove running on 10 deg from it was followed
+      along the groove to where that faded (the twin's frames, seed 2087087: a 1.57 mm
+      scratch reported 4.16 mm long).
+    - Straight on along a deep groove 12 deg off the scratch, to where the groove had
+      left the path (seed 2088050: a 1.65 mm scratch read 2.01 mm, its place 0.18 mm
+      off): the far end fades over 10 px.
+
+    A scratch that bends along the hatch, which the wall model's grooves took in, keeps
+    its stretch: that ends where the scratch does, in a cut, or at the frame's border
+    (unread)."""
     seg = np.hypot(*np.diff(on, axis=0).T)
     if on.shape[0] < 2 or float(seg.sum()) < cfg.track_min_px:
         return False
     to_end = np.concatenate([[0.0], np.cumsum(seg[::-1])])[::-1]
     far = on[to_end <= 60.0]
     if far.shape[0] < 2:
-        return False
-    chord = far[-1] - far[0]
-    if _near_hatch(float(np.degrees(np.arctan2(chord[1], chord[0])) % 180.0), angles_deg, cfg) is None:
         return False
     if _at_frame_border(on[-1], img.shape):
         return False
@@ -2737,12 +2742,11 @@ def _fades_along_a_groove(img: np.ndarray, level: np.ndarray, on: np.ndarray, wi
 
 
 def _track_scratches(img: np.ndarray, level: np.ndarray, examined: list["_Examined"],
-                     cfg: DefectConfig, angles_deg=()) -> list["_Examined"]:
+                     cfg: DefectConfig) -> list["_Examined"]:
     """Each scratch's ends followed where the furrow runs on (``_track_on``): its centre
     line, length, place and direction take the stretch in, and it is ``partial`` when
-    the stretch reaches the frame's border. A stretch along the hatch (``angles_deg``)
-    that fades at its end is a groove the scratch meets, not taken
-    (``_fades_along_a_groove``)."""
+    the stretch reaches the frame's border. A stretch that fades at its far end is a
+    groove the scratch meets, not taken (``_run_on_fades``)."""
     out = []
     for ex in examined:
         d = ex.defect
@@ -2755,7 +2759,7 @@ def _track_scratches(img: np.ndarray, level: np.ndarray, examined: list["_Examin
         grown = False
         for k in (0, -1):
             on = _track_on(img, level, line, k, d.width_px, blur, cfg)
-            if on is None or _fades_along_a_groove(img, level, on, d.width_px, blur, angles_deg, cfg):
+            if on is None or _run_on_fades(img, level, on, d.width_px, blur, cfg):
                 continue
             grown = True
             line = np.vstack([on[::-1], line[1:]]) if k == 0 else np.vstack([line[:-1], on])

@@ -404,6 +404,16 @@ def test_a_scratch_ending_on_a_deep_groove_across_it_keeps_its_end():
         assert float(np.min(np.hypot(line[[0, -1], 0] - px, line[[0, -1], 1] - py))) <= 2.0, ((px, py), line[[0, -1]])
 
 
+def test_a_scratch_is_not_followed_straight_on_through_a_groove_that_diverges_from_it():
+    """A frame of the camera twin (the bench's seed 2088050): a 1.65 mm scratch 12 deg off
+    the hatch ends on a deep groove. Following the furrow past its end on the raw
+    darkness went straight on inside the groove's band for 34 px, until the groove had
+    left the path: 2.01 mm, its place 0.18 mm off. The stretch's far end fades over 10
+    px, as no cut does: not taken, whichever way it runs (``_run_on_fades``)."""
+    t, d = _the_twin_scratch_found(2088050)
+    assert abs(d.length_mm - t.length_mm) <= 0.03, (d.length_mm, t.length_mm)
+
+
 def test_a_scratch_across_the_frame_keeps_its_ends_where_the_lens_bends_it():
     """The camera twin's lens (barrel, -2.7 % at the corner) bends a straight furrow that
     crosses the frame away from its centre as r^3 and r^5 do. With a long scratch's own
