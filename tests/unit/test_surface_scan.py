@@ -471,6 +471,50 @@ def test_a_mark_seen_only_cut_by_frames_borders_and_not_in_a_frame_centred_on_it
             assert out == [] and any("not reported" in n for n in scan.notes), scan.notes
 
 
+def test_a_defect_seen_whole_in_several_frames_takes_its_size_from_every_reading():
+    """A 0.086 mm pore of a whole-surface part (seed 25601) read 0.060 mm (significance
+    8.8) in the frame nearest its centre and 0.093 mm (23.5) in the other; the scan
+    reported the first. Readings that agree are pooled (inverse-variance means, the
+    mean's uncertainty widened by the Birge ratio over 1); readings that disagree beyond
+    ``pool_birge_max`` are not one quantity, and the one with the most evidence is taken
+    as read. The place stays the chosen frame's; one reading alone is reported as read."""
+    from station.inspection.surface_scan import _Sighting
+    from station.vision.defects import Defect
+
+    def pore(x, y, length_mm, u_mm, width_mm=0.05, significance=10.0):
+        return Defect("pore", x, y, length_mm / 0.01, width_mm / 0.01, 0.9, 45.0, u_mm / 0.01, u_mm / 0.01,
+                      significance, False, None, length_mm, width_mm, length_mm, u_mm, u_mm)
+
+    cx, cy = GEO.centre_px
+    place = (60.0, 140.0)
+
+    def measured(first, second, r_near):
+        scan = _scan(calibrated=True)
+        a = _Sighting(first(cx - r_near, cy), place[0], place[1], r_near, 6, (place[0], place[1] + 3.0))
+        b = _Sighting(second(cx + 597.0, cy), place[0] + 0.003, place[1], 597.0, 11, (place[0], place[1] - 3.0))
+        (out,) = _run(scan.measure([a, b]))
+        assert abs(out.axial_mm - place[0]) < 1e-6  # the nearer reading's place
+        return out
+
+    for r_near in (547.0, 150.0):  # off every frame's centre (the calibrated choice), or centred in one
+        # the bench's pore: 2.2 of the Birge ratio apart; the stronger reading, as read
+        out = measured(lambda x, y: pore(x, y, 0.060, 0.010, significance=8.8),
+                       lambda x, y: pore(x, y, 0.093, 0.011, 0.06, significance=23.5), r_near)
+        assert (out.length_mm, out.width_mm, out.size_u_mm) == pytest.approx((0.093, 0.06, 0.022))
+        # readings that agree: the mean, its own uncertainty
+        out = measured(lambda x, y: pore(x, y, 0.080, 0.010), lambda x, y: pore(x, y, 0.082, 0.010, 0.06), r_near)
+        assert out.length_mm == pytest.approx(0.081) and out.width_mm == pytest.approx(0.055)
+        assert out.size_u_mm == pytest.approx(2.0 * 0.010 / math.sqrt(2.0))
+        # readings within the pooling's reach but scattered (Birge ratio 1.41): the mean's
+        # uncertainty widened to cover them
+        out = measured(lambda x, y: pore(x, y, 0.080, 0.010), lambda x, y: pore(x, y, 0.100, 0.010), r_near)
+        assert out.length_mm == pytest.approx(0.090) and out.size_u_mm == pytest.approx(0.020)
+    # one reading alone: as read
+    a = _Sighting(pore(cx - 547.0, cy, 0.060, 0.010), place[0], place[1], 547.0, 6, place)
+    (one,) = _run(_scan(calibrated=True).measure([a]))
+    assert one.length_mm == pytest.approx(0.060) and one.size_u_mm == pytest.approx(0.020)
+
+
 def test_a_scratch_running_out_of_the_band_is_measured_as_far_as_the_band_shows_and_says_so():
     scan = _scan()
     lo, hi = scan.plan.band_mm
