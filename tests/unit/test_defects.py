@@ -414,6 +414,22 @@ def test_a_scratch_is_not_followed_straight_on_through_a_groove_that_diverges_fr
     assert abs(d.length_mm - t.length_mm) <= 0.03, (d.length_mm, t.length_mm)
 
 
+def test_a_pore_a_grooves_stretch_grew_over_is_reported_once():
+    """A bench frame (wide envelope, 40 deg hatch, seed 89055): a 0.30 mm pore of low
+    contrast on a deep groove. Its own seed measured it; the seed of the groove's stretch
+    beside it grew a region over it and measured it again, as a 0.47 mm pore 7 px off.
+    A pore whose region covers half of one already measured is that pore again
+    (``_measured_again``): one pore, where the first measurement put it."""
+    f = random_defect_frame(89055, None, mm_per_px=MM_PER_PX, envelope="wide", hatch_deg=40.0)
+    (t,) = [t for t in f.defects if t.kind == "pore" and abs(t.image_x_px - 121.3) < 3.0]
+    found = detect_defects(f.image, MM_PER_PX)
+    near = [d for d in found if np.hypot(d.x_px - t.image_x_px, d.y_px - t.image_y_px) < 0.6 * t.length_px + 10.0]
+    assert len(near) == 1 and near[0].kind == "pore", near
+    assert np.hypot(near[0].x_px - t.image_x_px, near[0].y_px - t.image_y_px) < 4.0
+    pairs, false = match(f.defects, found, MM_PER_PX)
+    assert not [found[k] for k in false if found[k].kind == "pore"]
+
+
 def test_a_scratch_across_the_frame_keeps_its_ends_where_the_lens_bends_it():
     """The camera twin's lens (barrel, -2.7 % at the corner) bends a straight furrow that
     crosses the frame away from its centre as r^3 and r^5 do. With a long scratch's own
