@@ -1026,7 +1026,7 @@ class _SurfaceScan:
           widened by the Birge ratio where it is over 1.
         - Readings that do not are not one quantity read twice: a frame may have read a
           piece of a scratch whole, or a pore with a groove's stretch (seed 24804: a 1.65
-          mm scratch pooled with a 1.1 mm reading came out 0.31 mm short). The reading
+          mm scratch pooled with a shorter reading came out 0.31 mm short). The reading
           with the most evidence (its significance) is taken, as it was read.
 
         The place stays the chosen reading's (nearest its frame's centre: the lens's
