@@ -1003,7 +1003,7 @@ class _SurfaceScan:
         length = float(d.length_mm if d.length_mm is not None else d.length_px * s)
         width = float(d.width_mm if d.width_mm is not None else d.width_px * s)
         size_u = float(d.size_u_mm if d.size_u_mm is not None else d.length_u_px * s)
-        width_u = float(d.width_u_mm if getattr(d, "width_u_mm", None) is not None else d.width_u_px * s)
+        width_u = float(d.width_u_mm if d.width_u_mm is not None else d.width_u_px * s)
         if self.lens is not None:
             # the lens's local scale along the length and across it (a rim defect: both
             # ways; its angle is round its hole)

@@ -1560,10 +1560,11 @@ def _measure_scratch(patch: _Patch, region: np.ndarray, blur_hint: float | None 
         # groove 30 deg off it read 1.06 mm, its place 0.10 mm off)
         lo, hi = ext
         trim = int(np.ceil(2.0 * b / step))  # the raw end's own blurred step
-        if _groove_beyond_end(av_raw, (filt @ grooves) / filt_norm, ext[0], ext_raw[0] - trim, step):
+        groove_av = (filt @ grooves) / filt_norm  # the modelled grooves through the same filter
+        if _groove_beyond_end(av_raw, groove_av, ext[0], ext_raw[0] - trim, step):
             lo = ext_raw[0]
             av[:lo] = av_raw[:lo]
-        if _groove_beyond_end(av_raw, (filt @ grooves) / filt_norm, ext_raw[1] + trim, ext[1], step):
+        if _groove_beyond_end(av_raw, groove_av, ext_raw[1] + trim, ext[1], step):
             hi = ext_raw[1]
             av[hi:] = av_raw[hi:]
         ext = (lo, hi)
