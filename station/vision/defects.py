@@ -74,7 +74,7 @@ from dataclasses import asdict, dataclass, replace
 import cv2
 import numpy as np
 from scipy.ndimage import gaussian_filter1d, maximum_filter1d
-from scipy.special import ndtr
+from scipy.special import ive, ndtr
 
 from station.vision.grooves import honing_directions
 from station.vision.imageio import to_8bit, to_grey
@@ -1048,24 +1048,84 @@ def _fit_contrast(r, xx, yy, use, cx, cy, cov, mass,
     return c, s, c_sd, aspect
 
 
-def _outline(r, xx, yy, omega, cx, cy, mass: float, c: float, blur: float, with_order: bool = False):
+#: a pore's outline is read to the order whose harmonic the blur still keeps this much of
+#: (``_harmonic_attenuation``), at most ``OUTLINE_MAX_ORDER``, and only while the noise
+#: that the harmonic's division by it carries into the radius stays under
+#: ``OUTLINE_RIPPLE_NOISE_PX``: beyond, the grain's noise outweighs the shape. Faint
+#: 12 px pores on 8 % grooves (noise 0.24-0.38 px at harmonic 4) read 0.8 px wide
+#: with harmonic 4 let in on the attenuation alone
+OUTLINE_MIN_ATTENUATION = 0.5
+OUTLINE_MAX_ORDER = 8
+OUTLINE_RIPPLE_NOISE_PX = 0.25
+
+
+@functools.lru_cache(maxsize=4096)
+def _harmonic_attenuation_cached(radius_q: int, blur_q: int, kmax: int) -> tuple[float, ...]:
+    rho, sigma = radius_q / 20.0, blur_q / 100.0
+    s = np.linspace(max(rho - 8.0 * sigma, 0.0), rho + 8.0 * sigma, 801)
+    g = (s / sigma**2) * np.exp(-((s - rho) ** 2) / (2.0 * sigma**2))
+    return tuple(float(np.trapezoid(g * ive(k, s * rho / sigma**2), s)) for k in range(1, kmax + 1))
+
+
+def _harmonic_attenuation(radius: float, blur: float, kmax: int = OUTLINE_MAX_ORDER) -> np.ndarray:
+    """How much a Gaussian blur ``blur`` (px) keeps of the angular harmonics k = 1..kmax,
+    about a centre, of darkening at ``radius`` (px) from it. A point's darkening at
+    radius rho, spread by the blur sigma and read as harmonic k round the centre, keeps
+    h_k = integral over s of s / sigma^2 exp(-(s^2 + rho^2) / 2 sigma^2) I_k(s rho / sigma^2) ds
+    (the Rice law with the weight I_k for I_0; about exp(-k^2 sigma^2 / 2 rho^2) when
+    rho >> sigma).
+    A mark's outline is r(theta); a ripple of it at the rim is read attenuated by h_k at
+    the rim's radius. Cached on radius to 0.05 px and blur to 0.01 px."""
+    rq = int(round(max(radius, 0.5) * 20.0))
+    bq = int(round(max(blur, 0.3) * 100.0))
+    return np.array(_harmonic_attenuation_cached(rq, bq, int(kmax)))
+
+
+def _outline(r, xx, yy, omega, cx, cy, mass: float, c: float, blur: float, with_gain: bool = False,
+             deconvolve: bool = True, noise: float | None = None):
     """A dark mark's outline, radius against angle (360 angles over -pi..pi), from the
     darkening ``r`` over ``omega``: its angular density round the centroid is
     c r(theta)^2 / 2 (the area a direction holds), whatever the blur; as a Fourier series
-    of the pixels' angles (no binning), to the order the blur resolves (k sigma / R < 1)."""
+    of the pixels' angles (no binning). The blur spreads the darkening across
+    directions, which keeps only h_k of the outline's harmonic k (``_harmonic_attenuation``
+    at the mark's equivalent radius): each harmonic read is divided by its h_k, up to the
+    order where h_k falls under ``OUTLINE_MIN_ATTENUATION`` or, given the ``noise`` of a
+    coefficient, where the division would carry more than ``OUTLINE_RIPPLE_NOISE_PX`` of
+    it into the radius. Read as it was blurred (the first version, to the order
+    k sigma / R < 1 and not divided), the outline was smoothed: on 445 pores of 5-50 px
+    (station envelope, no hole) the greatest Feret diameter read 0.61 px short and the
+    width 0.34 px short on average, with their area right to 0.01 px of radius; divided,
+    -0.07 and -0.08 px (wide envelope, 359 pores: -0.39 / -0.25 -> +0.07 / -0.06 px,
+    the length's spread 1.10 -> 0.96 px).
+
+    With ``with_gain``, also the sum of 1 / h_k^2 over the harmonics kept, which is what
+    the grain's noise in the outline grows with. ``deconvolve`` False: the outline as
+    blurred, to the order k sigma / R < 1 (2-8; the edge-blur test's, which asks how far
+    the mark departs from the blurred ellipse it was fitted with)."""
     dx, dy = xx[omega] - cx, yy[omega] - cy
     phi = np.arctan2(dy, dx)
     mv = r[omega]
     r_eq = np.sqrt(max(mass / c, 1.0) / np.pi)
-    order = int(np.clip(np.floor(r_eq / max(blur, 0.7)), 2, 8))
+    if deconvolve:
+        att = _harmonic_attenuation(r_eq, blur)
+        ok = att >= OUTLINE_MIN_ATTENUATION
+        if noise is not None:
+            # a harmonic's coefficients each carry the noise of a sum over omega; divided
+            # by h_k, that is this much of the outline's radius (px)
+            ok &= noise * np.sqrt(2.0) / (att * np.pi * c * r_eq) <= OUTLINE_RIPPLE_NOISE_PX
+        order = int(max(2, np.sum(np.cumprod(ok))))
+        att = att[:order]
+    else:
+        order = int(np.clip(np.floor(r_eq / max(blur, 0.7)), 2, OUTLINE_MAX_ORDER))
+        att = np.ones(order)
     ks = np.arange(1, order + 1)
     cos_k, sin_k = np.cos(ks[:, None] * phi[None, :]), np.sin(ks[:, None] * phi[None, :])
-    a_k, b_k = cos_k @ mv, sin_k @ mv
+    a_k, b_k = (cos_k @ mv) / att, (sin_k @ mv) / att
     th = np.linspace(-np.pi, np.pi, 360, endpoint=False)
     harmonics = a_k @ np.cos(ks[:, None] * th[None, :]) + b_k @ np.sin(ks[:, None] * th[None, :])
     density = (mass + 2.0 * harmonics) / (2 * np.pi)
     rr = np.sqrt(np.clip(2.0 * density / c, 0.0, None))
-    return (th, rr, order) if with_order else (th, rr)
+    return (th, rr, float(np.sum(1.0 / att**2))) if with_gain else (th, rr)
 
 
 def _outline_roughness(th: np.ndarray, rr: np.ndarray) -> float:
@@ -1131,7 +1191,7 @@ def _measure_pore(patch: _Patch, region: np.ndarray, cfg: DefectConfig, allow_sc
         # (a radial scatter rho widens the mean edge to sqrt(s^2 + rho^2)): what the
         # outline's own harmonics beyond the ellipse's say of it comes off first. A soft
         # shading of the wall has a smooth outline and keeps its blur
-        th, rr = _outline(r, xx, yy, omega, cx, cy, mass, c, blur)
+        th, rr = _outline(r, xx, yy, omega, cx, cy, mass, c, blur, deconvolve=False)
         rough = _outline_roughness(th, rr)
         if np.sqrt(max(blur * blur - rough * rough, 0.0)) > cfg.max_edge_blur_px:
             return None
@@ -1143,13 +1203,14 @@ def _measure_pore(patch: _Patch, region: np.ndarray, cfg: DefectConfig, allow_sc
     if held is not None:
         c, blur, c_sd, _ = _fit_contrast(r, xx, yy, fit_area, cx, cy, cov, mass,
                                          blur_held=float(np.clip(held, 0.5, 3.5)))
-    th, rr, order = _outline(r, xx, yy, omega, cx, cy, mass, c, blur, with_order=True)
-    r_eq = np.sqrt(max(mass / c, 1.0) / np.pi)
-    length, direction, width = feret(rr * np.cos(th), rr * np.sin(th))
     # noise of a sum over n px: the 5x5 box mean's spread x 25 per 25 px (correlated
     # grain); each coefficient sums the pixels with weights of RMS 1/sqrt(2); r^2 = 2 D / c
     u_coef = 5.0 * patch.noise_box5 * np.sqrt(omega.sum() / 2.0)
-    u_density = u_coef * np.sqrt(2.0 * order) / np.pi
+    th, rr, gain = _outline(r, xx, yy, omega, cx, cy, mass, c, blur, with_gain=True,
+                            noise=u_coef)
+    r_eq = np.sqrt(max(mass / c, 1.0) / np.pi)
+    length, direction, width = feret(rr * np.cos(th), rr * np.sin(th))
+    u_density = u_coef * np.sqrt(2.0 * gain) / np.pi
     u_r = u_density / (c * max(r_eq, 1.0))
     u_scale = c_sd / (2.0 * c)  # the outline scales as c^-1/2
     u_len = float(np.sqrt(2.0 * u_r**2 + (length * u_scale) ** 2))

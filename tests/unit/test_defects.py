@@ -225,6 +225,33 @@ def test_sizes_are_sub_pixel_not_pixel_counts():
     assert np.all(np.abs(steps - 0.5) < 0.25), lengths
 
 
+def test_a_ragged_pores_greatest_diameter_is_read_through_the_blur():
+    """The blur spreads a pore's darkening across directions round its centre, which
+    keeps only part of its outline's harmonics (h_k ~ exp(-k^2 s^2 / 2 R^2)): read as
+    blurred, ragged pores of 14-35 px read their greatest Feret diameter 0.5 px short
+    on average and their width 0.2 px short, with their area right. Each harmonic is
+    now divided by what the blur kept of it: over 48 pores, half with a hole giving the
+    blur, the mean errors are within 0.25 px of nothing."""
+    p = FrameParams(wall_level_dn=120.0, hole_level_dn=40.0, groove_depth=0.04, grain=0.02, blotch=0.02,
+                    blur_sigma_px=1.4, gain_e_per_dn=40.0, read_noise_dn=1.0, vignetting=0.1, **SMALL)
+    length_err, width_err = [], []
+    for k in range(6):
+        size = 14.0 + k
+        pores = [DefectSpec("pore", 140.3 + 120 * (j % 4), 110.6 + 140 * (j // 4), size + 2 * j, (size + 2 * j) * 0.75,
+                            25.0 * k + 40 * j, 0.4, shape_seed=500 + 10 * k + j) for j in range(8)]
+        f = render_frame(p, [HoleSpec(560.0, 440.0, 80.0)] if k % 2 else [], seed=700 + k, defects=pores)
+        truths = [d.with_scale(MM_PER_PX) for d in f.defects]
+        pairs, false = match(truths, detect_defects(f.image, MM_PER_PX), MM_PER_PX)
+        assert not false, k
+        for t, d in pairs:
+            assert d is not None and d.kind == "pore", (k, t.x_px, t.y_px)
+            length_err.append(d.length_px - t.length_px)
+            width_err.append(d.width_px - t.width_px)
+    assert len(length_err) == 48
+    assert abs(np.mean(length_err)) <= 0.25, np.mean(length_err)
+    assert abs(np.mean(width_err)) <= 0.25, np.mean(width_err)
+
+
 def _the_one_scratch_found(p: FrameParams, spec: DefectSpec, seed: int):
     """``spec`` rendered alone on a wall of ``p``: (its truth, the one defect found), which
     must be a scratch matched to it with nothing else reported."""
