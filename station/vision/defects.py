@@ -1648,8 +1648,11 @@ def _measure_scratch(patch: _Patch, region: np.ndarray, blur_hint: float | None 
     blur_x = b
     blur = float(np.clip(blur_x, 0.7, 2.8))
     ms = gaussian_filter1d(av, 1.0 / step)
-    s1, u_s1 = _fit_end(sv, ms, s1, blur, rising=True)
-    s2, u_s2 = _fit_end(sv, ms, s2, blur, rising=False)
+    # a square end's step in ms: the camera's blur and the strip's sampling (blur_x), and
+    # the 1 px smoothing
+    step_blur = float(np.hypot(blur_x, 1.0))
+    s1, u_s1 = _fit_end(sv, ms, s1, blur, rising=True, step_blur=step_blur)
+    s2, u_s2 = _fit_end(sv, ms, s2, blur, rising=False, step_blur=step_blur)
     if s2 - s1 < 3.0:
         return None
     ss = np.linspace(s1, s2, 200)
@@ -2223,7 +2226,8 @@ def _chip_floor(prof: _RimProfile, rays: np.ndarray, s_arc: np.ndarray, s1: floa
     return float(np.clip(np.median(vals), 0.3, 1.3))
 
 
-def _fit_end(s: np.ndarray, data: np.ndarray, guess: float, blur: float, rising: bool) -> tuple[float, float]:
+def _fit_end(s: np.ndarray, data: np.ndarray, guess: float, blur: float, rising: bool,
+             step_blur: float | None = None) -> tuple[float, float]:
     """Where a profile steps up (``rising``) or down near ``guess``: the crossing of half
     its *local* height, the height read 1.2 blur to 1.2 blur + 1 px inside the end
     (where a blurred step has reached 88-97 %), iterated from ``guess``. A ragged defect
@@ -2231,7 +2235,14 @@ def _fit_end(s: np.ndarray, data: np.ndarray, guess: float, blur: float, rising:
     fitted over a window reaching into its middle) put such ends 1-2 px too far in. On
     the dev frames' 217 rim defects, lengths off by more than 10 % and 2 px: 24 with the
     height read 2-4 blur inside, 13 with 1.2 blur + 1 px. Returns (position, standard
-    deviation from the noise at the crossing)."""
+    deviation from the noise at the crossing).
+
+    ``step_blur``: the blur of a square end's step in ``data`` (Gaussian sigma, px), if it
+    is one. The height read so near the end is the blurred step's 88-97 %, not its
+    plateau, so its half sat outside the end: each end of a square-ended scratch (its
+    profile smoothed over 1 px, a step blur of 1.7 px) read 0.2-0.3 px out, every
+    scratch 0.55 px long on a clean wall. Given the step's blur, the height is divided by
+    what the step reaches where it was read."""
     order = np.argsort(s)
     s, data = s[order], data[order]
     inward = 1.0 if rising else -1.0
@@ -2242,6 +2253,8 @@ def _fit_end(s: np.ndarray, data: np.ndarray, guess: float, blur: float, rising:
         if not near.any():
             break
         level = 0.5 * float(np.median(data[near]))
+        if step_blur is not None:
+            level /= float(np.median(ndtr(inward * (s[near] - end) / step_blur)))
         if level <= 0:
             break
         half = level
