@@ -1935,6 +1935,26 @@ def _marks_mask(shape: tuple[int, int], found, blur: float) -> np.ndarray:
     return mask.astype(bool)
 
 
+def _rim_noise(dev: np.ndarray, k: float, rounds: int = 4) -> float:
+    """The noise of a rim's edge about its circle (px): the robust spread (MAD) of the
+    deviations, read again without those that stand out at ``k`` times it, until it
+    settles. The MAD alone is robust to a few defects, not to a rim that is half defect:
+    two burrs and two chips over 42 % of a 0.75 mm hole's rim read a noise of 0.62 px
+    (clean rims there: 0.05-0.17), and the chips, 2.5 and 3.5 px high, stayed under the
+    5-noise bar (station bench seed 93005); without the burrs it reads 0.17 px. On a
+    rim without defects nothing stands out at k noise, and the first reading stands."""
+    noise = max(_mad_sigma(dev), 0.02)
+    for _ in range(rounds):
+        inside = np.abs(dev) < k * noise
+        if inside.sum() < 10 or inside.all():
+            break
+        new = max(_mad_sigma(dev[inside]), 0.02)
+        if abs(new - noise) <= 1e-3 * noise:
+            break
+        noise = new
+    return noise
+
+
 def _rim_defects(img: np.ndarray, hole, index: int, zone_others: np.ndarray, wall_level: np.ndarray, angles_deg,
                  cfg: DefectConfig, mm_per_px: float, marks: np.ndarray | None = None) -> list[Defect]:
     """Burrs and chips on one hole's rim: where the rim's edge stands out of its own
@@ -1963,12 +1983,12 @@ def _rim_defects(img: np.ndarray, hole, index: int, zone_others: np.ndarray, wal
     step_arc = 2 * np.pi * rad / n  # px of arc per ray
     # smoothed over ~1 px of arc: the rays are 0.5 px apart and the blur correlates them
     dev_s = gaussian_filter1d(dev, 1.0 / step_arc, mode="wrap" if whole else "nearest")
-    noise = max(_mad_sigma(dev_s[valid]), 0.02)
+    noise = _rim_noise(dev_s[valid], cfg.rim_k)
     thr = max(cfg.rim_k * noise, cfg.rim_min_height_px)
     # the rays' edges on the share averaged along the rim, where a defect is looked for
     dev_f = np.where(valid, prof.edge_find - _robust_harmonics(theta, prof.edge_find, valid, 1), 0.0)
     dev_f = gaussian_filter1d(dev_f, 1.0 / step_arc, mode="wrap" if whole else "nearest")
-    thr_f = max(cfg.rim_k * max(_mad_sigma(dev_f[valid]), 0.02), cfg.rim_min_height_px)
+    thr_f = max(cfg.rim_k * _rim_noise(dev_f[valid], cfg.rim_k), cfg.rim_min_height_px)
     # the area-true deviation, each ray integrated over its own edge and the baseline
     # plus the blur's reach: thin features (a burr lower than the blur) keep their area.
     # The ends and the significance are read on it; a chip's depth on the same integral
