@@ -1052,8 +1052,8 @@ def _fit_contrast(r, xx, yy, use, cx, cy, cov, mass,
 #: (``_harmonic_attenuation``), at most ``OUTLINE_MAX_ORDER``, and only while the noise
 #: that the harmonic's division by it carries into the radius stays under
 #: ``OUTLINE_RIPPLE_NOISE_PX``: beyond, the grain's noise outweighs the shape. Faint
-#: 12 px pores on 8 % grooves (noise 0.24-0.38 px at harmonic 4) read 0.8 px wide
-#: with harmonic 4 let in on the attenuation alone
+#: 12 px pores on 8 % grooves (noise 0.24-0.38 px at harmonic 4) read 0.9 px too wide
+#: on average with harmonic 4 let in on the attenuation alone
 OUTLINE_MIN_ATTENUATION = 0.5
 OUTLINE_MAX_ORDER = 8
 OUTLINE_RIPPLE_NOISE_PX = 0.25
