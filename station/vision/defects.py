@@ -286,6 +286,17 @@ class DefectConfig:
     #: 74000-74059, 78000-78059 at 22 deg, station 60000-60059) at most 0.22 (0.29 before),
     #: a deep groove meeting the rim obliquely 1.0 (0.11), two in a V 0.45 (0.19)
     chip_groove_share: float = 0.4
+    #: a chip is a notch, and beyond its ends the rim's wall comes back.  A dark band that
+    #: runs on past both its ends along a groove's line through it or just outside it
+    #: (``_groove_along_rim``) at more than this share of the hole's darkness, the share at
+    #: which the rim's own edge is read (``rim_crossing``), would be read as hole there by
+    #: itself: a deep groove grazing the rim, not a chip.  Session 54: 276 true chips
+    #: (wide seeds 94000-94099, 95000-95099, 82000-82059, 74000-74059, 78000-78059 at a 22
+    #: deg hatch, station 91000-91059) at most 0.60 (a chip a groove runs through, on a
+    #: 36 %-dark hole), all others under 0.35; a groove darker than the hole grazing its
+    #: rim (wide clean frame 1094030, a 0.44 mm "chip") and the rendered grazing grooves
+    #: of the unit test 1.2-1.4
+    chip_groove_along_share: float = 0.75
     #: standard uncertainties from the fits' and integrals' noise are multiplied by this,
     #: the factor the hole measurement's white-noise u took until round 12 of the vision
     #: stage (docs/vision-history.md): the texture is correlated noise the formulas do not
@@ -2083,6 +2094,10 @@ def _rim_defects(img: np.ndarray, hole, index: int, zone_others: np.ndarray, wal
                                                  hole, ((s1 + s2) / 2.0) / rad, length, height, angles_deg,
                                                  blur) > cfg.chip_groove_share:
                 continue  # a deep groove running into the rim
+            if kind == "chip" and _groove_along_rim(img, wall_level, zone_others if marks is None else zone_others | marks,
+                                                    hole, s1 / rad, s2 / rad, height, angles_deg,
+                                                    blur) > cfg.chip_groove_along_share:
+                continue  # a deep groove grazing the rim
             partial = not ok.all()
             significance = height * np.sqrt(length) / noise
             if significance < cfg.min_significance:
@@ -2138,6 +2153,99 @@ def _flank_level(values: np.ndarray, valid: np.ndarray, whole: bool, s1: float, 
     return max(min(levels), 0.0)
 
 
+def _darkness_reader(img: np.ndarray, wall_level: np.ndarray, others: np.ndarray):
+    """A function of points (..., 2) giving the wall's darkness 1 - I / W there (W the
+    frame's level ``wall_level``, bilinear), NaN off the frame and in ``others``."""
+    hh, ww = img.shape
+    level = np.asarray(wall_level, np.float32)
+
+    def darkness(pts: np.ndarray) -> np.ndarray:
+        x = pts[..., 0].astype(np.float32)
+        y = pts[..., 1].astype(np.float32)
+        v = cv2.remap(img, x, y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).astype(np.float32)
+        w = cv2.remap(level, x, y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        ix, iy = np.rint(x).astype(int), np.rint(y).astype(int)
+        inside = (ix >= 0) & (iy >= 0) & (ix < ww) & (iy < hh)
+        inside[inside] = ~others[iy[inside], ix[inside]]
+        return np.where(inside, 1.0 - v / np.maximum(w, 1.0), np.nan)
+
+    return darkness
+
+
+def _hole_darkness(darkness, centre: np.ndarray, rad: float, theta: float) -> float | None:
+    """The hole's own darkness towards angle ``theta`` (rad): the median over 11 points
+    across 10 px at 0.6 of its radius; None where fewer than 3 are read or it is under
+    0.05 (no hole to compare a mark with)."""
+    radial = np.array([np.cos(theta), np.sin(theta)])
+    inner = centre + 0.6 * rad * radial + np.linspace(-5.0, 5.0, 11)[:, None] * np.array([-radial[1], radial[0]])
+    d = darkness(inner[None])
+    if np.isfinite(d).sum() < 3:
+        return None
+    v = float(np.nanmedian(d))
+    return v if v > 0.05 else None
+
+
+def _groove_along_rim(img: np.ndarray, wall_level: np.ndarray, others: np.ndarray, hole, theta1: float,
+                      theta2: float, height: float, angles_deg, blur: float) -> float:
+    """How dark the wall stays beyond both ends of a chip found between angles
+    ``theta1`` and ``theta2`` (rad) of ``hole``'s rim, ``height`` px deep, along lines
+    of the hatch's directions through the notch and just outside it, as a share of the
+    hole's darkness (both 1 - I / W, as ``_groove_run_on``): a deep groove that grazes
+    the rim (runs nearly along its tangent) darkens the wall along an arc just outside
+    it and moves the edge out there as a notch does, but leaves the rim at under 0.2 of
+    the radial direction, where ``_groove_run_on`` does not look; its darkness runs on
+    along its line past both the notch's ends, where a chip's wall comes back.
+
+    Lines 1 px of arc apart across the notch, at 0.5, 0.75 and 1 of its depth out from
+    the rim and 1.5 blur beyond its depth (where the edge is read, the groove's skirt
+    and the hole's blurred step together reach the edge's crossing: a groove that makes
+    a shallow notch has its middle outside it), are followed both ways along each
+    direction from where each leaves the notch (its ends' angles or its depth), 3 blur
+    + 2 px on, over 24 px; points nearer the hole's centre than its radius plus that
+    clearance (the rim's blurred step, the hole beyond it), off the frame or in
+    ``others`` are not read, nor a line with fewer than 8 points left. Each line's
+    median darkness, each way's upper quartile over a depth's lines; the lower of the
+    two ways, the greatest over the depths and directions. A direction that either way
+    does not read (one that runs into the hole, the radial test's) counts 0, as does a
+    hole under 0.05 dark."""
+    centre = np.array([hole.x_px, hole.y_px])
+    rad = hole.diameter_px / 2.0
+    mid = 0.5 * (theta1 + theta2)
+    half = 0.5 * (theta2 - theta1)
+    darkness = _darkness_reader(img, wall_level, others)
+    hole_dark = _hole_darkness(darkness, centre, rad, mid)
+    if hole_dark is None:
+        return 0.0
+    depth = max(height, 1.0)
+    th = np.linspace(theta1, theta2, max(3, int(np.ceil(2.0 * half * rad)) + 1))
+    ray = np.stack([np.cos(th), np.sin(th)], axis=1)
+    clear = 3.0 * blur + 2.0
+    walk = np.arange(0.0, 2.0 * rad + 2.0 * depth + 2.0 + 1.5 * blur, 0.5)  # long enough to cross the notch
+    read = np.arange(0.0, 24.0, 1.0)
+    best = 0.0
+    for out_px in (0.5 * depth, 0.75 * depth, depth, depth + 1.5 * blur):
+        q = centre + (rad + out_px) * ray  # (lines, 2)
+        for a in angles_deg:
+            u = np.array([np.cos(np.deg2rad(a)), np.sin(np.deg2rad(a))])
+            ways = []
+            for sgn in (1.0, -1.0):
+                d = q[:, None, :] + sgn * walk[None, :, None] * u - centre
+                r = np.hypot(d[..., 0], d[..., 1])
+                dth = (np.arctan2(d[..., 1], d[..., 0]) - mid + np.pi) % (2.0 * np.pi) - np.pi
+                outside = (np.abs(dth) > half) | (r > rad + max(depth, out_px)) | (r < rad - 1.0)
+                left = walk[np.argmax(outside, axis=1)]  # where each line leaves the notch
+                pts = q[:, None, :] + sgn * (left[:, None] + clear + read[None, :])[..., None] * u
+                dd = pts - centre
+                v = np.where(np.hypot(dd[..., 0], dd[..., 1]) >= rad + clear, darkness(pts), np.nan)
+                ok = np.isfinite(v).sum(axis=1) >= 8
+                if not ok.any():
+                    break
+                ways.append(float(np.percentile(np.nanmedian(v[ok], axis=1), 75.0)))
+            if len(ways) == 2:
+                best = max(best, min(ways))
+    return best / hole_dark
+
+
 def _groove_run_on(img: np.ndarray, wall_level: np.ndarray, others: np.ndarray, hole, theta: float, length: float,
                    height: float, angles_deg, blur: float) -> float:
     """How dark the wall stays beyond a chip found at angle ``theta`` (rad) of ``hole``'s
@@ -2159,30 +2267,13 @@ def _groove_run_on(img: np.ndarray, wall_level: np.ndarray, others: np.ndarray, 
     quartile 0.23 and 0.19).
     Points off the frame or in another hole's zone (``others``) are not read, nor a line
     with fewer than 8 points left.  0 when no direction leaves the rim outwards."""
-    hh, ww = img.shape
     radial = np.array([np.cos(theta), np.sin(theta)])
     tang = np.array([-radial[1], radial[0]])
     centre = np.array([hole.x_px, hole.y_px])
     rad = hole.diameter_px / 2.0
-    level = np.asarray(wall_level, np.float32)
-
-    def darkness(pts: np.ndarray) -> np.ndarray:
-        """1 - I / W at the points (..., 2); NaN off the frame and in other holes' zones."""
-        x = pts[..., 0].astype(np.float32)
-        y = pts[..., 1].astype(np.float32)
-        v = cv2.remap(img, x, y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE).astype(np.float32)
-        w = cv2.remap(level, x, y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-        ix, iy = np.rint(x).astype(int), np.rint(y).astype(int)
-        inside = (ix >= 0) & (iy >= 0) & (ix < ww) & (iy < hh)
-        inside[inside] = ~others[iy[inside], ix[inside]]
-        return np.where(inside, 1.0 - v / np.maximum(w, 1.0), np.nan)
-
-    inner = centre + 0.6 * rad * radial + np.linspace(-5.0, 5.0, 11)[:, None] * tang
-    dark_in = darkness(inner[None])
-    if np.isfinite(dark_in).sum() < 3:
-        return 0.0
-    hole_dark = float(np.nanmedian(dark_in))
-    if hole_dark <= 0.05:
+    darkness = _darkness_reader(img, wall_level, others)
+    hole_dark = _hole_darkness(darkness, centre, rad, theta)
+    if hole_dark is None:
         return 0.0
     # lines through the notch's mouth on the rim, 1 px apart across its length and 1 px
     # beyond each end, in each groove direction, each read from where it leaves the

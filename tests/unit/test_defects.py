@@ -1330,3 +1330,42 @@ def test_a_deep_groove_crossing_a_chips_arc_does_not_make_it_a_groove():
         for t in chips:
             near = [d for d in found if d.kind == "chip" and np.hypot(d.x_px - t.x_px, d.y_px - t.y_px) < 0.5 * t.length_px]
             assert near, (seed, t.x_px, t.y_px)
+
+
+@pytest.mark.parametrize("angle, side, gap", [(150.0, 1, 0.0), (150.0, -1, 1.0), (150.0, 1, 2.0), (30.0, -1, 1.0)])
+def test_a_deep_groove_grazing_a_rim_is_no_chip_and_a_chip_on_that_rim_is_found(angle, side, gap):
+    """A groove of the hatch darker than the hole, running along the rim's tangent 2.5-4.5
+    px outside it (its middle), moves the rim's edge out along an arc as a notch does: a
+    0.35-0.49 mm "chip" (wide clean frame 1094030: 0.44 mm, the wide bench's one false
+    defect per 100 clean frames). No groove direction leaves the rim outwards through
+    that arc, so the run-on test (``_groove_run_on``) read nothing; the groove's darkness
+    runs on along its line beyond both the notch's ends (1.2-1.4 of the hole's), where a
+    chip's wall comes back (true chips on the benches: at most 0.6). The frame is clean;
+    a true chip on the same rim, a third of the way round, is found as one and in place."""
+    p = FrameParams(wall_level_dn=140.0, hole_level_dn=84.0, groove_depth=0.07, grain=0.03, blotch=0.03,
+                    blur_sigma_px=1.5, gain_e_per_dn=30.0, read_noise_dn=1.5, vignetting=0.2, **SMALL)
+    cx, cy, diameter = 320.3, 256.6, 90.0
+    ux, uy = np.cos(np.deg2rad(angle)), np.sin(np.deg2rad(angle))
+    nx, ny = -uy * side, ux * side  # from the hole's centre towards the groove
+    g = diameter / 2 + 2.5 + gap
+    wall = _with_groove_stretch(wall_patch(p, 300 + int(gap * 2)), cx + g * nx - 250 * ux, cy + g * ny - 250 * uy,
+                                angle, 500.0, 0.6, width_px=5.0, fade=0.05)
+    seed = 400 + int(gap * 2)
+    clean = render_frame(p, [HoleSpec(cx, cy, diameter)], seed=seed, wall=wall)
+    assert [(d.kind, round(d.length_mm, 3)) for d in detect_defects(clean.image, MM_PER_PX)] == []
+    at = (np.rad2deg(np.arctan2(ny, nx)) + 120.0) % 360.0
+    chip = DefectSpec("chip", length_px=14.0, width_px=4.0, angle_deg=at, hole=0, shape_seed=7)
+    f = render_frame(p, [HoleSpec(cx, cy, diameter)], seed=seed, wall=wall, defects=[chip])
+    (truth,) = [d.with_scale(MM_PER_PX) for d in f.defects]
+    found = detect_defects(f.image, MM_PER_PX)
+    assert [d.kind for d in found] == ["chip"], found
+    assert np.hypot(found[0].x_px - truth.image_x_px, found[0].y_px - truth.image_y_px) * MM_PER_PX < 0.05
+
+
+def test_a_bench_frames_grazing_groove_is_no_chip_and_a_chip_a_groove_runs_through_is():
+    """Wide bench frames: clean frame 1094030, where a groove darker than the hole grazes
+    its rim (a 0.44 mm "chip", along-the-groove share 1.25), and frame 94053, whose true
+    chip (0.24 mm) a groove of the hatch runs through on a 36 %-dark hole: the highest
+    share of 276 true chips on the benches (0.60). The first is clean, the second's chip
+    is found."""
+    assert _chips_without_false_ones(((1094030, True), (94053, False))) == 1
