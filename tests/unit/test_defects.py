@@ -1369,3 +1369,16 @@ def test_a_bench_frames_grazing_groove_is_no_chip_and_a_chip_a_groove_runs_throu
     share of 276 true chips on the benches (0.60). The first is clean, the second's chip
     is found."""
     assert _chips_without_false_ones(((1094030, True), (94053, False))) == 1
+
+
+def test_a_deep_grooves_stretch_meeting_a_hole_is_not_cut_there():
+    """A mark along the hatch is a scratch only if it ends in cuts; one cut end and the
+    other running on is read again on the residual with its line left out of the
+    grooves. The residual is 0 in the holes' zone, which read as the wall beyond an end
+    that meets a hole: a cut. Wide clean frames 1096029 (a deep groove's stretch between
+    a crossing and a rim: a 0.63 mm "scratch") and 1096052 (a 1.45 mm stretch whose far
+    end's read reached a hole's zone 18 px on). The zone is not read there, as the frame's
+    border is not: both frames are clean."""
+    for seed in (1096029, 1096052):
+        f = random_defect_frame(seed, {}, mm_per_px=MM_PER_PX, envelope="wide")
+        assert [(d.kind, round(d.length_mm, 3)) for d in detect_defects(f.image, MM_PER_PX)] == [], seed
