@@ -293,7 +293,7 @@ class DefectConfig:
     #: itself: a deep groove grazing the rim, not a chip.  Session 54: 276 true chips
     #: (wide seeds 94000-94099, 95000-95099, 82000-82059, 74000-74059, 78000-78059 at a 22
     #: deg hatch, station 91000-91059) at most 0.60 (a chip a groove runs through, on a
-    #: 36 %-dark hole), all others under 0.35; a groove darker than the hole grazing its
+    #: 36 %-dark hole), all others under 0.3; a groove darker than the hole grazing its
     #: rim (wide clean frame 1094030, a 0.44 mm "chip") and the rendered grazing grooves
     #: of the unit test 1.2-1.4
     chip_groove_along_share: float = 0.75
