@@ -295,7 +295,7 @@ class DefectConfig:
     #: deg hatch, station 91000-91059) at most 0.60 (a chip a groove runs through, on a
     #: 36 %-dark hole), all others under 0.3; a groove darker than the hole grazing its
     #: rim (wide clean frame 1094030, a 0.44 mm "chip") and the rendered grazing grooves
-    #: of the unit test 1.2-1.4
+    #: of the unit test 1.14-1.33 (1094030: 1.78)
     chip_groove_along_share: float = 0.75
     #: standard uncertainties from the fits' and integrals' noise are multiplied by this,
     #: the factor the hole measurement's white-noise u took until round 12 of the vision

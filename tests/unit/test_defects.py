@@ -1339,7 +1339,7 @@ def test_a_deep_groove_grazing_a_rim_is_no_chip_and_a_chip_on_that_rim_is_found(
     0.35-0.49 mm "chip" (wide clean frame 1094030: 0.44 mm, the wide bench's one false
     defect per 100 clean frames). No groove direction leaves the rim outwards through
     that arc, so the run-on test (``_groove_run_on``) read nothing; the groove's darkness
-    runs on along its line beyond both the notch's ends (1.2-1.4 of the hole's), where a
+    runs on along its line beyond both the notch's ends (1.14-1.33 of the hole's), where a
     chip's wall comes back (true chips on the benches: at most 0.6). The frame is clean;
     a true chip on the same rim, a third of the way round, is found as one and in place."""
     p = FrameParams(wall_level_dn=140.0, hole_level_dn=84.0, groove_depth=0.07, grain=0.03, blotch=0.03,
@@ -1364,7 +1364,7 @@ def test_a_deep_groove_grazing_a_rim_is_no_chip_and_a_chip_on_that_rim_is_found(
 
 def test_a_bench_frames_grazing_groove_is_no_chip_and_a_chip_a_groove_runs_through_is():
     """Wide bench frames: clean frame 1094030, where a groove darker than the hole grazes
-    its rim (a 0.44 mm "chip", along-the-groove share 1.25), and frame 94053, whose true
+    its rim (a 0.44 mm "chip", along-the-groove share 1.78), and frame 94053, whose true
     chip (0.24 mm) a groove of the hatch runs through on a 36 %-dark hole: the highest
     share of 276 true chips on the benches (0.60). The first is clean, the second's chip
     is found."""
