@@ -31,8 +31,15 @@ export function detailText(body, status) {
   return `HTTP ${status}`;
 }
 
+// once: a second assign while the first navigation is pending aborts it (a poll's 401
+// right after "Log out" did, and the browser test waiting for the login page saw
+// net::ERR_ABORTED under load)
+let leaving = false;
+
 export function toLogin() {
-  if (!location.pathname.endsWith("/login.html")) location.assign("/panel/login.html");
+  if (leaving || location.pathname.endsWith("/login.html")) return;
+  leaving = true;
+  location.assign("/panel/login.html");
 }
 
 export async function api(method, path, { json, form, headers = {} } = {}) {
