@@ -131,7 +131,7 @@ def detect_candidates(image: np.ndarray, cfg: DetectConfig = DetectConfig()) -> 
     # it is only searched inside the components that failed, each level inside the
     # previous level's failures; what two levels find is kept once
     out, failed = _components(darkness, threshold, cfg)
-    first_failed = list(failed)
+    first_failed = failed  # the ladder rebinds ``failed``, never changes this list
     level = threshold
     while failed and level + cfg.split_step <= cfg.split_max:
         level += cfg.split_step
@@ -139,9 +139,7 @@ def detect_candidates(image: np.ndarray, cfg: DetectConfig = DetectConfig()) -> 
         for x0, y0, x1, y1 in failed:
             sub, sub_failed = _components(darkness, level, cfg, (x0, y0, x1, y1))
             still += sub_failed
-            for cand in sub:
-                if not any(np.hypot(cand.x_px - o.x_px, cand.y_px - o.y_px) < max(o.radius_px, 8.0) for o in out):
-                    out.append(cand)
+            _keep_once(out, sub)
         failed = still
     # a hole that a groove darker than it touches: no level parts them (above the groove's
     # darkness the hole is gone as well; wide envelope at a 22 deg hatch, clean frame
@@ -161,10 +159,16 @@ def detect_candidates(image: np.ndarray, cfg: DetectConfig = DetectConfig()) -> 
             if sub or not (sub_failed or (darkness[y0:y1, x0:x1] > level).any()):
                 break
             level += cfg.split_step
-        for cand in sub:
-            if not any(np.hypot(cand.x_px - o.x_px, cand.y_px - o.y_px) < max(o.radius_px, 8.0) for o in out):
-                out.append(cand)
+        _keep_once(out, sub)
     return out
+
+
+def _keep_once(out: list[Candidate], found: list[Candidate]) -> None:
+    """Append to ``out`` each of ``found`` whose centre is not within an earlier
+    candidate's radius (at least 8 px): what two searches find is kept once."""
+    for cand in found:
+        if not any(np.hypot(cand.x_px - o.x_px, cand.y_px - o.y_px) < max(o.radius_px, 8.0) for o in out):
+            out.append(cand)
 
 
 def _components(
