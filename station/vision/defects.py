@@ -230,6 +230,10 @@ class DefectConfig:
     #: contrast): the twin's deep grooves (10 % on average, up to 30 %) leave pieces of
     #: 0.12-0.13 there; the true scratches along the hatch fitted 0.13 and more
     aligned_min_scratch_contrast: float = 0.14
+    #: the least angle (deg) at which a groove family crosses a mark along the other for
+    #: its grooves to be read along their own lines and taken out of the mark's ends'
+    #: read (``_end_steps``); nearer, the lines beside the mark run along it
+    crossing_min_deg: float = 20.0
     #: a furrow no wider than this (mm): the bench's scratches are 0.015-0.06 mm wide;
     #: a broad dark band is wear or the cross-hatch's residue (dev frames: 14-28 px "scratches")
     max_scratch_width_mm: float = 0.1
@@ -3195,7 +3199,7 @@ def _examine_once(img: np.ndarray, box, seed: np.ndarray, excl: np.ndarray, zone
         ends = np.array([along.min(), along.max()])
         blur0 = float(blur_hint) if blur_hint is not None else BLUR_PRIOR_PX[0]
         pre = dict(line=(mx_ + ends * ca, my_ + ends * sa), blur=blur0, width=max(ext_w - 2.0 * blur0, 1.0))
-        if not any(_square_end(img, wall_level, x0, y0, pre, cfg)):
+        if not any(_square_end(img, wall_level, x0, y0, pre, cfg, angles_deg, zone)):
             # a piece of groove the wall model left, or a pore with such a piece attached
             return _core_pore(patch, rs, seed, region, zone[y0:y1, x0:x1], peak, box, at_border_of(region),
                               angles_deg, cfg, max_width_px, blur_hint)
@@ -3231,7 +3235,7 @@ def _examine_once(img: np.ndarray, box, seed: np.ndarray, excl: np.ndarray, zone
             # and the other running on is a piece of a longer scratch (the wall model's
             # grooves along its line took the rest in), measured again along it (``_examine``),
             # as is a piece of one that crosses the lines (``_along_hatch``)
-            m["square_end"], m["runs_on"] = _square_end(img, wall_level, x0, y0, m, cfg)
+            m["square_end"], m["runs_on"] = _square_end(img, wall_level, x0, y0, m, cfg, angles_deg, zone)
             if line_out and not m["square_end"]:
                 # measured again with its line left out of the grooves (``_examine``): its ends
                 # read on the residual too, where a groove it ran into is modelled from beside
@@ -3242,7 +3246,7 @@ def _examine_once(img: np.ndarray, box, seed: np.ndarray, excl: np.ndarray, zone
                 # runs into a rim read as cut there (wide clean frame 1096029: a 0.63 mm
                 # "scratch" between a crossing and a hole)
                 res_img = np.where(patch.zone, np.nan, 1.0 - patch.residual).astype(np.float32)
-                m["square_end"] = _square_end(res_img, np.ones_like(res_img), 0, 0, m, cfg)[0]
+                m["square_end"] = _square_end(res_img, np.ones_like(res_img), 0, 0, m, cfg, angles_deg)[0]
     defect = _accept(m, kind, box, at_border, angles_deg, cfg, max_width_px)
     if defect is None:
         core = _core_pore(patch, rs, seed, region, zone[y0:y1, x0:x1], peak, box, at_border, angles_deg, cfg,
@@ -3328,7 +3332,8 @@ def _core_pore(patch: _Patch, rs: np.ndarray, seed: np.ndarray, region: np.ndarr
 
 
 def _end_steps(img: np.ndarray, level: np.ndarray, x0: int, y0: int, m: dict,
-               ends: tuple[int, ...] = (0, -1)) -> list[tuple[float, float]]:
+               ends: tuple[int, ...] = (0, -1), other_deg: float | None = None,
+               unread: np.ndarray | None = None) -> list[tuple[float, float]]:
     """How a mark measured as a line (``m``: its centre line, width and blur; patch offset
     ``x0``, ``y0``) steps down at each of its ``ends`` read (0: the first, -1: the last):
     (the step's width, px; its height as a share of the darkness inside). The raw
@@ -3336,7 +3341,20 @@ def _end_steps(img: np.ndarray, level: np.ndarray, x0: int, y0: int, m: dict,
     line's chord from up to 30 px inside the end to 30 px beyond it, the mean across the
     mark's core less that of its 4 px flanks (the other family's grooves cross both
     alike), and fitted as a blurred step (height, place, width, offset). An end the frame
-    cuts is not read (no entry); a mark no darker inside than beyond reads (inf, 0)."""
+    cuts is not read (no entry); a mark no darker inside than beyond reads (inf, 0).
+
+    ``other_deg``: the direction of the groove family that crosses a mark lying along the
+    other (``_crossing_family``). Its grooves cross the core and the flanks at places
+    along the line that differ by the flanks' offset over the tangent of the crossing
+    angle (5-10 px at a 44 deg crossing), so core less flanks read a crossing groove as a
+    peak beside a dip: at a deep groove's stretch that ended where a groove of the other
+    family crossed it, a step 0.5-1.1 px wide of 0.9-1.1 of the darkness inside, sharper
+    than the frame's blur allows an edge (wide clean frames 1097042, 1097051 at a 22 deg
+    hatch: 1.14 and 0.84 mm "scratches"). That family's darkness is read along its own
+    lines beside the mark (beyond the core, up to ``_CROSSING_READ_PX`` along them) and
+    taken from every sample first, each sample by the line through it; ``unread`` (bool,
+    the frame's shape, offset as ``img``): where those lines are not read (the holes'
+    zone: a hole 20 px along them would read as the family's darkness)."""
     lx, ly = (np.asarray(v, float) for v in m["line"])
     if lx.size < 2:
         return []
@@ -3361,14 +3379,46 @@ def _end_steps(img: np.ndarray, level: np.ndarray, x0: int, y0: int, m: dict,
             continue
         mx = px[k] + t[None, :] * ux - off[:, None] * uy
         my = py[k] + t[None, :] * uy + off[:, None] * ux
-        bx0, by0 = int(max(np.floor(mx.min()) - 1, 0)), int(max(np.floor(my.min()) - 1, 0))
-        bx1, by1 = int(min(np.ceil(mx.max()) + 2, ww)), int(min(np.ceil(my.max()) + 2, hh))
+        s_b = np.zeros(0)
+        if other_deg is not None:
+            b = np.array([np.cos(np.deg2rad(other_deg)), np.sin(np.deg2rad(other_deg))])
+            bn = float(b[0] * -uy + b[1] * ux)  # across the mark per px along the other family
+            slope = float(b[0] * ux + b[1] * uy) / bn  # along the mark per px across it
+            s_b = np.arange(-_CROSSING_READ_PX, _CROSSING_READ_PX + 0.5, 1.0)
+            s_b = s_b[np.abs(s_b * bn) >= core + 2.0]  # beside the mark, off its core
+        if s_b.size:
+            t_b = np.arange(t[0] - (core + 7.0) * abs(slope), t[-1] + (core + 7.0) * abs(slope) + 0.5, 0.5)
+            bx = px[k] + t_b[None, :] * ux + s_b[:, None] * b[0]
+            by = py[k] + t_b[None, :] * uy + s_b[:, None] * b[1]
+            allx, ally = np.concatenate([mx.ravel(), bx.ravel()]), np.concatenate([my.ravel(), by.ravel()])
+        else:
+            allx, ally = mx, my
+        bx0, by0 = int(max(np.floor(allx.min()) - 1, 0)), int(max(np.floor(ally.min()) - 1, 0))
+        bx1, by1 = int(min(np.ceil(allx.max()) + 2, ww)), int(min(np.ceil(ally.max()) + 2, hh))
         if bx1 - bx0 < 2 or by1 - by0 < 2:
             continue
         dark = (1.0 - img[by0:by1, bx0:bx1].astype(np.float32)
                 / np.maximum(level[by0:by1, bx0:bx1], 1.0)).astype(np.float32)
         st = cv2.remap(dark, (mx - bx0).astype(np.float32), (my - by0).astype(np.float32), cv2.INTER_LINEAR,
                        borderMode=cv2.BORDER_CONSTANT, borderValue=float("nan"))
+        if s_b.size:
+            sb = cv2.remap(dark, (bx - bx0).astype(np.float32), (by - by0).astype(np.float32), cv2.INTER_LINEAR,
+                           borderMode=cv2.BORDER_CONSTANT, borderValue=float("nan"))
+            if unread is not None:
+                ix = np.clip(np.rint(bx).astype(np.int64), 0, ww - 1)
+                iy = np.clip(np.rint(by).astype(np.int64), 0, hh - 1)
+                sb[unread[iy, ix]] = np.nan
+            have = np.isfinite(sb).sum(axis=0)
+            if (have >= 4).sum() >= 8:
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore", RuntimeWarning)  # a line with nothing read
+                    prof = np.where(have >= 4, np.nanmedian(sb, axis=0), np.nan)
+                ok_b = np.isfinite(prof)
+                # each sample less the other family's darkness on its line, where the line
+                # meets the mark's centre line (the constant the lines pick up beside the
+                # mark cancels in core less flanks)
+                st = st - np.interp(t[None, :] - off[:, None] * slope, t_b[ok_b], prof[ok_b],
+                                    left=np.nan, right=np.nan)
         ok = np.isfinite(st).all(axis=0)
         if ok.sum() < 20 or t[ok].max() < 12.0:
             continue  # the frame cuts this end
@@ -3389,8 +3439,27 @@ def _end_steps(img: np.ndarray, level: np.ndarray, x0: int, y0: int, m: dict,
     return steps
 
 
+#: how far along the crossing family's lines their darkness is read either side of a
+#: mark's centre line (px; ``_end_steps``)
+_CROSSING_READ_PX = 24.0
+
+
+def _crossing_family(line: tuple, angles_deg, cfg: DefectConfig) -> float | None:
+    """The groove family that crosses a mark lying along the other (``line``: its centre
+    line's x and y), at ``cfg.crossing_min_deg`` or more; None for a mark along neither
+    family (both cross it) or where the families are too near to part."""
+    lx, ly = (np.asarray(v, float) for v in line)
+    if lx.size < 2 or len(angles_deg) < 2:
+        return None
+    mark = float(np.rad2deg(np.arctan2(ly[-1] - ly[0], lx[-1] - lx[0])) % 180.0)
+    if _near_hatch(mark, angles_deg, cfg) is None:
+        return None
+    far = max(angles_deg, key=lambda g: _circ_diff_deg(mark, g))
+    return float(far) if _circ_diff_deg(mark, far) >= cfg.crossing_min_deg else None
+
+
 def _square_end(img: np.ndarray, level: np.ndarray, x0: int, y0: int, m: dict,
-                cfg: DefectConfig) -> tuple[bool, bool]:
+                cfg: DefectConfig, angles_deg=(), unread: np.ndarray | None = None) -> tuple[bool, bool]:
     """Whether a scratch measured along a groove direction (``m``, patch offset ``x0``,
     ``y0``) ends in a cut at both ends, as a furrow does, rather than fading as a groove
     does, each end read on the raw darkness (the grooves kept: the wall model's grooves
@@ -3400,8 +3469,10 @@ def _square_end(img: np.ndarray, level: np.ndarray, x0: int, y0: int, m: dict,
     than ``cfg.square_end_max_width_px``, or 2.5 of the mark's blur) and the other no
     wider than ``cfg.square_end_other_max_width_px``; and whether one end is square while
     another runs on at more than ``cfg.square_end_max_run_on`` of the darkness (a piece
-    of a longer mark)."""
-    steps = _end_steps(img, level, x0, y0, m)
+    of a longer mark). ``angles_deg``: the hatch's directions (the family crossing the
+    mark is taken out of its ends' read, ``unread`` not read: ``_end_steps``)."""
+    steps = _end_steps(img, level, x0, y0, m, other_deg=_crossing_family(m["line"], angles_deg, cfg),
+                       unread=unread)
     max_width = max(cfg.square_end_max_width_px, 2.5 * float(np.clip(m["blur"], 0.7, 2.8)))
     square = [w <= max_width and h >= cfg.square_end_min_height for w, h in steps]
     ends = [w <= max(cfg.square_end_other_max_width_px, max_width) and h >= cfg.square_end_min_height

@@ -1371,6 +1371,53 @@ def test_a_bench_frames_grazing_groove_is_no_chip_and_a_chip_a_groove_runs_throu
     assert _chips_without_false_ones(((1094030, True), (94053, False))) == 1
 
 
+def test_a_groove_crossed_where_it_fades_has_no_cut_end_and_a_furrow_cut_there_has():
+    """``_end_steps`` with the crossing family (``other_deg``). A deep groove of the hatch
+    that fades where a groove of the other family crosses it read, as core less flanks
+    across the mark alone, as a step 1.1-1.8 px wide whatever the fade's length: the
+    crossing groove meets the core and the flanks at places 5-10 px apart along the
+    line. With the crossing family read along its own lines and taken out, the groove's
+    end fades as it does, and a furrow cut at the crossing steps by all of its darkness
+    over the blur alone (1.4 px). Wide clean frames 1097042 and 1097051 (22 deg hatch) are
+    below: such stretches were 1.14 and 0.84 mm "scratches"."""
+    from station.vision.defects import DefectConfig, _end_steps
+
+    cfg = DefectConfig()
+    h, w, blur = 200, 480, 1.4
+    yy, xx = np.mgrid[0:h, 0:w].astype(np.float32)
+    cx, cy = 240.0, 100.0
+
+    def across_along(deg):
+        a = np.deg2rad(deg)
+        return (-np.sin(a) * (xx - cx) + np.cos(a) * (yy - cy), np.cos(a) * (xx - cx) + np.sin(a) * (yy - cy))
+
+    (u_a, v_a), (u_b, _) = across_along(22.0), across_along(158.0)
+    level = np.full((h, w), 150.0, np.float32)
+    along = np.linspace(-120.0, 0.0, 25)  # the mark ends at the crossing
+    line = (cx + along * np.cos(np.deg2rad(22.0)), cy + along * np.sin(np.deg2rad(22.0)))
+
+    def image(dark):
+        return level * (1.0 - cv2.GaussianBlur(dark.astype(np.float32), (0, 0), blur))
+
+    for crossing in (0.15, 0.3):
+        b = crossing * np.exp(-0.5 * (u_b / 3.0) ** 2)
+        for fade in (4.0, 6.0, 10.0):
+            groove = (0.05 + 0.3 * (1.0 - np.tanh(v_a / fade)) / 2.0) * np.exp(-0.5 * (u_a / 3.0) ** 2)
+            m = dict(line=line, blur=blur, width=6.0)
+            (width, _), = _end_steps(image(groove + b), level, 0, 0, m, ends=(-1,), other_deg=158.0)
+            assert width > 0.75 * fade, (crossing, fade, width)
+            if fade >= 6.0:
+                assert width > cfg.square_end_max_width_px, (crossing, fade, width)
+        for furrow_w in (3.0, 6.0):
+            furrow = 0.25 * ((np.abs(u_a) <= furrow_w / 2.0) & (v_a <= 0.0))
+            m = dict(line=line, blur=blur, width=furrow_w)
+            (width, height), = _end_steps(image(furrow + b), level, 0, 0, m, ends=(-1,), other_deg=158.0)
+            assert abs(width - blur) < 0.2 and abs(height - 1.0) < 0.05, (crossing, furrow_w, width, height)
+    for seed in (1097042, 1097051):
+        f = random_defect_frame(seed, {}, mm_per_px=MM_PER_PX, envelope="wide", hatch_deg=22.0)
+        assert [(d.kind, round(d.length_mm, 3)) for d in detect_defects(f.image, MM_PER_PX)] == [], seed
+
+
 def test_a_deep_grooves_stretch_meeting_a_hole_is_not_cut_there():
     """A mark along the hatch is a scratch only if it ends in cuts; one cut end and the
     other running on is read again on the residual with its line left out of the
