@@ -3371,6 +3371,7 @@ def _end_steps(img: np.ndarray, level: np.ndarray, x0: int, y0: int, m: dict,
     in_core, in_flank = np.abs(off) <= core, np.abs(off) >= core + 2.0
     inner = min(30.0, length / 2.0)
     t = np.arange(-inner, 30.0 + 0.25, 0.5)  # along the line, outwards from the end
+    darkness = None  # the crossing family's lines' reader, made once when needed
     hh, ww = img.shape
     steps = []  # (width, share of the darkness) of each end read
     # along the chord: the centre line's last few px bend as its polynomial likes, and a
@@ -3382,6 +3383,14 @@ def _end_steps(img: np.ndarray, level: np.ndarray, x0: int, y0: int, m: dict,
             continue
         mx = px[k] + t[None, :] * ux - off[:, None] * uy
         my = py[k] + t[None, :] * uy + off[:, None] * ux
+        bx0, by0 = int(max(np.floor(mx.min()) - 1, 0)), int(max(np.floor(my.min()) - 1, 0))
+        bx1, by1 = int(min(np.ceil(mx.max()) + 2, ww)), int(min(np.ceil(my.max()) + 2, hh))
+        if bx1 - bx0 < 2 or by1 - by0 < 2:
+            continue
+        dark = (1.0 - img[by0:by1, bx0:bx1].astype(np.float32)
+                / np.maximum(level[by0:by1, bx0:bx1], 1.0)).astype(np.float32)
+        st = cv2.remap(dark, (mx - bx0).astype(np.float32), (my - by0).astype(np.float32), cv2.INTER_LINEAR,
+                       borderMode=cv2.BORDER_CONSTANT, borderValue=float("nan"))
         s_b = np.zeros(0)
         if other_deg is not None:
             b = np.array([np.cos(np.deg2rad(other_deg)), np.sin(np.deg2rad(other_deg))])
@@ -3391,26 +3400,10 @@ def _end_steps(img: np.ndarray, level: np.ndarray, x0: int, y0: int, m: dict,
             s_b = s_b[np.abs(s_b * bn) >= core + 2.0]  # beside the mark, off its core
         if s_b.size:
             t_b = np.arange(t[0] - (core + 7.0) * abs(slope), t[-1] + (core + 7.0) * abs(slope) + 0.5, 0.5)
-            bx = px[k] + t_b[None, :] * ux + s_b[:, None] * b[0]
-            by = py[k] + t_b[None, :] * uy + s_b[:, None] * b[1]
-            allx, ally = np.concatenate([mx.ravel(), bx.ravel()]), np.concatenate([my.ravel(), by.ravel()])
-        else:
-            allx, ally = mx, my
-        bx0, by0 = int(max(np.floor(allx.min()) - 1, 0)), int(max(np.floor(ally.min()) - 1, 0))
-        bx1, by1 = int(min(np.ceil(allx.max()) + 2, ww)), int(min(np.ceil(ally.max()) + 2, hh))
-        if bx1 - bx0 < 2 or by1 - by0 < 2:
-            continue
-        dark = (1.0 - img[by0:by1, bx0:bx1].astype(np.float32)
-                / np.maximum(level[by0:by1, bx0:bx1], 1.0)).astype(np.float32)
-        st = cv2.remap(dark, (mx - bx0).astype(np.float32), (my - by0).astype(np.float32), cv2.INTER_LINEAR,
-                       borderMode=cv2.BORDER_CONSTANT, borderValue=float("nan"))
-        if s_b.size:
-            sb = cv2.remap(dark, (bx - bx0).astype(np.float32), (by - by0).astype(np.float32), cv2.INTER_LINEAR,
-                           borderMode=cv2.BORDER_CONSTANT, borderValue=float("nan"))
-            if unread is not None:
-                ix = np.clip(np.rint(bx).astype(np.int64), 0, ww - 1)
-                iy = np.clip(np.rint(by).astype(np.int64), 0, hh - 1)
-                sb[unread[iy, ix]] = np.nan
+            if darkness is None:
+                darkness = _darkness_reader(img, level, np.zeros(img.shape, bool) if unread is None else unread)
+            sb = darkness(np.stack([px[k] + t_b[None, :] * ux + s_b[:, None] * b[0],
+                                    py[k] + t_b[None, :] * uy + s_b[:, None] * b[1]], axis=-1))
             have = np.isfinite(sb).sum(axis=0)
             if (have >= 4).sum() >= 8:
                 with warnings.catch_warnings():

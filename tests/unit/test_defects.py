@@ -1371,6 +1371,22 @@ def test_a_bench_frames_grazing_groove_is_no_chip_and_a_chip_a_groove_runs_throu
     assert _chips_without_false_ones(((1094030, True), (94053, False))) == 1
 
 
+def _along_and_across(deg: float, h: int = 200, w: int = 480) -> tuple[np.ndarray, np.ndarray]:
+    """Each pixel's place across and along lines of direction ``deg`` through the middle
+    of an ``h`` x ``w`` frame (px): the ends' tests' rendered marks and grooves."""
+    yy, xx = np.mgrid[0:h, 0:w].astype(np.float32)
+    a = np.deg2rad(deg)
+    return (-np.sin(a) * (xx - w / 2) + np.cos(a) * (yy - h / 2), np.cos(a) * (xx - w / 2) + np.sin(a) * (yy - h / 2))
+
+
+def _mark_ending_mid_frame(deg: float, h: int = 200, w: int = 480) -> tuple[np.ndarray, tuple]:
+    """A flat wall level of 150 DN, and a 120 px centre line of direction ``deg`` that
+    ends in the middle of the frame (its last point)."""
+    along = np.linspace(-120.0, 0.0, 25)
+    a = np.deg2rad(deg)
+    return np.full((h, w), 150.0, np.float32), (w / 2 + along * np.cos(a), h / 2 + along * np.sin(a))
+
+
 def test_a_groove_crossed_where_it_fades_has_no_cut_end_and_a_furrow_cut_there_has():
     """``_end_steps`` with the crossing family (``other_deg``). A deep groove of the hatch
     that fades where a groove of the other family crosses it read, as core less flanks
@@ -1383,18 +1399,9 @@ def test_a_groove_crossed_where_it_fades_has_no_cut_end_and_a_furrow_cut_there_h
     from station.vision.defects import DefectConfig, _end_steps
 
     cfg = DefectConfig()
-    h, w, blur = 200, 480, 1.4
-    yy, xx = np.mgrid[0:h, 0:w].astype(np.float32)
-    cx, cy = 240.0, 100.0
-
-    def across_along(deg):
-        a = np.deg2rad(deg)
-        return (-np.sin(a) * (xx - cx) + np.cos(a) * (yy - cy), np.cos(a) * (xx - cx) + np.sin(a) * (yy - cy))
-
-    (u_a, v_a), (u_b, _) = across_along(22.0), across_along(158.0)
-    level = np.full((h, w), 150.0, np.float32)
-    along = np.linspace(-120.0, 0.0, 25)  # the mark ends at the crossing
-    line = (cx + along * np.cos(np.deg2rad(22.0)), cy + along * np.sin(np.deg2rad(22.0)))
+    blur = 1.4
+    (u_a, v_a), (u_b, _) = _along_and_across(22.0), _along_and_across(158.0)
+    level, line = _mark_ending_mid_frame(22.0)  # the mark ends at the crossing
 
     def image(dark):
         return level * (1.0 - cv2.GaussianBlur(dark.astype(np.float32), (0, 0), blur))
@@ -1428,13 +1435,8 @@ def test_a_tapering_furrows_cut_end_reads_square():
 
     cfg = DefectConfig()
     h, w, blur = 200, 480, 1.4
-    yy, xx = np.mgrid[0:h, 0:w].astype(np.float32)
-    cx, cy, a = 240.0, 100.0, np.deg2rad(22.0)
-    u = -np.sin(a) * (xx - cx) + np.cos(a) * (yy - cy)
-    v = np.cos(a) * (xx - cx) + np.sin(a) * (yy - cy)
-    level = np.full((h, w), 150.0, np.float32)
-    along = np.linspace(-120.0, 0.0, 25)
-    m = dict(line=(cx + along * np.cos(a), cy + along * np.sin(a)), blur=blur, width=3.0)
+    (u, v), (level, line) = _along_and_across(22.0), _mark_ending_mid_frame(22.0)
+    m = dict(line=line, blur=blur, width=3.0)
     for taper, least in ((0.8, 17), (0.0, 19)):
         square = 0
         for k in range(20):
