@@ -176,6 +176,15 @@ class DefectConfig:
     #: the border, and no true pore lost there nor on station seeds 60000 and 93000
     broad_pore_px: float = 12.0
     min_broad_pore_darkness: float = 0.17
+    #: a pore is a cavity with one dark floor: the mean darkness over its region (all of
+    #: it at or outside the floor's blurred edge) can exceed the fitted floor's contrast
+    #: only by noise. More than this times it, and the blurred ellipse did not describe
+    #: the mark: a residue peaked where two deep grooves cross, whose arms run out along
+    #: them and draw the fit to a broad faint ellipse under a core darker than its floor
+    #: (session 56: wide clean frame 1100002, a 0.40 mm "pore" at 1.30; on frames with
+    #: defects 1.12-2.13, four false pores; 858 true pores of nine sets at most 0.92 over
+    #: a whole region, 0.99 over a core, ``_core_pore``, whose pixels are its darker half)
+    max_pore_darkness_over_floor: float = 1.1
     #: a pore's rim is a sharp edge blurred by the camera alone: a fitted edge blur beyond
     #: this (px) is a soft shading of the wall, not a cavity (the renderer's and the
     #: endoscope's envelope is 0.8-2 px; dev frames' texture blobs fit 3-3.5 px)
@@ -3531,6 +3540,8 @@ def _accept(m: dict | None, kind: str, box, at_border: bool, angles_deg, cfg: De
         return None
     if kind == "pore" and m["length"] >= cfg.broad_pore_px and m["mean_darkness"] < cfg.min_broad_pore_darkness:
         return None  # broad and faint: the cross-hatch's residue, not a cavity
+    if kind == "pore" and m["mean_darkness"] > cfg.max_pore_darkness_over_floor * m["contrast"]:
+        return None  # darker on the whole than its own fitted floor: no cavity's blurred step
     if kind == "scratch" and (m["contrast"] < cfg.min_scratch_contrast or m["blur"] > cfg.max_edge_blur_px
                               or m["width"] > max_width_px or m["length"] < cfg.scratch_elongation * m["width"]
                               or (m.get("along_hatch", False)
