@@ -95,6 +95,15 @@ MIN_HOLE_DIAMETER_MM = 0.55
 #: (a chip's floor, lit up to ~0.3 of the wall-to-hole step, stands well above it; a deep
 #: groove beside a hole reads ~0.25 and the groove model takes most of that away)
 RIM_FLOOR_CROSSING = 0.2
+#: a ray's share falls below a crossing going out (``_rim_profile``) only where it stays
+#: below it over the next this many px: the rim's blurred step, and the burr's metal or
+#: the wall beyond it, hold for many px, where the noise inside a dim hole dips for a
+#: pixel or two (bilinear samples 0.5 px apart share their pixels). On the wide bench's
+#: dim, noisy holes (5-20 e-/DN, 30 % contrast) the share inside reads 1 +/- 0.1 a
+#: sample, and a dip below 0.75 at one sample 14-18 px inside the rim, the share back
+#: at 0.86-1 beyond it, was that ray's "edge": 0.03-0.07 mm "burrs" 3-12 px high on
+#: clean frames 1097086, 1099092 and 1100029 (session 56)
+RIM_HOLD_PX = 2.0
 
 
 @dataclass(frozen=True)
@@ -1812,9 +1821,12 @@ def _rim_profile(img: np.ndarray, hole, zone_others: np.ndarray, reach_px: float
     share = _lift_wall(share, rb, valid, rad + 2.5 * blur_px + 1.0, smooth)
 
     def first_crossing(sh: np.ndarray, crossing: float = crossing) -> np.ndarray:
-        # the first fall below ``crossing``, going out (a ray already below it at the
-        # band's start: the edge is there)
+        # the first fall below ``crossing``, going out, that holds over ``RIM_HOLD_PX``
+        # (past the band's end counts as below: the wall; a ray already below it at the
+        # band's start, and held: the edge is there)
         below = sh < crossing
+        for j in range(1, int(round(RIM_HOLD_PX / step)) + 1):
+            below[:-j] &= sh[j:] < crossing
         k = np.argmax(below, axis=0)
         k = np.where(below.any(axis=0), k, rb.size - 1)
         km = np.maximum(k - 1, 0)

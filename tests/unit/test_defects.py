@@ -1480,3 +1480,41 @@ def test_a_deep_grooves_stretch_meeting_a_hole_is_not_cut_there():
     for seed in (1096029, 1096052):
         f = random_defect_frame(seed, {}, mm_per_px=MM_PER_PX, envelope="wide")
         assert [(d.kind, round(d.length_mm, 3)) for d in detect_defects(f.image, MM_PER_PX)] == [], seed
+
+
+def test_a_rims_edge_is_where_the_share_falls_for_good_not_where_the_noise_dips():
+    """``_rim_profile`` reads a ray's edge where the share of hole falls below the
+    crossing going out and stays below it over ``RIM_HOLD_PX``. On the wide bench's dim,
+    noisy holes the share inside reads 1 +/- 0.1 a sample, and one sample below 0.75 some
+    15 px inside the rim was that ray's edge: 0.03-0.07 mm "burrs" 3-12 px high (wide
+    clean frames 1097086, 1099092 and 1100029, below). A bright pixel inside a hole now
+    leaves the edge at the rim, and a burr's metal, which runs on to the wall, is still
+    read at its tip."""
+    from types import SimpleNamespace
+
+    from station.vision.defects import _rim_profile
+
+    h = w = 160
+    cx = cy = 80.0
+    rad, blur = 35.0, 1.4
+    yy, xx = np.mgrid[0:h, 0:w].astype(np.float32)
+    rho, phi = np.hypot(xx - cx, yy - cy), np.arctan2(yy - cy, xx - cx)
+    hole = rho < rad
+    # a burr: the wall's metal 5 px into the hole over 10 px of arc round 180 deg
+    burr = (rho >= rad - 5.0) & (rho < rad + 1.0) & (np.abs(np.abs(phi) - np.pi) < 5.0 / rad)
+    dark = np.where(hole & ~burr, 1.0, 0.0).astype(np.float32)
+    img = 150.0 * (1.0 - 0.33 * cv2.GaussianBlur(dark, (0, 0), blur))
+    img[int(cy), int(cx + rad - 15.0)] = 150.0  # a bright pixel inside, on the 0 deg ray
+    spec = SimpleNamespace(x_px=cx, y_px=cy, diameter_px=2.0 * rad)
+    prof = _rim_profile(img, spec, np.zeros((h, w), bool), 18.0, np.full((h, w), 150.0, np.float32),
+                        (30.0, 150.0), blur, 0.75, 1.0, True)
+    deg = np.rad2deg(prof.theta)
+    at0 = (deg < 0.5) | (deg > 359.5)
+    at180 = np.abs(deg - 180.0) < 2.0
+    for edge in (prof.edge, prof.edge_find):
+        rim = float(np.median(edge))  # the 0.75 crossing of the blurred step: ~0.7 blur inside
+        assert np.all(np.abs(edge[at0] - rim) < 1.0), edge[at0] - rim
+        assert np.all(np.abs(edge[at180] - (rim - 5.0)) < 1.0), edge[at180] - rim
+    for seed, hatch in ((1097086, 22.0), (1099092, 25.0), (1100029, 35.0)):
+        f = random_defect_frame(seed, {}, mm_per_px=MM_PER_PX, envelope="wide", hatch_deg=hatch)
+        assert [(d.kind, round(d.length_mm, 3)) for d in detect_defects(f.image, MM_PER_PX)] == [], seed
