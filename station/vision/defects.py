@@ -191,8 +191,8 @@ class DefectConfig:
     #: the mark: a residue peaked where two deep grooves cross, whose arms run out along
     #: them and draw the fit to a broad faint ellipse under a core darker than its floor
     #: (session 56: wide clean frame 1100002, a 0.40 mm "pore" at 1.30; on frames with
-    #: defects 1.12-2.13, four false pores; 858 true pores of nine sets at most 0.92 over
-    #: a whole region, 0.99 over a core, ``_core_pore``, whose pixels are its darker half)
+    #: defects 1.12-2.13, four false pores; 1,662 true pores of seventeen sets at most 0.93
+    #: over a whole region, 0.99 over a core, ``_core_pore``, whose pixels are its darker half)
     max_pore_darkness_over_floor: float = 1.1
     #: a pore's rim is a sharp edge blurred by the camera alone: a fitted edge blur beyond
     #: this (px) is a soft shading of the wall, not a cavity (the renderer's and the
