@@ -1327,6 +1327,47 @@ def _largest_piece(coarse: np.ndarray, a: int, b: int, gap_px: float) -> tuple[i
     return a + best[0], a + best[1]
 
 
+#: a stretch that the grooves' scaling adds at a scratch's end is a shelf, not the
+#: scratch, when it is at least ``SHELF_MIN_PX`` long, runs along a modelled groove
+#: (``SHELF_MIN_GROOVE_SHARE`` of the scratch's level through the same filter), holds at
+#: most ``SHELF_MAX_SHARE`` of the scratch's scaled darkening (medians) and does not
+#: overlap it: ``_shelf_beyond``
+SHELF_MAX_SHARE = 0.6
+SHELF_MIN_GROOVE_SHARE = 0.25
+SHELF_MIN_PX = 10.0
+
+
+def _shelf_beyond(av: np.ndarray, groove_av: np.ndarray, a: int, b: int, core: tuple[int, int],
+                  step: float) -> bool:
+    """Whether the stretch ``[a, b)`` of a scratch's scaled amplitude ``av`` (sampled every
+    ``step`` px), which the grooves' scaling added past the raw read's end, is a groove's
+    shelf rather than the scratch: at least ``SHELF_MIN_PX`` long; along a groove, the
+    modelled grooves through the scratch's filter (``groove_av``) at least
+    ``SHELF_MIN_GROOVE_SHARE`` of the scratch's level there (medians; the level the median
+    of ``av`` over the raw read's extent ``core``); and at a level of its own, its median
+    at most ``SHELF_MAX_SHARE`` of the scratch's and its upper quartile under the
+    scratch's lower quartile.
+
+    A scratch's floor is one furrow of one reflectance, its width varying by ~15 % on a
+    scale of 8 px, so where the scaling restores its darkness through a groove it crosses
+    the stretch reads at the scratch's level. A groove that the scratch ends on at a
+    shallow angle (10-15 deg, as the station's scratches cross the hatch) runs on along
+    its line, and the scaling lifts the wall model's misfit of it to a shelf at about half
+    the scratch's level, which a box of free height takes in for nothing (station frame
+    110048: a 0.85 mm scratch read 1.82 mm, a false scratch and a miss; the groove through
+    the filter 0.45 of the scratch's level, the stretch 0.55; its misfit did not rise with
+    the modelled groove, so ``_groove_beyond_end`` let it stand). A faint scratch's own end
+    may read as low where its centre line, continued straight past its region, leaves it,
+    but no groove runs along it there (station frame 91044: 0.08 of its level)."""
+    if (b - a) * step < SHELF_MIN_PX or core[1] - core[0] < 2:
+        return False
+    stretch, inside = av[a:b], av[core[0]:core[1]]
+    med = float(np.median(inside))
+    return bool(med > 0 and float(np.median(groove_av[a:b])) >= SHELF_MIN_GROOVE_SHARE * med
+                and float(np.median(stretch)) <= SHELF_MAX_SHARE * med
+                and float(np.percentile(stretch, 75)) < float(np.percentile(inside, 25)))
+
+
 #: a scratch's centre line is a quintic, not a cubic, where its peaks span this far (px):
 #: across much of a frame the lens's distortion bends it as well as its own modes
 QUINTIC_BEND_PX = 400.0
@@ -1651,14 +1692,17 @@ def _measure_scratch(patch: _Patch, region: np.ndarray, blur_hint: float | None 
         # ... but an end that the scaling carried on into a groove the scratch ends on is
         # the raw darkness's: there the scaling lifts the wall model's misfit of the groove
         # (``_groove_beyond_end``; a whole-surface part's 0.89 mm scratch ending on a deep
-        # groove 30 deg off it read 1.06 mm, its place 0.10 mm off)
+        # groove 30 deg off it read 1.06 mm, its place 0.10 mm off), or lifts it to a shelf
+        # below the scratch's own level (``_shelf_beyond``)
         lo, hi = ext
         trim = int(np.ceil(2.0 * b / step))  # the raw end's own blurred step
         groove_av = (filt @ grooves) / filt_norm  # the modelled grooves through the same filter
-        if _groove_beyond_end(av_raw, groove_av, ext[0], ext_raw[0] - trim, step):
+        if _groove_beyond_end(av_raw, groove_av, ext[0], ext_raw[0] - trim, step) \
+                or _shelf_beyond(av, groove_av, ext[0], ext_raw[0], ext_raw, step):
             lo = ext_raw[0]
             av[:lo] = av_raw[:lo]
-        if _groove_beyond_end(av_raw, groove_av, ext_raw[1] + trim, ext[1], step):
+        if _groove_beyond_end(av_raw, groove_av, ext_raw[1] + trim, ext[1], step) \
+                or _shelf_beyond(av, groove_av, ext_raw[1], ext[1], ext_raw, step):
             hi = ext_raw[1]
             av[hi:] = av_raw[hi:]
         ext = (lo, hi)
@@ -2610,7 +2654,7 @@ def detect_defects(image: np.ndarray, mm_per_px: float, *, holes=None, blur_px: 
                 if own.any() and inside[own].mean() < 0.05:
                     queue.append(([i], group_claim))
     examined = _drop_scratch_pieces(examined)
-    examined = _track_scratches(img, level_full, examined, cfg)
+    examined = _track_scratches(img, level_full, examined, cfg, wall.angles_deg)
     examined = _join_scratch_pieces(img, level_full, examined, cfg)
     found: list[Defect] = [ex.defect if ex.line is None else replace(ex.defect, line_px=_line_points(ex.line))
                            for ex in examined if ex.defect is not None]
@@ -2973,8 +3017,49 @@ def _run_on_fades(img: np.ndarray, level: np.ndarray, on: np.ndarray, width: flo
     return not (w <= max_width and h >= cfg.square_end_min_height)
 
 
+#: a run on's body, beyond its first ``RUN_ON_SETTLE_PX`` (where the path turns onto
+#: what it follows), that is at least ``RUN_ON_BODY_PX`` long, within ``RUN_ON_HATCH_DEG``
+#: of a groove family and ``RUN_ON_STRAIGHT_PX`` (RMS) of a straight line:
+#: ``_turns_onto_hatch``
+RUN_ON_SETTLE_PX = 60.0
+RUN_ON_BODY_PX = 120.0
+RUN_ON_HATCH_DEG = 2.5
+RUN_ON_STRAIGHT_PX = 1.5
+
+
+def _turns_onto_hatch(line: np.ndarray, k: int, on: np.ndarray, angles_deg, cfg: DefectConfig) -> bool:
+    """Whether a scratch's run on (``_track_on``'s path from its end ``k`` outwards) is a
+    groove the scratch ends on: the scratch's end runs off the hatch (at least
+    ``cfg.groove_alignment_deg`` from a family), and past its first ``RUN_ON_SETTLE_PX``
+    the path is a straight line along that family (``RUN_ON_BODY_PX`` long at least,
+    within ``RUN_ON_HATCH_DEG`` of it, ``RUN_ON_STRAIGHT_PX`` RMS of a line).
+
+    A groove is straight and keeps the hatch's direction over the frame; a scratch bends
+    slowly and its direction passes the hatch's rather than turning onto it and staying
+    (the twin's modes: 1.2 % of its length, under 1 deg per 50 px on a 16 mm scratch). A
+    scratch that meets a deep groove at a shallow angle was followed along the groove to
+    the frame's border, where ``_run_on_fades`` does not read (station frame 110048: a
+    0.85 mm scratch 12 deg off the hatch, its end turning 8 deg onto a groove at 30 deg
+    within 60 px, reported 8.3 mm long)."""
+    t = _end_tangent(line, k, 30.0)
+    if not np.any(t) or on.shape[0] < 3:
+        return False
+    acc = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(on, axis=0).T))])
+    body = on[acc >= RUN_ON_SETTLE_PX]
+    if body.shape[0] < 3 or acc[-1] - RUN_ON_SETTLE_PX < RUN_ON_BODY_PX:
+        return False
+    centred = body - body.mean(axis=0)
+    _, sv, vt = np.linalg.svd(centred, full_matrices=False)
+    if float(sv[-1]) / np.sqrt(body.shape[0]) > RUN_ON_STRAIGHT_PX:
+        return False
+    body_deg = float(np.rad2deg(np.arctan2(vt[0, 1], vt[0, 0])) % 180.0)
+    end_deg = float(np.rad2deg(np.arctan2(t[1], t[0])) % 180.0)
+    return any(_circ_diff_deg(body_deg, g) <= RUN_ON_HATCH_DEG
+               and _circ_diff_deg(end_deg, g) >= cfg.groove_alignment_deg for g in angles_deg)
+
+
 def _track_scratches(img: np.ndarray, level: np.ndarray, examined: list["_Examined"],
-                     cfg: DefectConfig) -> list["_Examined"]:
+                     cfg: DefectConfig, angles_deg=()) -> list["_Examined"]:
     """Each scratch's ends followed where the furrow runs on (``_track_on``): its centre
     line, length, place and direction take the stretch in, and it is ``partial`` when
     the stretch reaches the frame's border. A stretch that fades at its far end is a
@@ -2991,7 +3076,8 @@ def _track_scratches(img: np.ndarray, level: np.ndarray, examined: list["_Examin
         grown = False
         for k in (0, -1):
             on = _track_on(img, level, line, k, d.width_px, blur, cfg)
-            if on is None or _run_on_fades(img, level, on, d.width_px, blur, cfg):
+            if on is None or _run_on_fades(img, level, on, d.width_px, blur, cfg) \
+                    or _turns_onto_hatch(line, k, on, angles_deg, cfg):
                 continue
             grown = True
             line = np.vstack([on[::-1], line[1:]]) if k == 0 else np.vstack([line[:-1], on])

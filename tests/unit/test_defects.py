@@ -1525,3 +1525,89 @@ def test_a_rims_edge_is_where_the_share_falls_for_good_not_where_the_noise_dips(
     for seed, hatch in ((1097086, 22.0), (1099092, 25.0), (1100029, 35.0)):
         f = random_defect_frame(seed, {}, mm_per_px=MM_PER_PX, envelope="wide", hatch_deg=hatch)
         assert [(d.kind, round(d.length_mm, 3)) for d in detect_defects(f.image, MM_PER_PX)] == [], seed
+
+
+def test_a_stretch_the_grooves_scaling_adds_along_a_groove_at_a_level_of_its_own_is_no_scratch():
+    """``_shelf_beyond``: the stretch that the grooves' scaling adds past the raw read's
+    end is a groove's shelf, not the scratch, when a modelled groove runs along the
+    scratch's filter there and the stretch holds the scaled darkening at most at
+    ``SHELF_MAX_SHARE`` of the scratch's, the two not overlapping. The scaling lifted a
+    groove that a scratch ends on at 12 deg to half the scratch's level (station frame
+    110048, in the next test: a 0.85 mm scratch read 1.82 mm). Where the scaling restores
+    the scratch through a groove it crosses, or the scratch narrows a little, or no groove
+    runs along it (a faint end its straight line leaves: 91044), the stretch is the
+    scratch's; and a stretch under ``SHELF_MIN_PX`` says nothing."""
+    from station.vision.defects import SHELF_MAX_SHARE, SHELF_MIN_GROOVE_SHARE, SHELF_MIN_PX, _shelf_beyond
+
+    rng = np.random.default_rng(110048)
+    step = 0.5
+
+    def profile(parts):  # (length px, level) pieces, sampled every 0.5 px, with noise
+        m = np.concatenate([np.full(int(n / step), v) for n, v in parts])
+        return m + rng.normal(0.0, 0.04, m.size)
+
+    core = (int(60 / step), int(140 / step))  # the raw read's extent: 60-140 px
+    a = int(20 / step)  # the scaled read starts 40 px before it
+    along = profile([(20, 0.0), (40, 0.45), (80, 0.0), (20, 0.0)])  # a groove along the filter before it
+    assert _shelf_beyond(profile([(20, 0.0), (40, 0.5), (80, 1.0), (20, 0.0)]), along, a, core[0], core, step)
+    assert _shelf_beyond(profile([(20, 0.0), (40, SHELF_MAX_SHARE - 0.05), (80, 1.0), (20, 0.0)]), along, a,
+                         core[0], core, step)
+    # ... and after it
+    after = profile([(60, 0.0), (80, 0.0), (20, 0.4)])
+    assert _shelf_beyond(profile([(60, 0.0), (80, 1.0), (20, 0.45)]), after, core[1], int(160 / step), core, step)
+    # no groove along it (crossings only): the scratch's own end, however low
+    crossing = profile([(20, 0.0), (40, SHELF_MIN_GROOVE_SHARE - 0.1), (80, 0.0), (20, 0.0)])
+    assert not _shelf_beyond(profile([(20, 0.0), (40, 0.5), (80, 1.0), (20, 0.0)]), crossing, a, core[0], core, step)
+    # restored through a groove it crosses, or a quarter narrower: the scratch's
+    for level in (0.95, 0.75):
+        assert not _shelf_beyond(profile([(20, 0.0), (40, level), (80, 1.0), (20, 0.0)]), along, a, core[0], core,
+                                 step)
+    # too short to say
+    a_short = core[0] - int((SHELF_MIN_PX - 2.0) / step)
+    assert not _shelf_beyond(profile([(52, 0.0), (8, 0.5), (80, 1.0), (20, 0.0)]), along, a_short, core[0], core,
+                             step)
+
+
+def test_a_run_on_that_turns_onto_a_groove_is_the_groove():
+    """``_turns_onto_hatch``: a scratch's run on whose body, past its first 60 px, is a
+    straight line along a groove family while the scratch's end runs off the hatch is a
+    groove the scratch ends on. Station frame 110048: a 0.85 mm scratch 12 deg off the
+    30 deg hatch ends on a deep groove; its first box took the groove's residue in (1.82
+    mm, a false scratch and a miss), and, its box cut at its own end, the run on followed
+    the groove to the frame's border (8.3 mm). Now it is found and sized."""
+    from station.vision.defects import DefectConfig, _turns_onto_hatch
+
+    cfg = DefectConfig()
+    hatch = (30.0, 150.0)
+
+    def path(start, deg, length, step=2.0):
+        t = np.array([np.cos(np.deg2rad(deg)), np.sin(np.deg2rad(deg))])
+        return np.asarray(start, float) + np.arange(0.0, length + step / 2, step)[:, None] * t
+
+    line = path((100.0, 100.0), 18.0, 90.0)  # a scratch 12 deg off the hatch, ends at line[-1]
+    end = line[-1]
+    turn = path(end, 24.0, 40.0)
+    onto = np.vstack([turn, path(turn[-1], 30.0, 300.0)[1:]])
+    assert _turns_onto_hatch(line, -1, onto, hatch, cfg)
+    # straight on: the scratch's own furrow
+    assert not _turns_onto_hatch(line, -1, path(end, 18.0, 340.0), hatch, cfg)
+    # a bend that passes the hatch's direction and goes on bending: a scratch's
+    s = np.arange(0.0, 340.0, 2.0)
+    ang = np.deg2rad(18.0 + 0.09 * s)  # 4.5 deg per 50 px
+    bent = end + np.column_stack([np.concatenate([[0.0], np.cumsum(2.0 * np.cos(ang[:-1]))]),
+                                  np.concatenate([[0.0], np.cumsum(2.0 * np.sin(ang[:-1]))])])
+    assert not _turns_onto_hatch(line, -1, bent, hatch, cfg)
+    # too short a body to say
+    assert not _turns_onto_hatch(line, -1, np.vstack([turn, path(turn[-1], 30.0, 100.0)[1:]]), hatch, cfg)
+    # a scratch along the hatch running on along it
+    along = path((100.0, 100.0), 30.0, 90.0)
+    assert not _turns_onto_hatch(along, -1, path(along[-1], 30.0, 340.0), hatch, cfg)
+    # the frame
+    f = random_defect_frame(110048, None, mm_per_px=MM_PER_PX)
+    truth = [t for t in f.defects if t.kind == "scratch"]
+    found = detect_defects(f.image, MM_PER_PX)
+    pairs, false = match(f.defects, found, MM_PER_PX)
+    assert not false, [(found[k].kind, round(found[k].length_mm, 3)) for k in false]
+    (t, d), = [(t, d) for t, d in pairs if t.kind == "scratch"]
+    assert len(truth) == 1 and d is not None and d.kind == "scratch"
+    assert abs(d.length_mm - t.length_mm) <= 0.1 * t.length_mm, (d.length_mm, t.length_mm)
