@@ -1686,6 +1686,7 @@ def _measure_scratch(patch: _Patch, region: np.ndarray, blur_hint: float | None 
     c_eff = float(np.clip(max(c, float(np.nanmax(prof_all))), 0.05, 1.0))
     factor = c_eff / np.maximum(c_eff - grooves, c_eff / 2.5)
     ext_raw, av_raw = ext, av
+    groove_ends = [False, False]  # an end read where a groove's stretch begins
     mv, av = profiles(factor)
     ext = _scratch_extent(av, step, gap_px)
     if ext is not None:
@@ -1701,10 +1702,12 @@ def _measure_scratch(patch: _Patch, region: np.ndarray, blur_hint: float | None 
                 or _shelf_beyond(av, groove_av, ext[0], ext_raw[0], ext_raw, step):
             lo = ext_raw[0]
             av[:lo] = av_raw[:lo]
+            groove_ends[0] = True
         if _groove_beyond_end(av_raw, groove_av, ext_raw[1] + trim, ext[1], step) \
                 or _shelf_beyond(av, groove_av, ext_raw[1], ext[1], ext_raw, step):
             hi = ext_raw[1]
             av[hi:] = av_raw[hi:]
+            groove_ends[1] = True
         ext = (lo, hi)
         s1, s2 = float(sv[ext[0]]), float(sv[ext[1] - 1])
     if blur_hint is None:
@@ -1758,6 +1761,7 @@ def _measure_scratch(patch: _Patch, region: np.ndarray, blur_hint: float | None 
     return dict(x=float(x), y=float(y), length=length, width=width, angle=direction,
                 u_length=float(np.hypot(u_s1, u_s2)), u_width=u_width, significance=float(significance),
                 contrast=c, blur=blur_x, mean_darkness=float(np.max(pv)), cut=cut, line=line,
+                groove_ends=(bool(groove_ends[0]), bool(groove_ends[1])),
                 half_band=float(width / 2.0 + 2.5 * blur + 2.0))
 
 
@@ -2713,6 +2717,10 @@ class _Examined:
     #: a scratch's centre line (frame px, (n, 2), end to end) and its blur (px)
     line: np.ndarray | None = None
     blur: float | None = None
+    #: which of a scratch's line's ends (its first point, its last) the measurement read
+    #: where a groove's stretch begins (``_groove_beyond_end``, ``_shelf_beyond``): not
+    #: followed on (``_track_scratches``)
+    groove_ends: tuple[bool, bool] = (False, False)
 
 
 def _measured_again(labels: np.ndarray, region: np.ndarray, sizes: list[int]) -> bool:
@@ -3063,7 +3071,12 @@ def _track_scratches(img: np.ndarray, level: np.ndarray, examined: list["_Examin
     """Each scratch's ends followed where the furrow runs on (``_track_on``): its centre
     line, length, place and direction take the stretch in, and it is ``partial`` when
     the stretch reaches the frame's border. A stretch that fades at its far end is a
-    groove the scratch meets, not taken (``_run_on_fades``)."""
+    groove the scratch meets, not taken (``_run_on_fades``), nor one that turns onto the
+    hatch and runs straight along it (``_turns_onto_hatch``); and an end that the
+    measurement read where a groove's stretch begins (``_groove_beyond_end``,
+    ``_shelf_beyond``) is not followed at all: the raw darkness beyond it is the groove's
+    (the twin's 2088002: its end read right, a run on of 21 px straight on through the
+    groove's band to a 6.8 px step that passes as a cut put it 0.11 mm off)."""
     out = []
     for ex in examined:
         d = ex.defect
@@ -3075,6 +3088,8 @@ def _track_scratches(img: np.ndarray, level: np.ndarray, examined: list["_Examin
         partial = d.partial
         grown = False
         for k in (0, -1):
+            if ex.groove_ends[0 if k == 0 else 1]:
+                continue  # beyond it the raw darkness is the groove's (``_measure_scratch``)
             on = _track_on(img, level, line, k, d.width_px, blur, cfg)
             if on is None or _run_on_fades(img, level, on, d.width_px, blur, cfg) \
                     or _turns_onto_hatch(line, k, on, angles_deg, cfg):
@@ -3090,7 +3105,7 @@ def _track_scratches(img: np.ndarray, level: np.ndarray, examined: list["_Examin
         length = d.length_px + along - _line_place(ex.line)[0]
         nd = Defect(**{**asdict(d), "x_px": x, "y_px": y, "length_px": length, "angle_deg": angle,
                        "partial": bool(partial)})
-        out.append(_Examined(nd, ex.region, ex.box, ex.cover, line, ex.blur))
+        out.append(_Examined(nd, ex.region, ex.box, ex.cover, line, ex.blur, ex.groove_ends))
     # a piece whose centre line the other's followed stretch now runs along is the same
     # furrow twice: the shorter goes
     items = [ex for ex in out if ex.defect is not None and ex.defect.kind == "scratch" and ex.line is not None]
@@ -3369,7 +3384,8 @@ def _examine_once(img: np.ndarray, box, seed: np.ndarray, excl: np.ndarray, zone
         cv2.polylines(lines, [pts], False, 1, int(2 * m["half_band"] + 1))
         cover = lines.astype(bool)
         line = np.column_stack(m["line"]) + np.array([x0, y0], float)
-        return _Examined(defect, region, tuple(box), cover, line, float(m["blur"])), m, kind
+        return _Examined(defect, region, tuple(box), cover, line, float(m["blur"]),
+                         m.get("groove_ends", (False, False))), m, kind
     return _Examined(defect, region, tuple(box), cover), m, kind
 
 
