@@ -3052,15 +3052,15 @@ def _turns_onto_hatch(line: np.ndarray, k: int, on: np.ndarray, angles_deg, cfg:
     t = _end_tangent(line, k, 30.0)
     if not np.any(t) or on.shape[0] < 3:
         return False
-    acc = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(on, axis=0).T))])
-    body = on[acc >= RUN_ON_SETTLE_PX]
-    if body.shape[0] < 3 or acc[-1] - RUN_ON_SETTLE_PX < RUN_ON_BODY_PX:
+    to_end = _to_end(on)
+    body = on[to_end[0] - to_end >= RUN_ON_SETTLE_PX]
+    if body.shape[0] < 3 or to_end[0] - RUN_ON_SETTLE_PX < RUN_ON_BODY_PX:
         return False
-    centred = body - body.mean(axis=0)
-    _, sv, vt = np.linalg.svd(centred, full_matrices=False)
-    if float(sv[-1]) / np.sqrt(body.shape[0]) > RUN_ON_STRAIGHT_PX:
+    # the body's axis, and its RMS distance from it (the covariance's lesser eigenvalue)
+    _, _, axis, cov = _weighted_pca(body[:, 0], body[:, 1], np.ones(body.shape[0]))
+    if float(np.sqrt(max(np.linalg.eigvalsh(cov)[0], 0.0))) > RUN_ON_STRAIGHT_PX:
         return False
-    body_deg = float(np.rad2deg(np.arctan2(vt[0, 1], vt[0, 0])) % 180.0)
+    body_deg = float(np.rad2deg(axis) % 180.0)
     end_deg = float(np.rad2deg(np.arctan2(t[1], t[0])) % 180.0)
     return any(_circ_diff_deg(body_deg, g) <= RUN_ON_HATCH_DEG
                and _circ_diff_deg(end_deg, g) >= cfg.groove_alignment_deg for g in angles_deg)
