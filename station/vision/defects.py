@@ -269,6 +269,17 @@ class DefectConfig:
     #: the grooves.  True scratches 0.36-0.99 (median 0.90-0.93; 502 on station and wide
     #: seeds 81000, 82000, 83000), such residue 0.06-0.25 (9)
     min_scratch_along_share: float = 0.3
+    #: ... and its contrast carried along its own direction (the fitted contrast times the
+    #: square root of that share: the share is one of gradient energy, which goes as the
+    #: contrast squared) at least this.  The grooves' residue that passes the two gates
+    #: above is faint *and* ragged: session 58, every scratch measurement that passed the
+    #: other tests with these two gates off (station 111000, 113000, 118000; the twin's
+    #: 2088000-2088059; along the hatch 542000; wide 94000, 97000, 116000, 119000: 670
+    #: true, 82 false), the false ones 0.083 at most (fresh wide 1116033: contrast 0.12,
+    #: share 0.47) and the true ones that pass the contrast gate 0.107 and more (a thin
+    #: faint 0.19 mm wide scratch, 111051: 0.121, 0.79; along the hatch, where the share's
+    #: window narrows, 0.145 and more)
+    min_scratch_line_contrast: float = 0.095
     #: length/width at which a dark mark is a scratch rather than a pore (pores of the
     #: envelope are at most 1.6:1, ragged outlines up to ~2:1; scratches at least 4:1)
     scratch_elongation: float = 3.0
@@ -3661,8 +3672,10 @@ def _accept(m: dict | None, kind: str, box, at_border: bool, angles_deg, cfg: De
                               or (m.get("along_hatch", False)
                                   and (not m.get("square_end", False)
                                        or m["contrast"] < cfg.aligned_min_scratch_contrast))
-                              or m.get("along_share", 1.0) < cfg.min_scratch_along_share):
-        return None  # the cross-hatch's residue: broad, faint, soft, short, along a groove or not one line
+                              or m.get("along_share", 1.0) < cfg.min_scratch_along_share
+                              or m["contrast"] * np.sqrt(max(m.get("along_share", 1.0), 0.0))
+                              < cfg.min_scratch_line_contrast):
+        return None  # the cross-hatch residue: broad, faint, soft, short, along a groove, not one line or faint, ragged
     conf = _confidence(m["significance"], cfg.min_significance)
     return Defect(kind, m["x"] + box[0], m["y"] + box[1], m["length"], m["width"], conf, m["angle"], m["u_length"],
                   m["u_width"], m["significance"], at_border)
