@@ -73,7 +73,7 @@ from dataclasses import asdict, dataclass, replace
 
 import cv2
 import numpy as np
-from scipy.ndimage import gaussian_filter1d, maximum_filter1d
+from scipy.ndimage import gaussian_filter1d, map_coordinates, maximum_filter1d
 from scipy.special import ive, ndtr
 
 from station.vision.grooves import honing_directions
@@ -361,6 +361,15 @@ class DefectConfig:
     #: ... and the whole stretch this share (a groove's residue that a faint scratch's end
     #: runs into reads 0.76 of it; a scratch's own stretch along the hatch 1.03-1.24)
     track_hold_share: float = 0.9
+    #: a run on off the hatch (``groove_alignment_deg`` or more from each family) must hold
+    #: this share of the scratch's own darkness with the grooves removed (the wall model's
+    #: residual, median along each): there no groove's line mean takes a furrow in, and a
+    #: run on that the raw darkness carries but the residual does not is a groove the
+    #: scratch meets at a shallow angle (``_run_on_grooves_only``). Session 58: the twin's
+    #: 2130019 and 2115051 ran on 15 and 14 px at 0.17 and 0.26 of the body's residual (0.08
+    #: and 0.07 mm off); the one true run on of 600 frames (twin 2088000, 2091000,
+    #: 2130000, station 110000, 130000, wide 94000) held 0.76 (2091057)
+    track_residual_share: float = 0.5
     #: ... followed on over a dip below half its contrast as long as this (px): a deep
     #: groove crossing a thin scratch at the hatch's angle darkens its flanks as much as
     #: its core over ~2 groove widths, and the furrow on beyond was left unread (6 px
@@ -2671,7 +2680,8 @@ def detect_defects(image: np.ndarray, mm_per_px: float, *, holes=None, blur_px: 
                 if own.any() and inside[own].mean() < 0.05:
                     queue.append(([i], group_claim))
     examined = _drop_scratch_pieces(examined)
-    examined = _track_scratches(img, level_full, examined, cfg, wall.angles_deg)
+    examined = _track_scratches(img, level_full, examined, cfg, wall.angles_deg,
+                                cv2.GaussianBlur(wall.residual, (0, 0), 1.0))
     examined = _join_scratch_pieces(img, level_full, examined, cfg)
     found: list[Defect] = [ex.defect if ex.line is None else replace(ex.defect, line_px=_line_points(ex.line))
                            for ex in examined if ex.defect is not None]
@@ -3079,13 +3089,45 @@ def _turns_onto_hatch(line: np.ndarray, k: int, on: np.ndarray, angles_deg, cfg:
                and _circ_diff_deg(end_deg, g) >= cfg.groove_alignment_deg for g in angles_deg)
 
 
+def _run_on_grooves_only(residual: np.ndarray, line: np.ndarray, on: np.ndarray, angles_deg,
+                         cfg: DefectConfig) -> bool:
+    """Whether a run on ``on`` (frame px, from the scratch's end outwards) is the grooves'
+    darkness alone: its chord lies off the hatch (``cfg.groove_alignment_deg`` or more
+    from each family), where the wall model's grooves (their means along their own
+    lines) cannot take a furrow in, and the model's residual (``residual``, half
+    resolution, 1 px-smoothed) along it holds less than ``cfg.track_residual_share`` of
+    the residual along the scratch's own line (medians). Along the hatch the residual
+    says nothing: there the grooves' means take a furrow in, which is what the run on is
+    for (``_track_on``). Points in the holes' zones (residual 0) are not read; fewer than
+    5 read on either part: no judgement."""
+    chord = on[-1] - on[0]
+    if float(np.hypot(*chord)) < 4.0 or not len(angles_deg):
+        return False
+    deg = float(np.rad2deg(np.arctan2(chord[1], chord[0])) % 180.0)
+    if _near_hatch(deg, angles_deg, cfg) is not None:
+        return False
+
+    def along(pts: np.ndarray) -> np.ndarray:
+        q = (np.asarray(pts, float) - 0.5) / 2.0  # half resolution: pixel i covers 2i and 2i + 1
+        v = map_coordinates(residual, [q[:, 1], q[:, 0]], order=1, mode="constant", cval=0.0)
+        return v[v != 0.0]
+
+    body, run = along(_dense(line)), along(_dense(on)[1:])
+    if body.size < 5 or run.size < 5:
+        return False
+    own = float(np.median(body))
+    return bool(own > 0.0 and float(np.median(run)) < cfg.track_residual_share * own)
+
+
 def _track_scratches(img: np.ndarray, level: np.ndarray, examined: list["_Examined"],
-                     cfg: DefectConfig, angles_deg=()) -> list["_Examined"]:
+                     cfg: DefectConfig, angles_deg=(), residual: np.ndarray | None = None) -> list["_Examined"]:
     """Each scratch's ends followed where the furrow runs on (``_track_on``): its centre
     line, length, place and direction take the stretch in, and it is ``partial`` when
     the stretch reaches the frame's border. A stretch that fades at its far end is a
     groove the scratch meets, not taken (``_run_on_fades``), nor one that turns onto the
-    hatch and runs straight along it (``_turns_onto_hatch``); and an end that the
+    hatch and runs straight along it (``_turns_onto_hatch``), nor one off the hatch that
+    the wall model's residual (``residual``, half resolution) does not carry
+    (``_run_on_grooves_only``); and an end that the
     measurement read where a groove's stretch begins (``_groove_beyond_end``,
     ``_shelf_beyond``) is not followed at all: the raw darkness beyond it is the groove's
     (the twin's 2088002: its end read right, a run on of 21 px straight on through the
@@ -3105,7 +3147,8 @@ def _track_scratches(img: np.ndarray, level: np.ndarray, examined: list["_Examin
                 continue  # beyond it the raw darkness is the groove's (``_measure_scratch``)
             on = _track_on(img, level, line, k, d.width_px, blur, cfg)
             if on is None or _run_on_fades(img, level, on, d.width_px, blur, cfg) \
-                    or _turns_onto_hatch(line, k, on, angles_deg, cfg):
+                    or _turns_onto_hatch(line, k, on, angles_deg, cfg) \
+                    or (residual is not None and _run_on_grooves_only(residual, line, on, angles_deg, cfg)):
                 continue
             grown = True
             line = np.vstack([on[::-1], line[1:]]) if k == 0 else np.vstack([line[:-1], on])

@@ -1657,3 +1657,37 @@ def test_a_faint_ragged_mark_is_no_scratch_and_a_faint_straight_one_is():
         for t, d in scratches:
             assert d is not None and d.kind == "scratch", (seed, t.length_mm)
             assert abs(d.length_mm - t.length_mm) <= max(0.1 * t.length_mm, 0.02), (seed, d.length_mm, t.length_mm)
+
+
+def test_a_run_on_off_the_hatch_that_the_residual_does_not_carry_is_the_grooves():
+    """``_run_on_grooves_only``: off the hatch no groove's line mean takes a furrow in, so
+    a run on there must hold half the scratch's own darkness with the grooves removed;
+    along the hatch the residual says nothing. Synthetic residuals, then the twin's frames:
+    2130019 and 2115051 (1.26 and 1.41 mm scratches meeting a deep groove at a shallow
+    angle) ran on 15 and 14 px through the groove's band (0.08 mm off); 2091057's true
+    run on (16 px, at 0.76 of the body's residual) is kept."""
+    from station.bench.defects import PLACE_TOL_MM, twin_scratch_frame
+    from station.vision.defects import DefectConfig, _run_on_grooves_only
+
+    cfg = DefectConfig()
+    hatch = (30.0, 150.0)
+    residual = np.random.default_rng(2130019).normal(0.0, 0.005, (200, 300)).astype(np.float32)  # the wall's
+    line = np.column_stack([np.linspace(40.0, 200.0, 17), np.full(17, 200.0)])  # a scratch at 0 deg (frame px)
+    residual[99:102, 20:101] += 0.08  # ... and the scratch's residual (half resolution)
+    run = np.column_stack([np.linspace(200.0, 230.0, 16), np.full(16, 200.0)])
+    assert _run_on_grooves_only(residual, line, run, hatch, cfg)  # nothing carries it on
+    carried = residual.copy()
+    carried[99:102, 100:116] += 0.06
+    assert not _run_on_grooves_only(carried, line, run, hatch, cfg)
+    # along a family the grooves' means take a furrow in: no judgement
+    run_along = np.vstack([line[-1], line[-1] + 30.0 * np.array([np.cos(np.deg2rad(30.0)), np.sin(np.deg2rad(30.0))])])
+    assert not _run_on_grooves_only(residual, line, run_along, hatch, cfg)
+    for seed in (2130019, 2115051, 2091057):
+        f = twin_scratch_frame(seed)
+        (t,) = f.defects
+        found = [d for d in detect_defects(f.image, MM_PER_PX) if d.kind == "scratch"]
+        assert len(found) == 1, (seed, [round(d.length_mm, 3) for d in found])
+        d = found[0]
+        assert abs(d.length_mm - t.length_mm) <= 0.1 * t.length_mm, (seed, d.length_mm, t.length_mm)
+        place = float(np.hypot(d.x_px - t.x_px, d.y_px - t.y_px)) * MM_PER_PX
+        assert place <= PLACE_TOL_MM, (seed, place)
