@@ -366,9 +366,10 @@ class DefectConfig:
     #: residual, median along each): there no groove's line mean takes a furrow in, and a
     #: run on that the raw darkness carries but the residual does not is a groove the
     #: scratch meets at a shallow angle (``_run_on_grooves_only``). Session 58: the twin's
-    #: 2130019 and 2115051 ran on 15 and 14 px at 0.17 and 0.26 of the body's residual (0.08
-    #: and 0.07 mm off); the one true run on of 600 frames (twin 2088000, 2091000,
-    #: 2130000, station 110000, 130000, wide 94000) held 0.76 (2091057)
+    #: 2130019 and 2115051 ran on 15 and 14 px at 0.17 and 0.26 of the body's residual
+    #: (0.077 mm off each; the benches found 2110011 and 2121072 too); the one true run on
+    #: of 600 frames (twin 2088000, 2091000, 2130000, station 110000, 130000, wide 94000,
+    #: 100 each) held 0.76 (2091057)
     track_residual_share: float = 0.5
     #: ... followed on over a dip below half its contrast as long as this (px): a deep
     #: groove crossing a thin scratch at the hatch's angle darkens its flanks as much as
