@@ -2681,8 +2681,7 @@ def detect_defects(image: np.ndarray, mm_per_px: float, *, holes=None, blur_px: 
                 if own.any() and inside[own].mean() < 0.05:
                     queue.append(([i], group_claim))
     examined = _drop_scratch_pieces(examined)
-    examined = _track_scratches(img, level_full, examined, cfg, wall.angles_deg,
-                                cv2.GaussianBlur(wall.residual, (0, 0), 1.0))
+    examined = _track_scratches(img, level_full, examined, cfg, wall.angles_deg, wall.residual)
     examined = _join_scratch_pieces(img, level_full, examined, cfg)
     found: list[Defect] = [ex.defect if ex.line is None else replace(ex.defect, line_px=_line_points(ex.line))
                            for ex in examined if ex.defect is not None]
@@ -3127,13 +3126,22 @@ def _track_scratches(img: np.ndarray, level: np.ndarray, examined: list["_Examin
     the stretch reaches the frame's border. A stretch that fades at its far end is a
     groove the scratch meets, not taken (``_run_on_fades``), nor one that turns onto the
     hatch and runs straight along it (``_turns_onto_hatch``), nor one off the hatch that
-    the wall model's residual (``residual``, half resolution) does not carry
-    (``_run_on_grooves_only``); and an end that the
+    the wall model's residual (``residual``, half resolution; smoothed over 1 px here, on
+    the first run on to judge) does not carry (``_run_on_grooves_only``); and an end that the
     measurement read where a groove's stretch begins (``_groove_beyond_end``,
     ``_shelf_beyond``) is not followed at all: the raw darkness beyond it is the groove's
     (the twin's 2088002: its end read right, a run on of 21 px straight on through the
     groove's band to a 6.8 px step that passes as a cut put it 0.11 mm off)."""
     out = []
+    smooth: list[np.ndarray] = []  # the residual smoothed, once, when a run on needs it
+
+    def grooves_only(line: np.ndarray, on: np.ndarray) -> bool:
+        if residual is None:
+            return False
+        if not smooth:
+            smooth.append(cv2.GaussianBlur(residual, (0, 0), 1.0))
+        return _run_on_grooves_only(smooth[0], line, on, angles_deg, cfg)
+
     for ex in examined:
         d = ex.defect
         if d is None or d.kind != "scratch" or ex.line is None or len(ex.line) < 2:
@@ -3149,7 +3157,7 @@ def _track_scratches(img: np.ndarray, level: np.ndarray, examined: list["_Examin
             on = _track_on(img, level, line, k, d.width_px, blur, cfg)
             if on is None or _run_on_fades(img, level, on, d.width_px, blur, cfg) \
                     or _turns_onto_hatch(line, k, on, angles_deg, cfg) \
-                    or (residual is not None and _run_on_grooves_only(residual, line, on, angles_deg, cfg)):
+                    or grooves_only(line, on):
                 continue
             grown = True
             line = np.vstack([on[::-1], line[1:]]) if k == 0 else np.vstack([line[:-1], on])
