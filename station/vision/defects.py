@@ -110,6 +110,14 @@ RIM_HOLD_PX = 2.0
 class DefectConfig:
     #: a dark disc at least this large is a hole, not a pore (:data:`MIN_HOLE_DIAMETER_MM`)
     min_hole_diameter_mm: float = MIN_HOLE_DIAMETER_MM
+    #: the share of a hole's rays that must agree on its circle when the rim analysis
+    #: measures it by its rays alone (``_measure_holes_for_rims``; ``MeasureConfig.
+    #: min_inlier_fraction`` is 0.5). Its rim defects are the rays' outliers: a dim hole
+    #: (33 % contrast) with two burrs and two chips had 103 of 218 rays agree (0.47), was
+    #: no hole, and its four defects were lost (wide bench frame 129068). Over 1,400 wide
+    #: and station frames the candidates of a hole's size that are no hole agree 0.29 at
+    #: most (and their contrast, 0.10 at most, fails ``min_relative_contrast`` besides)
+    rim_hole_min_inlier_fraction: float = 0.4
     #: the honing cross-hatch's line directions (deg, image sense); None: estimated per
     #: frame from its power spectrum (``honing_directions``), falling back to +/-30 deg
     #: (the renderer's and the Sunnen/Nagel guides' typical cross-hatch half-angle)
@@ -1533,7 +1541,81 @@ def _groove_beyond_end(raw: np.ndarray, groove: np.ndarray, a: int, b: int, step
     return bool(coef[1] > 0 and (se == 0.0 or coef[1] / se >= GROOVE_BEYOND_END_T))
 
 
-def _measure_scratch(patch: _Patch, region: np.ndarray, blur_hint: float | None = None):
+#: a stretch of a scratch's centre-line peaks at one end that is the groove it ends on:
+#: at least ``HATCH_TAIL_MIN_PX`` long, within ``HATCH_TAIL_DEG`` of a groove family,
+#: the rest (at least ``HATCH_TAIL_MIN_BODY_PX``) off the hatch, and the two straight
+#: lines fitting the peaks ``HATCH_TAIL_MAX_SSE_SHARE`` or less of one line's squares:
+#: ``_hatch_tail``
+HATCH_TAIL_MIN_PX = 20.0
+HATCH_TAIL_MIN_BODY_PX = 40.0
+HATCH_TAIL_DEG = 3.0
+HATCH_TAIL_MAX_SSE_SHARE = 0.25
+
+
+def _hatch_tail(s: np.ndarray, c: np.ndarray, w: np.ndarray, ang: float, angles_deg,
+                alignment_deg: float) -> tuple[np.ndarray, float, int] | None:
+    """Which of a scratch's centre-line peaks (``s`` along its axis ``ang``, rad; ``c``
+    across; weights ``w``) are a groove's straight stretch at one of its ends: (that mask,
+    where along the axis the peaks leave the scratch's line for the groove's, the end: 0
+    low s, 1 high s), or None.
+
+    A scratch that ends on a deep groove at a shallow angle joins the groove's residue in
+    one region, and the peaks run on along the groove; at 15-20 deg from the scratch the
+    robust line's Tukey weights do not drop them, they drag it, and the cubic follows the
+    groove (the twin's frame 2131037: a 1.33 mm scratch 17 deg off the groove it ends on
+    read 2.36 mm). The peaks then lie on two straight lines that meet at the kink: the
+    tail along a groove family (``angles_deg``, within ``HATCH_TAIL_DEG``) and the body
+    off the hatch (``alignment_deg`` or more from each family). A scratch bends slowly
+    (the renderer's modes: 1.2 % of its length) and never onto the hatch at a kink; one
+    along the hatch is never cut here."""
+    if s.size < 12 or not len(angles_deg):
+        return None
+    o = np.argsort(s)
+    ss, cc, ww = s[o], c[o], np.maximum(w[o], 1e-12)
+
+    def line_fit(sel: np.ndarray) -> tuple[float, float, float]:
+        """Weighted least squares c = a + m s: (sum of squares, a, m)."""
+        x, y, q = ss[sel], cc[sel], ww[sel]
+        sw = q.sum()
+        mx, my = (q * x).sum() / sw, (q * y).sum() / sw
+        vx = (q * (x - mx) ** 2).sum()
+        slope = (q * (x - mx) * (y - my)).sum() / vx if vx > 0 else 0.0
+        r = y - my - slope * (x - mx)
+        return float((q * r * r).sum()), float(my - slope * mx), float(slope)
+
+    whole = line_fit(np.ones(ss.size, bool))[0]
+    if whole <= 0:
+        return None
+    # the best split of the peaks into two straight lines; the tail then the part along
+    # the hatch (at least HATCH_TAIL_MIN_PX), the body the other (HATCH_TAIL_MIN_BODY_PX)
+    best = None
+    for b in np.arange(ss[0] + HATCH_TAIL_MIN_PX, ss[-1] - HATCH_TAIL_MIN_PX + 1e-9, 2.0):
+        low = ss < b
+        if low.sum() < 4 or (~low).sum() < 4:
+            continue
+        fl, fh = line_fit(low), line_fit(~low)
+        if best is None or fl[0] + fh[0] < best[0]:
+            best = (fl[0] + fh[0], float(b), fl[2], fh[2])
+    if best is None or best[0] > HATCH_TAIL_MAX_SSE_SHARE * whole:
+        return None
+    _, b, m_low, m_high = best
+    deg = [float(np.rad2deg(ang + np.arctan(m)) % 180.0) for m in (m_low, m_high)]
+    span = (b - ss[0], ss[-1] - b)
+    for side in (0, 1):  # 0: the tail at the low end of s, 1: at the high end
+        if span[side] >= HATCH_TAIL_MIN_PX and span[1 - side] >= HATCH_TAIL_MIN_BODY_PX and \
+                any(_circ_diff_deg(deg[side], g) <= HATCH_TAIL_DEG for g in angles_deg) and \
+                all(_circ_diff_deg(deg[1 - side], g) >= alignment_deg for g in angles_deg):
+            break
+    else:
+        return None
+    tail = ss < b if side == 0 else ss >= b
+    out = np.zeros(s.size, bool)
+    out[o] = tail
+    return out, float(b), side
+
+
+def _measure_scratch(patch: _Patch, region: np.ndarray, blur_hint: float | None = None, angles_deg=(),
+                     alignment_deg: float = 7.5):
     """A scratch: its centre line (a polynomial bend), its extent (``_scratch_extent``)
     and each end at half its local height (``_fit_end``) on its amplitude along it (the
     strip matched-filtered across by its own mean cross profile), its mean width (that
@@ -1598,6 +1680,10 @@ def _measure_scratch(patch: _Patch, region: np.ndarray, blur_hint: float | None 
     # per cent of its length): a groove's residue a scratch ends on leaves it at a shallow
     # angle, and the cubic followed it (bench frames: a 171 px scratch, a groove 25 deg off
     # its end, read 213 px). The line robustly (Tukey weights), then the peaks near it
+    tail = _hatch_tail(s[good], centre_n[good], col_mass[good], ang, angles_deg, alignment_deg)
+    if tail is not None:
+        idx = np.flatnonzero(good)
+        good[idx[tail[0]]] = False
     wts = np.sqrt(col_mass[good])
     sg, cg = s[good], centre_n[good]
     for _ in range(5):
@@ -1733,6 +1819,20 @@ def _measure_scratch(patch: _Patch, region: np.ndarray, blur_hint: float | None 
             groove_ends[1] = True
         ext = (lo, hi)
         s1, s2 = float(sv[ext[0]]), float(sv[ext[1] - 1])
+    if tail is not None:
+        # the scratch ends where it meets the groove its peaks ran on along (``_hatch_tail``):
+        # beyond, the darkness is the groove's, which the straight line read for ~15 px as it
+        # left it (the twin's 2131037 read 10 % long and 0.07 mm off)
+        meet, side = tail[1], tail[2]
+        beyond = sv < meet if side == 0 else sv > meet
+        av = np.where(beyond, np.minimum(av, 0.0), av)
+        groove_ends[side] = True
+        if side == 0:
+            s1 = max(s1, meet)
+        else:
+            s2 = min(s2, meet)
+        if s2 - s1 < 3.0:
+            return None
     if blur_hint is None:
         ends = _ends_blur(sv, av, s1, s2)
         if ends is not None:
@@ -2526,7 +2626,7 @@ def _measure_holes_for_rims(img: np.ndarray, mm_per_px: float, cfg: DefectConfig
 
     # the rims need no grain-aware step: the weighted fit places them well within a px
     holes = list(measure_holes(img, mm_per_px, cfg=MeasureConfig(gls_steps=0)))
-    rays_only = MeasureConfig(photometric=None)
+    rays_only = MeasureConfig(photometric=None, min_inlier_fraction=cfg.rim_hole_min_inlier_fraction)
     rays_only = replace(rays_only, detect=for_scale(rays_only.detect, mm_per_px))
     for cand in detect_candidates(img, rays_only.detect):
         if 2.0 * cand.radius_px * mm_per_px < 0.8 * cfg.min_hole_diameter_mm:
@@ -3403,12 +3503,12 @@ def _examine_once(img: np.ndarray, box, seed: np.ndarray, excl: np.ndarray, zone
         return reg, _measure_pore(patch, reg, cfg, allow_scratch=allow_scratch, blur_hint=blur_hint)
 
     if elongated:
-        m = _measure_scratch(patch, region, blur_hint)
+        m = _measure_scratch(patch, region, blur_hint, angles_deg, cfg.groove_alignment_deg)
     else:
         region, m = as_pore(region)
     if m is not None and m.get("scratch"):
         elongated = True
-        m = _measure_scratch(patch, region, blur_hint)
+        m = _measure_scratch(patch, region, blur_hint, angles_deg, cfg.groove_alignment_deg)
     kind = "scratch" if elongated else "pore"
     if kind == "scratch" and m is not None and m["length"] < cfg.scratch_elongation * m["width"]:
         region, m = as_pore(region, allow_scratch=False)  # short, broad

@@ -1691,3 +1691,64 @@ def test_a_run_on_off_the_hatch_that_the_residual_does_not_carry_is_the_grooves(
         assert abs(d.length_mm - t.length_mm) <= 0.1 * t.length_mm, (seed, d.length_mm, t.length_mm)
         place = float(np.hypot(d.x_px - t.x_px, d.y_px - t.y_px)) * MM_PER_PX
         assert place <= PLACE_TOL_MM, (seed, place)
+
+
+def test_a_scratchs_peaks_that_turn_onto_the_hatch_at_its_end_are_the_groove():
+    """``_hatch_tail``: a scratch that ends on a deep groove at a shallow angle joins the
+    groove's residue in one region, and its centre-line peaks run on along the groove.
+    Synthetic peaks: a body 17 deg off a groove family with a 100 px tail along it is cut
+    at the kink, at either end; no tail when the tail is off the hatch, when the body is
+    along it, or when the line is straight or bends smoothly. Then the twin's frame
+    2131037 (a 1.33 mm scratch read 2.36 mm, its place 0.5 mm off)."""
+    from station.bench.defects import PLACE_TOL_MM, twin_scratch_frame
+    from station.vision.defects import _hatch_tail
+
+    rng = np.random.default_rng(2131037)
+    hatch = (30.0, 150.0)
+    ang = np.deg2rad(47.0)  # the axis: the body's direction
+
+    def peaks(turn_deg, body=(0.0, 135.0), tail_len=100.0, at_high=True):
+        sb = np.arange(body[0], body[1], 0.5)
+        m = np.tan(np.deg2rad(turn_deg))
+        st = np.arange(body[1], body[1] + tail_len, 0.5) if at_high else np.arange(body[0] - tail_len, body[0], 0.5)
+        ct = m * (st - (body[1] if at_high else body[0]))
+        s = np.concatenate([sb, st])
+        c = np.concatenate([np.zeros(sb.size), ct]) + rng.normal(0.0, 0.3, sb.size + st.size)
+        return s, c, np.ones(s.size)
+
+    cut = _hatch_tail(*peaks(-17.0), ang, hatch, 7.5)  # the tail at 30 deg
+    assert cut is not None
+    mask, where, side = cut
+    s = peaks(-17.0)[0]
+    assert side == 1 and abs(where - 135.0) <= 4.0, (side, where)
+    assert mask[s > 140.0].all() and not mask[s < 130.0].any()
+    low = _hatch_tail(*peaks(-17.0, at_high=False), ang, hatch, 7.5)  # 47 - 17 = 30 deg either way
+    assert low is not None and low[2] == 0 and abs(low[1] - 0.0) <= 4.0, low and low[1:]
+    assert _hatch_tail(*peaks(-9.0), ang, hatch, 7.5) is None  # the tail at 38 deg: no groove's
+    assert _hatch_tail(*peaks(0.0), ang, hatch, 7.5) is None  # straight on
+    assert _hatch_tail(*peaks(-17.0), np.deg2rad(36.0), hatch, 7.5) is None  # the body along the hatch
+    s = np.arange(0.0, 235.0, 0.5)  # a smooth bend of the renderer's size (1.2 % of the length)
+    c = 0.012 * 235.0 * np.sin(np.pi * s / 235.0) + rng.normal(0.0, 0.3, s.size)
+    assert _hatch_tail(s, c, np.ones(s.size), ang, hatch, 7.5) is None
+    f = twin_scratch_frame(2131037)
+    (t,) = f.defects
+    found = [d for d in detect_defects(f.image, MM_PER_PX) if d.kind == "scratch"]
+    assert len(found) == 1, [round(d.length_mm, 3) for d in found]
+    d = found[0]
+    assert abs(d.length_mm - t.length_mm) <= 0.1 * t.length_mm, (d.length_mm, t.length_mm)
+    assert float(np.hypot(d.x_px - t.x_px, d.y_px - t.y_px)) * MM_PER_PX <= PLACE_TOL_MM
+
+
+def test_a_dim_hole_whose_rim_defects_take_half_its_rays_is_still_a_hole_for_its_rims():
+    """``rim_hole_min_inlier_fraction``: the rim analysis measures a hole that the
+    photometric fit drops by its rays alone, and there its rim defects are the rays'
+    outliers. Wide frame 129068 (26 deg hatch): a dim 0.70 mm hole (33 % contrast, blur
+    1.8 px) with two burrs and two chips had 103 of 218 rays agree, under the hole
+    measurement's 0.5; it was no hole and its four defects were lost."""
+    f = random_defect_frame(129068, None, mm_per_px=MM_PER_PX, envelope="wide", hatch_deg=26.0)
+    found = detect_defects(f.image, MM_PER_PX)
+    pairs, false = match(f.defects, found, MM_PER_PX)
+    rim = [(t, d) for t, d in pairs if t.kind in ("burr", "chip")]
+    assert len(rim) == 4
+    assert all(d is not None and d.kind == t.kind for t, d in rim), [(t.kind, d and d.kind) for t, d in rim]
+    assert not false, [(found[k].kind, round(found[k].length_mm, 3)) for k in false]
