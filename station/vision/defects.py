@@ -1544,12 +1544,14 @@ def _groove_beyond_end(raw: np.ndarray, groove: np.ndarray, a: int, b: int, step
 #: a stretch of a scratch's centre-line peaks at one end that is the groove it ends on:
 #: at least ``HATCH_TAIL_MIN_PX`` long, within ``HATCH_TAIL_DEG`` of a groove family,
 #: the rest (at least ``HATCH_TAIL_MIN_BODY_PX``) off the hatch, and the two straight
-#: lines fitting the peaks ``HATCH_TAIL_MAX_SSE_SHARE`` or less of one line's squares:
-#: ``_hatch_tail``
+#: lines fitting the peaks ``HATCH_TAIL_MAX_SSE_SHARE`` or less of one line's squares
+#: (``_hatch_tail``)
 HATCH_TAIL_MIN_PX = 20.0
 HATCH_TAIL_MIN_BODY_PX = 40.0
 HATCH_TAIL_DEG = 3.0
 HATCH_TAIL_MAX_SSE_SHARE = 0.25
+#: ... and the tail's peaks (median) at most this share of the body's
+HATCH_TAIL_MAX_AMPLITUDE_SHARE = 0.6
 
 
 def _hatch_tail(s: np.ndarray, c: np.ndarray, w: np.ndarray, ang: float, angles_deg,
@@ -1609,6 +1611,14 @@ def _hatch_tail(s: np.ndarray, c: np.ndarray, w: np.ndarray, ang: float, angles_
     else:
         return None
     tail = ss < b if side == 0 else ss >= b
+    # ... and fainter: the groove's stretch is what the wall model misses of it, the
+    # scratch's darkness is whole along its length (its width varies by ~15 %). A scratch
+    # along the hatch whose region took in a piece off it (a crossing's residue) split
+    # there, its own long stretch the "tail" at 0.70-1.13 of the piece's peaks (along
+    # the hatch 542000: six scratches cut to a third of their length); 2131037's groove
+    # 0.53 of its scratch's
+    if float(np.median(ww[tail])) > HATCH_TAIL_MAX_AMPLITUDE_SHARE * float(np.median(ww[~tail])):
+        return None
     out = np.zeros(s.size, bool)
     out[o] = tail
     return out, float(b), side

@@ -1696,9 +1696,10 @@ def test_a_run_on_off_the_hatch_that_the_residual_does_not_carry_is_the_grooves(
 def test_a_scratchs_peaks_that_turn_onto_the_hatch_at_its_end_are_the_groove():
     """``_hatch_tail``: a scratch that ends on a deep groove at a shallow angle joins the
     groove's residue in one region, and its centre-line peaks run on along the groove.
-    Synthetic peaks: a body 17 deg off a groove family with a 100 px tail along it is cut
-    at the kink, at either end; no tail when the tail is off the hatch, when the body is
-    along it, or when the line is straight or bends smoothly. Then the twin's frame
+    Synthetic peaks: a body 17 deg off a groove family with a 100 px tail along it, half
+    as dark, is cut at the kink, at either end; no tail when the tail is off the hatch,
+    when the body is along it, when the tail is nearly as dark as the body, or when the
+    line is straight or bends smoothly. Then the twin's frame
     2131037 (a 1.33 mm scratch read 2.36 mm, its place 0.5 mm off)."""
     from station.bench.defects import PLACE_TOL_MM, twin_scratch_frame
     from station.vision.defects import _hatch_tail
@@ -1707,14 +1708,14 @@ def test_a_scratchs_peaks_that_turn_onto_the_hatch_at_its_end_are_the_groove():
     hatch = (30.0, 150.0)
     ang = np.deg2rad(47.0)  # the axis: the body's direction
 
-    def peaks(turn_deg, body=(0.0, 135.0), tail_len=100.0, at_high=True):
+    def peaks(turn_deg, body=(0.0, 135.0), tail_len=100.0, at_high=True, tail_share=0.5):
         sb = np.arange(body[0], body[1], 0.5)
         m = np.tan(np.deg2rad(turn_deg))
         st = np.arange(body[1], body[1] + tail_len, 0.5) if at_high else np.arange(body[0] - tail_len, body[0], 0.5)
         ct = m * (st - (body[1] if at_high else body[0]))
         s = np.concatenate([sb, st])
         c = np.concatenate([np.zeros(sb.size), ct]) + rng.normal(0.0, 0.3, sb.size + st.size)
-        return s, c, np.ones(s.size)
+        return s, c, np.concatenate([np.ones(sb.size), np.full(st.size, tail_share)])  # the peaks' heights
 
     cut = _hatch_tail(*peaks(-17.0), ang, hatch, 7.5)  # the tail at 30 deg
     assert cut is not None
@@ -1727,9 +1728,12 @@ def test_a_scratchs_peaks_that_turn_onto_the_hatch_at_its_end_are_the_groove():
     assert _hatch_tail(*peaks(-9.0), ang, hatch, 7.5) is None  # the tail at 38 deg: no groove's
     assert _hatch_tail(*peaks(0.0), ang, hatch, 7.5) is None  # straight on
     assert _hatch_tail(*peaks(-17.0), np.deg2rad(36.0), hatch, 7.5) is None  # the body along the hatch
+    # a tail as dark as the body is a scratch's own stretch along the hatch (a scratch along
+    # it whose region took in a piece off it: along the hatch 542000, six cut to a third)
+    assert _hatch_tail(*peaks(-17.0, tail_share=0.8), ang, hatch, 7.5) is None
     s = np.arange(0.0, 235.0, 0.5)  # a smooth bend of the renderer's size (1.2 % of the length)
     c = 0.012 * 235.0 * np.sin(np.pi * s / 235.0) + rng.normal(0.0, 0.3, s.size)
-    assert _hatch_tail(s, c, np.ones(s.size), ang, hatch, 7.5) is None
+    assert _hatch_tail(s, c, np.where(s > 140.0, 0.5, 1.0), ang, hatch, 7.5) is None
     f = twin_scratch_frame(2131037)
     (t,) = f.defects
     found = [d for d in detect_defects(f.image, MM_PER_PX) if d.kind == "scratch"]
