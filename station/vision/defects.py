@@ -1801,11 +1801,17 @@ def _measure_scratch(patch: _Patch, region: np.ndarray, blur_hint: float | None 
     # than cover x c (dev frames: a faint 1.6 px scratch broke into pieces at deep
     # grooves). Each pixel scaled by c / (c - G), which is 1 off the scratch: the first
     # version added G x width along the centre line, also past the ends, where a deep
-    # groove then carried the end on (the twin's frames)
+    # groove then carried the end on (the twin's frames). In the core's rows only: the
+    # flanks either side are the wall, where the residual is the model's misfit of a
+    # groove, and scaled there (through the filter's negative flank weights) the misfit of
+    # a groove band wider than the core read as the scratch running on past its end (the
+    # twin's 2134015, 2135092 and 2136019: 1.54, 1.76 and 1.46 mm scratches read 8-10 %
+    # long, 0.06-0.08 mm off, each raw read's end right)
     c_eff = float(np.clip(max(c, float(np.nanmax(prof_all))), 0.05, 1.0))
-    factor = c_eff / np.maximum(c_eff - grooves, c_eff / 2.5)
+    factor = np.where(box_rows[:, None], c_eff / np.maximum(c_eff - grooves, c_eff / 2.5), 1.0)
     ext_raw, av_raw = ext, av
     groove_ends = [False, False]  # an end read where a groove's stretch begins
+    groove_av = (filt @ grooves) / filt_norm  # the modelled grooves through the same filter
     mv, av = profiles(factor)
     ext = _scratch_extent(av, step, gap_px)
     if ext is not None:
@@ -1816,7 +1822,6 @@ def _measure_scratch(patch: _Patch, region: np.ndarray, blur_hint: float | None 
         # below the scratch's own level (``_shelf_beyond``)
         lo, hi = ext
         trim = int(np.ceil(2.0 * b / step))  # the raw end's own blurred step
-        groove_av = (filt @ grooves) / filt_norm  # the modelled grooves through the same filter
         if _groove_beyond_end(av_raw, groove_av, ext[0], ext_raw[0] - trim, step) \
                 or _shelf_beyond(av, groove_av, ext[0], ext_raw[0], ext_raw, step):
             lo = ext_raw[0]
@@ -1866,6 +1871,22 @@ def _measure_scratch(patch: _Patch, region: np.ndarray, blur_hint: float | None 
     step_blur = float(np.hypot(blur_x, 1.0))
     s1, u_s1 = _fit_end(sv, ms, s1, blur, rising=True, step_blur=step_blur)
     s2, u_s2 = _fit_end(sv, ms, s2, blur, rising=False, step_blur=step_blur)
+    # ... each end read at half its local height, which walks out along a shelf past a
+    # square end: where the scratch ends on a deep groove crossing it, the model's misfit
+    # of the groove beyond holds a third of the scratch's level, and read on it the half
+    # height fell onto the shelf, and again, 10-15 px on (the twin's 2133057: a 1.22 mm
+    # scratch read 1.37 mm, 0.07 mm off; the raw read's end right). An end that went 10 px
+    # or more past the raw read's over a shelf (``_shelf_beyond``) is read at half the
+    # scratch's own level instead, from the raw read's end
+    if tail is None:
+        own = float(np.median(av[ext_raw[0]:ext_raw[1]])) if ext_raw[1] > ext_raw[0] else 0.0
+        lo_raw, hi_raw = float(sv[ext_raw[0]]), float(sv[ext_raw[1] - 1])
+        k1 = int(np.searchsorted(sv, s1))
+        if own > 0 and _shelf_beyond(av, groove_av, k1, ext_raw[0], ext_raw, step):
+            s1, u_s1 = _fit_end(sv, ms, lo_raw, blur, rising=True, height=own)
+        k2 = int(np.searchsorted(sv, s2, side="right"))
+        if own > 0 and _shelf_beyond(av, groove_av, ext_raw[1], k2, ext_raw, step):
+            s2, u_s2 = _fit_end(sv, ms, hi_raw, blur, rising=False, height=own)
     if s2 - s1 < 3.0:
         return None
     ss = np.linspace(s1, s2, 200)
@@ -2544,7 +2565,7 @@ def _chip_floor(prof: _RimProfile, rays: np.ndarray, s_arc: np.ndarray, s1: floa
 
 
 def _fit_end(s: np.ndarray, data: np.ndarray, guess: float, blur: float, rising: bool,
-             step_blur: float | None = None) -> tuple[float, float]:
+             step_blur: float | None = None, height: float | None = None) -> tuple[float, float]:
     """Where a profile steps up (``rising``) or down near ``guess``: the crossing of half
     its *local* height, the height read 1.2 blur to 1.2 blur + 1 px inside the end
     (where a blurred step has reached 88-97 %), iterated from ``guess``. A ragged defect
@@ -2559,7 +2580,10 @@ def _fit_end(s: np.ndarray, data: np.ndarray, guess: float, blur: float, rising:
     plateau, so its half sat outside the end: each end of a square-ended scratch (its
     profile smoothed over 1 px, a step blur of 1.7 px) read 0.2-0.3 px out, every
     scratch 0.55 px long on a clean wall. Given the step's blur, the height is divided by
-    what the step reaches where it was read."""
+    what the step reaches where it was read.
+
+    ``height``: the profile's height at the end if known (a square-ended scratch's own
+    level): its half is the crossing, not a local height's."""
     order = np.argsort(s)
     s, data = s[order], data[order]
     inward = 1.0 if rising else -1.0
@@ -2569,9 +2593,12 @@ def _fit_end(s: np.ndarray, data: np.ndarray, guess: float, blur: float, rising:
         near = (inward * (s - end) >= 1.2 * blur) & (inward * (s - end) <= 1.2 * blur + 1.0)
         if not near.any():
             break
-        level = 0.5 * float(np.median(data[near]))
-        if step_blur is not None:
-            level /= float(np.median(ndtr(inward * (s[near] - end) / step_blur)))
+        if height is not None:
+            level = 0.5 * height
+        else:
+            level = 0.5 * float(np.median(data[near]))
+            if step_blur is not None:
+                level /= float(np.median(ndtr(inward * (s[near] - end) / step_blur)))
         if level <= 0:
             break
         half = level

@@ -1756,3 +1756,25 @@ def test_a_dim_hole_whose_rim_defects_take_half_its_rays_is_still_a_hole_for_its
     assert len(rim) == 4
     assert all(d is not None and d.kind == t.kind for t, d in rim), [(t.kind, d and d.kind) for t, d in rim]
     assert not false, [(found[k].kind, round(found[k].length_mm, 3)) for k in false]
+
+
+def test_a_scratch_ending_on_a_deep_groove_is_not_carried_on_by_the_grooves_misfit():
+    """Two readings of a scratch's end that the wall model's misfit of a deep groove beyond
+    it carried on. The grooves' scaling c / (c - G), which restores a scratch's darkness
+    where a groove crosses it, is applied in the matched filter's core only: scaled in the
+    flanks, the misfit of a groove band wider than the core read as the scratch running on
+    (the twin's 2134015, 2135092, 2136019: 8-10 % long, 0.06-0.08 mm off). And an end that
+    the half-local-height walk carried 10 px or more out over a shelf (``_shelf_beyond``)
+    is read at half the scratch's own level (2133057: a 1.22 mm scratch read 1.37 mm, 0.07
+    mm off). Each within 10 % and 0.05 mm."""
+    from station.bench.defects import PLACE_TOL_MM, twin_scratch_frame
+
+    for seed in (2134015, 2135092, 2136019, 2133057):
+        f = twin_scratch_frame(seed)
+        (t,) = f.defects
+        found = [d for d in detect_defects(f.image, MM_PER_PX) if d.kind == "scratch"]
+        assert len(found) == 1, (seed, [round(d.length_mm, 3) for d in found])
+        d = found[0]
+        assert abs(d.length_mm - t.length_mm) <= 0.1 * t.length_mm, (seed, d.length_mm, t.length_mm)
+        place = float(np.hypot(d.x_px - t.x_px, d.y_px - t.y_px)) * MM_PER_PX
+        assert place <= PLACE_TOL_MM, (seed, place)
