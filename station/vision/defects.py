@@ -1801,24 +1801,9 @@ def _measure_scratch(patch: _Patch, region: np.ndarray, blur_hint: float | None 
     # than cover x c (dev frames: a faint 1.6 px scratch broke into pieces at deep
     # grooves). Each pixel scaled by c / (c - G), which is 1 off the scratch: the first
     # version added G x width along the centre line, also past the ends, where a deep
-    # groove then carried the end on (the twin's frames). In the core's rows only: the
-    # flanks either side are the wall, where the residual is the model's misfit of a
-    # groove, and scaled there (through the filter's negative flank weights) the misfit of
-    # a groove band wider than the core read as the scratch running on past its end (the
-    # twin's 2134015, 2135092 and 2136019: 1.54, 1.76 and 1.46 mm scratches read 8-10 %
-    # long, 0.06-0.08 mm off, each raw read's end right). Off the hatch only: a mark
-    # within ``alignment_deg`` of a family lies along a modelled groove, whose model is as
-    # dark as the mark or darker over its whole length (the factor at its clip), and the
-    # tests for marks along the hatch (square ends, lines crossed) were set on the reading
-    # scaled across the filter (the twin's 2136119: a deep groove at the frame's border,
-    # where the lens turns it 4-6 deg off the hatch, read 72 px long that way and 88 px
-    # in the core alone, crossing 8.6 px of lines against the 8 allowed: a false 1.1 mm
-    # scratch)
+    # groove then carried the end on (the twin's frames)
     c_eff = float(np.clip(max(c, float(np.nanmax(prof_all))), 0.05, 1.0))
     factor = c_eff / np.maximum(c_eff - grooves, c_eff / 2.5)
-    axis_deg = float(np.rad2deg(ang) % 180.0)
-    if all(_circ_diff_deg(axis_deg, g) >= alignment_deg for g in angles_deg):
-        factor = np.where(box_rows[:, None], factor, 1.0)
     ext_raw, av_raw = ext, av
     groove_ends = [False, False]  # an end read where a groove's stretch begins
     groove_av = (filt @ grooves) / filt_norm  # the modelled grooves through the same filter

