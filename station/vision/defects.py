@@ -1552,6 +1552,9 @@ HATCH_TAIL_DEG = 3.0
 HATCH_TAIL_MAX_SSE_SHARE = 0.25
 #: ... and the tail's peaks (median) at most this share of the body's
 HATCH_TAIL_MAX_AMPLITUDE_SHARE = 0.6
+#: ... and a cubic through all the peaks no more than this many times better (its
+#: weighted squares) than the two lines: a smooth bend is the scratch's own
+HATCH_TAIL_MAX_CUBIC_GAIN = 4.0
 
 
 def _hatch_tail(s: np.ndarray, c: np.ndarray, w: np.ndarray, ang: float, angles_deg,
@@ -1618,6 +1621,17 @@ def _hatch_tail(s: np.ndarray, c: np.ndarray, w: np.ndarray, ang: float, angles_
     # the hatch 542000: six scratches cut to a third of their length); 2131037's groove
     # 0.53 of its scratch's
     if float(np.median(ww[tail])) > HATCH_TAIL_MAX_AMPLITUDE_SHARE * float(np.median(ww[~tail])):
+        return None
+    # ... and a kink, not the scratch's own bend: a scratch bends smoothly (the renderer's
+    # two modes, 1.2 % of its length each, turn its ends by up to ~6 deg), which a cubic
+    # follows to the noise, and one 10 deg off the hatch bent its last 48 px within 3 deg
+    # of it and was cut to 1.33 of its 1.81 mm (station frame 88091: the two lines' squares
+    # 8.5x the cubic's). Where the cubic fits HATCH_TAIL_MAX_CUBIC_GAIN times better than
+    # the two lines, no tail (2131037: 0.23; the twin's 2134066, where a thin scratch
+    # merges into a wide groove band: 1.95)
+    cubic = np.polyfit(ss, cc, 3, w=np.sqrt(ww))
+    r3 = cc - np.polyval(cubic, ss)
+    if best[0] > HATCH_TAIL_MAX_CUBIC_GAIN * float((ww * r3 * r3).sum()):
         return None
     out = np.zeros(s.size, bool)
     out[o] = tail
