@@ -1643,7 +1643,10 @@ def _measure_scratch(patch: _Patch, region: np.ndarray, blur_hint: float | None 
     """A scratch: its centre line (a polynomial bend), its extent (``_scratch_extent``)
     and each end at half its local height (``_fit_end``) on its amplitude along it (the
     strip matched-filtered across by its own mean cross profile), its mean width (that
-    profile fitted as a blurred box), with standard uncertainties (px)."""
+    profile fitted as a blurred box), with standard uncertainties (px). ``angles_deg``:
+    the frame's groove families, and ``alignment_deg`` how near one a direction is along
+    it (``DefectConfig.groove_alignment_deg``): a groove's stretch the peaks run on along
+    at an end is cut off (``_hatch_tail``); none given, none is."""
     r = patch.residual
     h, w = r.shape
     yy, xx = np.mgrid[0:h, 0:w].astype(np.float64)
