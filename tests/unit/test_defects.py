@@ -1701,7 +1701,6 @@ def test_a_scratchs_peaks_that_turn_onto_the_hatch_at_its_end_are_the_groove():
     when the body is along it, when the tail is nearly as dark as the body, or when the
     line is straight or bends smoothly (a cubic fits it 4x better than two lines). Then the twin's frame
     2131037 (a 1.33 mm scratch read 2.36 mm, its place 0.5 mm off)."""
-    from station.bench.defects import PLACE_TOL_MM, twin_scratch_frame
     from station.vision.defects import _hatch_tail
 
     rng = np.random.default_rng(2131037)
@@ -1734,13 +1733,7 @@ def test_a_scratchs_peaks_that_turn_onto_the_hatch_at_its_end_are_the_groove():
     s = np.arange(0.0, 235.0, 0.5)  # a smooth bend of the renderer's size (1.2 % of the length)
     c = 0.012 * 235.0 * np.sin(np.pi * s / 235.0) + rng.normal(0.0, 0.3, s.size)
     assert _hatch_tail(s, c, np.where(s > 140.0, 0.5, 1.0), ang, hatch, 7.5) is None
-    f = twin_scratch_frame(2131037)
-    (t,) = f.defects
-    found = [d for d in detect_defects(f.image, MM_PER_PX) if d.kind == "scratch"]
-    assert len(found) == 1, [round(d.length_mm, 3) for d in found]
-    d = found[0]
-    assert abs(d.length_mm - t.length_mm) <= 0.1 * t.length_mm, (d.length_mm, t.length_mm)
-    assert float(np.hypot(d.x_px - t.x_px, d.y_px - t.y_px)) * MM_PER_PX <= PLACE_TOL_MM
+    _the_twin_scratch_found(2131037)
     # a scratch 10 deg off the hatch whose own smooth bend takes its last 48 px within 3
     # deg of it, fainter there (station frame 88091, 1.81 mm): a cubic fits it 8.5x better
     # than two lines, and it is not cut
@@ -1773,7 +1766,6 @@ def test_a_scratch_end_read_at_half_its_local_height_does_not_walk_out_over_a_sh
     raw read's over a shelf (``_shelf_beyond``) is read at half the scratch's own level:
     the twin's 2133057, a 1.22 mm scratch read 1.37 mm and 0.07 mm off, now within 10 %
     and 0.05 mm. ``_fit_end`` with a known height crosses at its half."""
-    from station.bench.defects import PLACE_TOL_MM, twin_scratch_frame
     from scipy.ndimage import gaussian_filter1d
 
     from station.vision.defects import _fit_end
@@ -1784,10 +1776,4 @@ def test_a_scratch_end_read_at_half_its_local_height_does_not_walk_out_over_a_sh
     walked, _ = _fit_end(s, step, 3.0, 1.0, rising=False)
     held, _ = _fit_end(s, step, 3.0, 1.0, rising=False, height=1.0)
     assert walked > 10.0 and abs(held) <= 1.0, (walked, held)
-    f = twin_scratch_frame(2133057)
-    (t,) = f.defects
-    found = [d for d in detect_defects(f.image, MM_PER_PX) if d.kind == "scratch"]
-    assert len(found) == 1, [round(d.length_mm, 3) for d in found]
-    d = found[0]
-    assert abs(d.length_mm - t.length_mm) <= 0.1 * t.length_mm, (d.length_mm, t.length_mm)
-    assert float(np.hypot(d.x_px - t.x_px, d.y_px - t.y_px)) * MM_PER_PX <= PLACE_TOL_MM
+    _the_twin_scratch_found(2133057)
