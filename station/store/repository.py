@@ -602,15 +602,20 @@ class Store:
         self._bump_records()
         return ids
 
-    def log_event(self, kind: str, message: str, inspection_id: str | None = None) -> EventRecord:
-        """Append an event (an alarm, a state change of the station) to the log."""
+    def log_event(self, kind: str, message: str, inspection_id: str | None = None, *,
+                  at: datetime | None = None) -> EventRecord:
+        """Append an event (an alarm, a state change of the station) to the log. ``at``:
+        when it happened (an aware datetime), for an event written after the fact; now
+        by default."""
         _check_text("kind", kind, EVENT_KIND_LEN, required=True)
         if not isinstance(message, str):
             raise ValueError(f"message must be a string, not {type(message).__name__}")
+        if at is not None and (not isinstance(at, datetime) or at.tzinfo is None or at.utcoffset() is None):
+            raise ValueError(f"at must be an aware datetime, not {at!r}")
         with self.transaction("log an event") as s:
             if inspection_id is not None and s.get(Inspection, inspection_id) is None:
                 raise InspectionNotFound(f"no inspection {inspection_id!r}")
-            ev = Event(inspection_id=inspection_id, station_id=self.station_id, at=utcnow(), kind=kind,
+            ev = Event(inspection_id=inspection_id, station_id=self.station_id, at=at or utcnow(), kind=kind,
                        message=message)
             s.add(ev)
             s.flush()
