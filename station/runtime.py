@@ -292,7 +292,11 @@ async def open_session(config: str | Path | None = None, *, scenario: str | Path
             if annotator is not None:
                 session.documents.subscribe(annotator)
             async with StallWatch(stall_limit_s(station)):
-                yield session
+                try:
+                    yield session
+                finally:
+                    # the engine's last events reach the log before the store closes
+                    await session.event_log.flush()
     finally:
         await station.close()
         if store is not None:

@@ -89,11 +89,15 @@ class Session:
         from station.monitor.proposals import ProposalBook, apply_changes, part_scale_ppm
 
         #: every inspection's documents (station.inspection.documents); the record is
-        #: a required subscriber, the engine's event log and the scan log follow it
+        #: a required subscriber, the engine's event log and the scan log follow it. The
+        #: event log writes off the station loop, and its queue is flushed at the stop
+        #: before the record's end is written
         self.documents = DocumentStream()
         self.writer = StoreWriter(self.store)
+        self.event_log = EngineEventLog(self.store, self.engine)
+        self.documents.subscribe(self.event_log.flush)
         self.documents.subscribe(self.writer, required=True)
-        self.documents.subscribe(EngineEventLog(self.store, self.engine))
+        self.documents.subscribe(self.event_log)
         self.documents.subscribe(ScanLogWriter(self.store))
         if self.watch is None:
             self.watch = StationWatch(gate_um=self.settings.model_u_um)

@@ -18,12 +18,16 @@
 from __future__ import annotations
 
 import asyncio
+import logging
 import math
+from datetime import datetime, timezone
 
 from station.inspection.documents import CheckDocument, Document, InspectionStart, InspectionStop
 from station.inspection.scanlog import write_scan_log
 from station.store.errors import StoreError
 from station.store.records import SURFACE_SUBJECT, FindingRecord, Measurement
+
+log = logging.getLogger(__name__)
 
 
 class ResultNotStored(Exception):
@@ -36,9 +40,10 @@ class ResultNotStored(Exception):
         self.reason = reason
 
 
-def _alarm(store, inspection_id: str | None, text: str) -> None:
+async def _alarm(store, inspection_id: str | None, text: str) -> None:
+    """An alarm in the event log, written in a worker thread (never on the station loop)."""
     try:
-        store.log_event("alarm", text, inspection_id)
+        await asyncio.to_thread(store.log_event, "alarm", text, inspection_id)
     except Exception:  # noqa: BLE001 - the store is what failed; the outcome carries the reason
         pass
 
@@ -92,7 +97,7 @@ class StoreWriter:
             # a store that fails, or a result it refuses (a surface document that is not
             # JSON, a picture that is not uint8): the record ends faulted, never running
             reason = f"result not stored: {type(exc).__name__}: {exc}"
-            _alarm(self.store, iid, reason)
+            await _alarm(self.store, iid, reason)
             try:
                 await asyncio.to_thread(self.store.finish, iid, "faulted", None, reason)
             except StoreError:
@@ -104,7 +109,7 @@ class StoreWriter:
         for iid, reason in sorted(self.unfinished.items()):
             try:
                 await asyncio.to_thread(self.store.finish, iid, "faulted", None, reason)
-                _alarm(self.store, iid, "closed as faulted once the results store was back")
+                await _alarm(self.store, iid, "closed as faulted once the results store was back")
             except StoreError:
                 continue
             self.unfinished.pop(iid, None)
@@ -133,14 +138,30 @@ def cycle_fields(cycle: dict | None) -> dict:
 
 
 class EngineEventLog:
-    """The engine's events during an inspection, in the store's event log."""
+    """The engine's events during an inspection, in the store's event log.
+
+    The engine calls its listeners on the station loop, which also carries the drives'
+    heartbeats; a store's commit (a PostgreSQL round trip, an SQLite fsync) on a loaded
+    PC can take a second, the drives' watchdog. So an event is only queued there: its
+    write runs in a worker thread, each after the one before (the log keeps the engine's
+    order), with the time the event happened. :meth:`flush`, subscribed before the
+    record's writer, waits at the inspection's stop until every queued event is in the
+    log, so the record's end comes after its events, as when they were written at once.
+    A write that fails is counted in ``failed`` and logged; it never stops the inspection.
+    """
 
     KINDS = ("state", "fault", "retry", "note")
+    #: how long the stop (and the session's end) waits for the queued events (s)
+    FLUSH_TIMEOUT_S = 10.0
 
     def __init__(self, store, engine):
         self.store = store
         self.engine = engine
         self._unsubscribe = None
+        #: the last queued write (each waits for the one before)
+        self._tail: asyncio.Task | None = None
+        #: writes the store refused
+        self.failed = 0
 
     def __call__(self, doc: Document) -> None:
         if isinstance(doc, InspectionStart):
@@ -150,17 +171,50 @@ class EngineEventLog:
         elif isinstance(doc, InspectionStop):
             self._stop()
 
+    async def flush(self, doc: Document | None = None) -> None:
+        """Wait until every queued event is in the log (at an inspection's stop, when
+        given a document; always, without one), at most ``FLUSH_TIMEOUT_S``."""
+        if doc is not None and not isinstance(doc, InspectionStop):
+            return
+        tail = self._tail
+        if tail is None or tail.done():
+            return
+        done, _ = await asyncio.wait([tail], timeout=self.FLUSH_TIMEOUT_S)
+        if not done:
+            log.warning("the engine's events of the inspection were not all in the event log after %.0f s; "
+                        "they are still being written", self.FLUSH_TIMEOUT_S)
+
     def _stop(self) -> None:
         if self._unsubscribe is not None:
             self._unsubscribe()
             self._unsubscribe = None
 
     def _log(self, iid: str, ev) -> None:
-        if ev.kind in self.KINDS:
-            try:
-                self.store.log_event(ev.kind, f"{ev.state.value}: {ev.text}" if ev.kind == "state" else ev.text, iid)
-            except Exception:  # noqa: BLE001 - the event log must not stop the inspection
-                pass
+        if ev.kind not in self.KINDS:
+            return
+        text = f"{ev.state.value}: {ev.text}" if ev.kind == "state" else ev.text
+        at = datetime.fromtimestamp(ev.time, timezone.utc)
+        try:
+            loop = asyncio.get_running_loop()
+        except RuntimeError:
+            # called outside a loop (no heartbeat to hold up): written at once
+            self._write_now(ev.kind, text, iid, at)
+            return
+        self._tail = loop.create_task(self._write_after(self._tail, ev.kind, text, iid, at),
+                                      name=f"event log {iid}")
+
+    async def _write_after(self, before: asyncio.Task | None, kind: str, text: str, iid: str,
+                           at: datetime) -> None:
+        if before is not None and not before.done():
+            await asyncio.wait([before])
+        await asyncio.to_thread(self._write_now, kind, text, iid, at)
+
+    def _write_now(self, kind: str, text: str, iid: str, at: datetime) -> None:
+        try:
+            self.store.log_event(kind, text, iid, at=at)
+        except Exception as exc:  # noqa: BLE001 - the event log must not stop the inspection
+            self.failed += 1
+            log.warning("an engine event of inspection %s was not logged: %s: %s", iid, type(exc).__name__, exc)
 
 
 class ScanLogWriter:
@@ -175,4 +229,4 @@ class ScanLogWriter:
         try:
             await asyncio.to_thread(write_scan_log, self.store.data_dir, doc.inspection_id, doc.holes)
         except OSError as exc:
-            _alarm(self.store, doc.inspection_id, f"scan log not written: {exc}")
+            await _alarm(self.store, doc.inspection_id, f"scan log not written: {exc}")
