@@ -203,7 +203,13 @@ class CameraTwin(Camera):
                 await asyncio.sleep(self.grab_timeout_s)
                 raise DeviceTimeout(f"no frame within {self.grab_timeout_s:.2f} s", self.name)
             await asyncio.sleep(delay.delay_s)
-        if self.faults.is_active(FaultKind.FROZEN_FRAME) and self._last is not None:
+        if self.faults.is_active(FaultKind.FROZEN_FRAME):
+            if self._last is None:
+                # a sensor that hung before its first frame has no image to repeat: the
+                # capture waits for a buffer that never fills
+                await asyncio.sleep(self.grab_timeout_s)
+                raise DeviceTimeout(f"no frame within {self.grab_timeout_s:.2f} s (the sensor has not "
+                                    "delivered its first frame)", self.name)
             # the driver sees the same image again under a new number: a hung sensor
             self._sequence += 1
             return Frame(self._last.image, time.time(), self._sequence)

@@ -110,6 +110,19 @@ def test_camera_faults(rig):
     assert grab(cam).image.max() > 50
 
 
+def test_a_camera_frozen_before_its_first_frame_delivers_nothing(rig):
+    """A hung sensor repeats its last image; one that hung before its first has none to
+    repeat, and the capture times out (a fresh frame here could not be told from a good
+    one, and the fault would pass unseen). Once it recovers, it delivers."""
+    clock, world, z, c, cam = rig
+    cam.grab_timeout_s = 0.05
+    cam.faults.activate(FaultKind.FROZEN_FRAME)
+    with pytest.raises(DeviceTimeout, match="first frame"):
+        grab(cam)
+    cam.faults.clear()
+    assert grab(cam).sequence == 1
+
+
 def test_a_camera_that_stays_put_sees_the_same_wall_and_new_noise(rig):
     clock, world, z, c, cam = rig
     move(clock, z, 40.0)  # plain wall, no hole in view
