@@ -1307,7 +1307,8 @@ def _blurred_box(x, centre, width, blur):
     return ndtr((x - centre + width / 2.0) / blur) - ndtr((x - centre - width / 2.0) / blur)
 
 
-def _scratch_extent(m: np.ndarray, step: float, gap_px: float = 0.0) -> tuple[int, int] | None:
+def _scratch_extent(m: np.ndarray, step: float, gap_px: float = 0.0,
+                    held: tuple[np.ndarray, tuple[int, int]] | None = None) -> tuple[int, int] | None:
     """The extent of a scratch's darkening ``m`` (integrated across it, sampled every
     ``step`` px along it): the interval [a, b) that a box fits best, i.e. that maximises
     S^2 / n (S the darkening it holds, n its samples; the least-squares box of free
@@ -1315,12 +1316,34 @@ def _scratch_extent(m: np.ndarray, step: float, gap_px: float = 0.0) -> tuple[in
     nothing here and there over several px (noise, grooves crossing its smooth floor):
     runs above 40 % of the plateau, gaps of up to 6 px bridged, still read a 199 px
     scratch as 119 px (dev frames); a box pays for a dip only what the dip lacks, and for
-    a groove crossing beyond a gap the whole gap."""
+    a groove crossing beyond a gap the whole gap.
+
+    ``held``: another read of the same strip (its profile, sampled as ``m``, and its
+    extent there) whose gaps alone may split ``m`` inside that extent: the grooves'
+    scaling of a profile (``_measure_scratch``) is a correction, and where a groove runs
+    beside a scratch rather than across it, it drives the residual there below zero and
+    lifts a junction of grooves on the scratch 2-3x, so it made a gap the raw read does
+    not have, and the lesser half of a 1.6 mm scratch was lost (the twin's 2170043)."""
     k = max(int(round(1.0 / step)), 1)
     n = m.size // k
     if n < 2:
         return None
     coarse = m[: n * k].reshape(n, k).sum(axis=1)
+    bridge = None
+    if held is not None:
+        raw, (ra, rb) = held
+        rc = raw[: n * k].reshape(n, k).sum(axis=1)
+        ca, cb = ra // k, min(-(-rb // k), n)
+        if cb - ca >= 3:
+            # where the raw read is not in a gap of its own (the same rule, over its extent)
+            raw_seg = np.convolve(rc[ca:cb], np.ones(3) / 3.0, mode="same")
+            raw_plateau = float(np.median(rc[ca:cb]))
+            if raw_plateau > 0:
+                bridge = np.zeros(n, bool)
+                bridge[ca:cb] = True
+                for ga, gb in _runs(raw_seg < 0.25 * raw_plateau, False):
+                    if gb - ga >= gap_px:
+                        bridge[ca + ga:ca + gb] = False
     c = np.concatenate([[0.0], np.cumsum(coarse)])
     i, j = np.triu_indices(n + 1, 1)
     total = c[j] - c[i]
@@ -1334,14 +1357,16 @@ def _scratch_extent(m: np.ndarray, step: float, gap_px: float = 0.0) -> tuple[in
     # a gap only what it lacks, and a deep groove crossing 10 px past a scratch's end
     # (the twin's 10 % grooves, where the wall model's straight grooves meet their fading)
     # bought the gap and carried the end 28 px on. Of the pieces, the one holding most
-    a, b = _largest_piece(coarse, a, b, gap_px)
+    a, b = _largest_piece(coarse, a, b, gap_px, bridge)
     return a * k, b * k
 
 
-def _largest_piece(coarse: np.ndarray, a: int, b: int, gap_px: float) -> tuple[int, int]:
+def _largest_piece(coarse: np.ndarray, a: int, b: int, gap_px: float,
+                   bridge: np.ndarray | None = None) -> tuple[int, int]:
     """[a, b) of a 1 px profile split at runs of at least ``gap_px`` under a quarter
     of its median (smoothed over 3 px, so one noisy pixel does not bridge a gap); the
-    piece with the largest sum."""
+    piece with the largest sum. ``bridge`` (over the whole profile): where no gap may
+    split it (a gap mostly there is none)."""
     if b - a < 3 or gap_px <= 0:
         return a, b
     seg = np.convolve(coarse[a:b], np.ones(3) / 3.0, mode="same")
@@ -1349,7 +1374,8 @@ def _largest_piece(coarse: np.ndarray, a: int, b: int, gap_px: float) -> tuple[i
     if plateau <= 0:
         return a, b
     low = seg < 0.25 * plateau
-    gaps = [(ga, gb) for ga, gb in _runs(low, False) if gb - ga >= gap_px and ga > 0 and gb < b - a]
+    gaps = [(ga, gb) for ga, gb in _runs(low, False) if gb - ga >= gap_px and ga > 0 and gb < b - a
+            and not (bridge is not None and bridge[a + ga:a + gb].mean() > 0.5)]
     if not gaps:
         return a, b
     bounds = [0] + [v for g in gaps for v in g] + [b - a]
@@ -1825,7 +1851,7 @@ def _measure_scratch(patch: _Patch, region: np.ndarray, blur_hint: float | None 
     groove_ends = [False, False]  # an end read where a groove's stretch begins
     groove_av = (filt @ grooves) / filt_norm  # the modelled grooves through the same filter
     mv, av = profiles(factor)
-    ext = _scratch_extent(av, step, gap_px)
+    ext = _scratch_extent(av, step, gap_px, held=(av_raw, ext_raw))
     if ext is not None:
         # ... but an end that the scaling carried on into a groove the scratch ends on is
         # the raw darkness's: there the scaling lifts the wall model's misfit of the groove

@@ -1693,6 +1693,34 @@ def test_a_run_on_off_the_hatch_that_the_residual_does_not_carry_is_the_grooves(
         assert place <= PLACE_TOL_MM, (seed, place)
 
 
+def test_the_grooves_scaling_does_not_split_what_the_raw_read_holds_together():
+    """A scratch's profile along it, read again with the grooves' scaling: a gap that
+    the scaling alone makes (a groove beside the scratch drives the residual below zero,
+    a junction of grooves on it lifts the median) does not split it where the raw read
+    holds; a gap the raw read has too still does (the larger piece is kept). And the
+    twin's 2170043, a faint 1.6 mm scratch whose lesser half was lost that way (read
+    0.66 mm, 0.48 mm off), is found whole."""
+    from station.vision.defects import _scratch_extent
+
+    step = 0.5
+    raw = np.zeros(400)
+    raw[40:360] = 1.0  # 160 px of scratch, 2 samples per px
+    raw[200:230] = 0.5  # ... fainter where a groove runs beside it, but there
+    scaled = raw.copy()
+    scaled[200:230] = -0.3  # the scaling's gap
+    scaled[240:300] = 2.0  # a junction lifted
+    ext_raw = _scratch_extent(raw, step, 8.0)
+    assert ext_raw == (40, 360)
+    assert _scratch_extent(scaled, step, 8.0) == (230, 360)  # without the raw read: split
+    assert _scratch_extent(scaled, step, 8.0, held=(raw, ext_raw)) == (40, 360)
+    raw_gap = raw.copy()
+    raw_gap[200:230] = 0.0  # the raw read has the gap too: two marks
+    assert _scratch_extent(raw_gap, step, 8.0)[1] <= 205  # the raw read splits it too
+    assert _scratch_extent(scaled, step, 8.0, held=(raw_gap, (40, 360))) == (230, 360)
+    t, d = _the_twin_scratch_found(2170043)
+    assert abs(d.length_mm - t.length_mm) <= 0.02
+
+
 def test_a_scratchs_peaks_that_turn_onto_the_hatch_at_its_end_are_the_groove():
     """``_hatch_tail``: a scratch that ends on a deep groove at a shallow angle joins the
     groove's residue in one region, and its centre-line peaks run on along the groove.
