@@ -1334,16 +1334,13 @@ def _scratch_extent(m: np.ndarray, step: float, gap_px: float = 0.0,
         raw, (ra, rb) = held
         rc = raw[: n * k].reshape(n, k).sum(axis=1)
         ca, cb = ra // k, min(-(-rb // k), n)
-        if cb - ca >= 3:
+        raw_gaps = _profile_gaps(rc[ca:cb], gap_px) if cb - ca >= 3 else None
+        if raw_gaps is not None:
             # where the raw read is not in a gap of its own (the same rule, over its extent)
-            raw_seg = np.convolve(rc[ca:cb], np.ones(3) / 3.0, mode="same")
-            raw_plateau = float(np.median(rc[ca:cb]))
-            if raw_plateau > 0:
-                bridge = np.zeros(n, bool)
-                bridge[ca:cb] = True
-                for ga, gb in _runs(raw_seg < 0.25 * raw_plateau, False):
-                    if gb - ga >= gap_px:
-                        bridge[ca + ga:ca + gb] = False
+            bridge = np.zeros(n, bool)
+            bridge[ca:cb] = True
+            for ga, gb in raw_gaps:
+                bridge[ca + ga:ca + gb] = False
     c = np.concatenate([[0.0], np.cumsum(coarse)])
     i, j = np.triu_indices(n + 1, 1)
     total = c[j] - c[i]
@@ -1361,6 +1358,17 @@ def _scratch_extent(m: np.ndarray, step: float, gap_px: float = 0.0,
     return a * k, b * k
 
 
+def _profile_gaps(coarse: np.ndarray, gap_px: float) -> list[tuple[int, int]] | None:
+    """The gaps of a 1 px profile: runs of at least ``gap_px`` under a quarter of its
+    median, smoothed over 3 px (so one noisy pixel does not bridge a gap); None when
+    its median is not above zero (no plateau to judge a gap against)."""
+    plateau = float(np.median(coarse))
+    if plateau <= 0:
+        return None
+    seg = np.convolve(coarse, np.ones(3) / 3.0, mode="same")
+    return [(ga, gb) for ga, gb in _runs(seg < 0.25 * plateau, False) if gb - ga >= gap_px]
+
+
 def _largest_piece(coarse: np.ndarray, a: int, b: int, gap_px: float,
                    bridge: np.ndarray | None = None) -> tuple[int, int]:
     """[a, b) of a 1 px profile split at runs of at least ``gap_px`` under a quarter
@@ -1369,12 +1377,10 @@ def _largest_piece(coarse: np.ndarray, a: int, b: int, gap_px: float,
     split it (a gap mostly there is none)."""
     if b - a < 3 or gap_px <= 0:
         return a, b
-    seg = np.convolve(coarse[a:b], np.ones(3) / 3.0, mode="same")
-    plateau = float(np.median(coarse[a:b]))
-    if plateau <= 0:
+    gaps = _profile_gaps(coarse[a:b], gap_px)
+    if gaps is None:
         return a, b
-    low = seg < 0.25 * plateau
-    gaps = [(ga, gb) for ga, gb in _runs(low, False) if gb - ga >= gap_px and ga > 0 and gb < b - a
+    gaps = [(ga, gb) for ga, gb in gaps if ga > 0 and gb < b - a
             and not (bridge is not None and bridge[a + ga:a + gb].mean() > 0.5)]
     if not gaps:
         return a, b
