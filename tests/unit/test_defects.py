@@ -414,6 +414,31 @@ def test_a_scratch_whose_region_a_grooves_residue_joins_is_examined_along_its_ow
     assert _within(d.width_mm, t.width_mm), (d.width_mm, t.width_mm)
 
 
+def test_a_group_that_is_no_defect_has_each_of_its_members_judged_alone():
+    """A frame of the camera twin (the bench's seed 2180009): a bent 1.63 mm scratch, 5.9
+    px wide and plain to see, has a groove's stretch on its line beyond one end; the two
+    candidates were grouped as pieces of one scratch, the region grown from both was no
+    line (222 x 85 px) and no pore, and nothing was reported. A group that is no defect
+    has each member examined on its own, as any candidate is."""
+    import station.vision.defects as D
+
+    calls = []
+    real = D._group_collinear
+
+    def spy(candidates, *a, **k):
+        groups = real(candidates, *a, **k)
+        calls.append(groups)
+        return groups
+
+    D._group_collinear = spy
+    try:
+        t, d = _the_twin_scratch_found(2180009)
+    finally:
+        D._group_collinear = real
+    assert any(len(g) > 1 for g in calls[0])  # the frame still groups the scratch with the stretch
+    assert _within(d.width_mm, t.width_mm), (d.width_mm, t.width_mm)
+
+
 def test_a_scratch_that_ends_on_a_deep_groove_is_not_followed_along_the_groove():
     """A frame of the camera twin (the bench's seed 2087087): a 1.57 mm scratch, 12 deg off
     the hatch, ends where a deep groove runs on from it. The following of its furrow
