@@ -104,11 +104,9 @@ RIM_FLOOR_CROSSING = 0.2
 #: at 0.86-1 beyond it, was that ray's "edge": 0.03-0.07 mm "burrs" 3-12 px high on
 #: clean frames 1097086, 1099092 and 1100029 (session 56)
 RIM_HOLD_PX = 2.0
-#: a ray's ring (beyond the band) recalibrates the wall on at least this many samples
-#: (0.5 px apart) clear of other marks; a ray whose ring a mark covers borrows the
-#: recalibration of rays within this much arc (px) that read their own
-RIM_RING_MIN_SAMPLES = 4
-RIM_RING_CARRY_PX = 20.0
+#: a group of candidates (``_group_collinear``) that is no defect has its strongest member
+#: examined alone when its peak is at least this many times every other member's
+GROUP_DOMINANT_SHARE = 2.0
 
 
 @dataclass(frozen=True)
@@ -2049,43 +2047,23 @@ def _rim_profile(img: np.ndarray, hole, zone_others: np.ndarray, reach_px: float
     inner = rr < rad - reach_px
     band = (rr >= rad - reach_px) & (rr <= rad + reach_px)
     ring = rr > rad + reach_px + 1.0
-    # the ring recalibrates the wall per angle on what it holds clear of other marks: a
-    # mark crossing the ring (not the band) leaves the ray readable, its ring's ratio read
-    # on the rest of the ring or, where the mark covers the ring, carried over from the
-    # rays beside it (a 1 mm scratch 27 px below a 64 px hole took 36 deg of its rim out,
-    # and a 0.18 mm chip plain to see there was never looked for: station seed 190003)
-    ring_vals = np.where(other_polar[ring] == 0, polar[ring] / wall_polar[ring], np.nan)
     with np.errstate(all="ignore"), warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # a column all outside the frame: NaN, dropped below
         hole_lv = np.nanmedian(polar[inner], axis=0)
-        ratio = np.nanmedian(ring_vals, axis=0)
-    ratio_ok = np.isfinite(ratio) & (np.isfinite(ring_vals).sum(axis=0) >= RIM_RING_MIN_SAMPLES)
-    # ... and a mark in the band's last stretch, the blur's margin beyond the deepest rim
-    # defect (``reach_px`` is that depth + 2.5 blur + 2), cuts no defect's reading (the
-    # same scratch's skirt reached it)
-    core = band & (rr <= rad + reach_px - (2.5 * blur_px + 2.0))
-    valid = (np.isfinite(polar[band]).all(axis=0) & np.isfinite(hole_lv) & (other_polar[core].max(axis=0) == 0))
-    ratio_ok &= valid
-    if ratio_ok.sum() < 16:
+        ratio = np.nanmedian(polar[ring] / wall_polar[ring], axis=0)
+    valid = (np.isfinite(polar[band]).all(axis=0) & np.isfinite(hole_lv) & np.isfinite(ratio)
+             & (other_polar[band | ring].max(axis=0) == 0))
+    if valid.sum() < 16:
         return None
-    # a ray whose ring is covered is read only within reach of rays that read theirs
-    covered = ~ratio_ok
-    if covered.any():
-        idx = np.flatnonzero(ratio_ok)
-        k = np.arange(n_th)
-        gap = np.abs(k[:, None] - idx[None, :])
-        gap = np.minimum(gap, n_th - gap).min(axis=1) * step
-        valid &= gap <= RIM_RING_CARRY_PX
 
-    def smooth(v: np.ndarray, px: float, ok: np.ndarray | None = None) -> np.ndarray:
-        ok = valid if ok is None else ok
-        filled = np.interp(np.arange(n_th), np.flatnonzero(ok), v[ok], period=n_th)
+    def smooth(v: np.ndarray, px: float) -> np.ndarray:
+        filled = np.interp(np.arange(n_th), np.flatnonzero(valid), v[valid], period=n_th)
         return gaussian_filter1d(filled, px / step, mode="wrap")
 
     # the hole's far side varies slowly round it (vignetting) and has no texture: its
     # level smoothed over ~10 px of arc; the wall's recalibration over 4 px of arc
     hole_s = smooth(hole_lv, 10.0)
-    wall_b = wall_polar[band] * smooth(ratio, 4.0, ratio_ok)[None, :]
+    wall_b = wall_polar[band] * smooth(ratio, 4.0)[None, :]
     share = (wall_b - polar[band]) / np.maximum(wall_b - hole_s[None, :], 1.0)
     share[:, ~valid] = 0.0
     rb = rr[band]
@@ -2868,11 +2846,17 @@ def detect_defects(image: np.ndarray, mm_per_px: float, *, holes=None, blur_px: 
             examined.append(ex)
         if len(group) > 1 and not any(ex.defect is not None for ex in results):
             # a group is the guess that its members are pieces of one scratch; when the
-            # group is no defect, each member is judged on its own, as any candidate is: a
-            # groove's stretch on a bent scratch's line, grouped with it, grew its region
-            # into no line and no pore, and a 1.63 mm scratch, plain to see, was lost (the
-            # twin's 2180009)
-            queue.extend(([i], None) for i in group)
+            # group is no defect and one member stands out of it (its peak at least
+            # ``GROUP_DOMINANT_SHARE`` times every other's), that member is judged on its
+            # own, as any candidate is: a groove's stretch on a bent scratch's line, grouped
+            # with it, grew its region into no line and no pore, and a 1.63 mm scratch,
+            # plain to see, was lost (the twin's 2180009: peaks 32.6 and 6.5). Not members
+            # alike: pieces of groove residue in line, each examined alone, gave a 0.54 mm
+            # "scratch" where the group was rightly nothing (peaks 7.1 and 6.3, test frame
+            # 93401)
+            peaks = sorted((candidates[i][3], i) for i in group)
+            if peaks[-1][0] >= GROUP_DOMINANT_SHARE * peaks[-2][0]:
+                queue.append(([peaks[-1][1]], None))
         elif len(group) > 1:
             # a member apart from the group's defects (a scratch its line and width, a
             # pore its region: no more than a pixel or two of its seed on them) is another
