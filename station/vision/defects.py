@@ -107,11 +107,6 @@ RIM_HOLD_PX = 2.0
 #: a group of candidates (``_group_collinear``) that is no defect has its strongest member
 #: examined alone when its peak is at least this many times every other member's
 GROUP_DOMINANT_SHARE = 2.0
-#: a rim's ray whose ring (beyond the band) a found defect's footprint crosses reads the
-#: wall's recalibration on at least this many of the ring's samples (0.5 px apart) clear
-#: of it, or, covered, borrows that of rays within this much arc (px) (``_rim_profile``)
-RIM_RING_MIN_SAMPLES = 4
-RIM_RING_CARRY_PX = 20.0
 
 
 @dataclass(frozen=True)
@@ -2004,8 +1999,7 @@ class _RimProfile:
 
 
 def _rim_profile(img: np.ndarray, hole, zone_others: np.ndarray, reach_px: float, wall_level: np.ndarray,
-                 angles_deg, blur_px: float, crossing: float, smooth_px: float, groove_sides: bool,
-                 footprints: np.ndarray | None = None):
+                 angles_deg, blur_px: float, crossing: float, smooth_px: float, groove_sides: bool):
     """The rim along rays from the hole's centre: the share of "hole" (W - I) / (W - H)
     over [R - reach, R + reach], and each ray's edge, where that share first falls
     below ``crossing`` going out (``edge``; ``edge_find`` on the share averaged along
@@ -2019,18 +2013,7 @@ def _rim_profile(img: np.ndarray, hole, zone_others: np.ndarray, reach_px: float
     only when it touches the rim, where an integral of the share across the whole band
     took in every groove within reach (dev frames: 1-4 px on clean rims crossed by deep
     grooves, which the grooves' model, fitted on a ring further out, could not remove
-    where they fade along their length).
-
-    ``zone_others`` drops every ray whose band or ring it touches; where it lies inside
-    ``footprints`` (the defects found, each its measured ellipse and blurred skirt:
-    ``_marks_mask``) it drops only a ray whose band it enters short of the band's last
-    stretch (the blur's margin beyond the deepest rim defect), and the ring recalibrates
-    the wall on the rest of its samples, or, covered, borrows the recalibration of rays
-    within ``RIM_RING_CARRY_PX`` of arc: a 1 mm scratch found 27 px below a 64 px hole
-    crossed its ring, 36 deg of the rim were never read, and a 0.18 mm chip there, plain
-    to see, was lost (station bench seed 190003). A claimed region beyond a defect's own
-    ellipse (a groove's stretch grown with a scratch) still drops the rays: read, the
-    groove it lies on, where it enters the rim, was a false chip (wide seed 82083)."""
+    where they fade along their length)."""
     cx, cy, rad = hole.x_px, hole.y_px, hole.diameter_px / 2.0
     hh, ww = img.shape
     out_px = reach_px + 10.0
@@ -2040,8 +2023,6 @@ def _rim_profile(img: np.ndarray, hole, zone_others: np.ndarray, reach_px: float
     p = img[y0:y1, x0:x1].astype(np.float32)
     level = np.ascontiguousarray(wall_level[y0:y1, x0:x1], dtype=np.float32)
     others = zone_others[y0:y1, x0:x1].astype(np.float32)
-    # what of it is a found defect's own footprint (the rest is strict: ``_rim_profile``)
-    soft = (others > 0) & footprints[y0:y1, x0:x1] if footprints is not None else np.zeros(others.shape, bool)
     # the cross-hatch, modelled on a ring beyond the band and read back along its lines
     # (as the photometric hole fit does); the hole cuts the grooves before the camera
     # blurs them, so they are put back outside the rim only
@@ -2063,38 +2044,26 @@ def _rim_profile(img: np.ndarray, hole, zone_others: np.ndarray, reach_px: float
     polar = cv2.remap(p, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=nan)
     wall_polar = cv2.remap(level, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=nan)
     other_polar = cv2.remap(others, mx, my, cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT, borderValue=0.0)
-    soft_polar = cv2.remap(soft.astype(np.float32), mx, my, cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT,
-                           borderValue=0.0) > 0
-    strict_polar = (other_polar > 0) & ~soft_polar
     inner = rr < rad - reach_px
     band = (rr >= rad - reach_px) & (rr <= rad + reach_px)
     ring = rr > rad + reach_px + 1.0
-    ring_vals = np.where(other_polar[ring] == 0, polar[ring] / wall_polar[ring], np.nan)
     with np.errstate(all="ignore"), warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # a column all outside the frame: NaN, dropped below
         hole_lv = np.nanmedian(polar[inner], axis=0)
-        ratio = np.nanmedian(ring_vals, axis=0)
-    core = band & (rr <= rad + reach_px - (2.5 * blur_px + 2.0))
-    valid = (np.isfinite(polar[band]).all(axis=0) & np.isfinite(hole_lv)
-             & ~strict_polar[band | ring].any(axis=0) & ~soft_polar[core].any(axis=0))
-    ratio_ok = valid & np.isfinite(ratio) & (np.isfinite(ring_vals).sum(axis=0) >= RIM_RING_MIN_SAMPLES)
-    if ratio_ok.sum() < 16:
+        ratio = np.nanmedian(polar[ring] / wall_polar[ring], axis=0)
+    valid = (np.isfinite(polar[band]).all(axis=0) & np.isfinite(hole_lv) & np.isfinite(ratio)
+             & (other_polar[band | ring].max(axis=0) == 0))
+    if valid.sum() < 16:
         return None
-    if not ratio_ok.all():
-        # a ray whose ring a footprint covers is read within reach of rays that read theirs
-        k = np.arange(n_th)
-        gap = np.abs(k[:, None] - np.flatnonzero(ratio_ok)[None, :])
-        valid &= np.minimum(gap, n_th - gap).min(axis=1) * (2 * np.pi * rad / n_th) <= RIM_RING_CARRY_PX
 
-    def smooth(v: np.ndarray, px: float, ok: np.ndarray | None = None) -> np.ndarray:
-        ok = valid if ok is None else ok
-        filled = np.interp(np.arange(n_th), np.flatnonzero(ok), v[ok], period=n_th)
+    def smooth(v: np.ndarray, px: float) -> np.ndarray:
+        filled = np.interp(np.arange(n_th), np.flatnonzero(valid), v[valid], period=n_th)
         return gaussian_filter1d(filled, px / step, mode="wrap")
 
     # the hole's far side varies slowly round it (vignetting) and has no texture: its
     # level smoothed over ~10 px of arc; the wall's recalibration over 4 px of arc
     hole_s = smooth(hole_lv, 10.0)
-    wall_b = wall_polar[band] * smooth(ratio, 4.0, ratio_ok)[None, :]
+    wall_b = wall_polar[band] * smooth(ratio, 4.0)[None, :]
     share = (wall_b - polar[band]) / np.maximum(wall_b - hole_s[None, :], 1.0)
     share[:, ~valid] = 0.0
     rb = rr[band]
@@ -2236,21 +2205,15 @@ def _hole_blur(hole) -> float:
     return float(np.sqrt(max(hole.edge_sigma_px**2 - 1.0 - 1.0 / 6.0, 0.25)))
 
 
-def _marks_mask(shape: tuple[int, int], found, blur: float, along_lines: bool = False) -> np.ndarray:
+def _marks_mask(shape: tuple[int, int], found, blur: float) -> np.ndarray:
     """The frame's pores and scratches found, each as its measured ellipse (length by
     width along its direction) grown by its blurred skirt (3 blur + 2 px): whole, where
     their claimed regions stop at a hole's zone (``_groove_run_on`` must not read a pore
-    beside a rim as a groove's darkness running on). ``along_lines``: a scratch with a
-    centre line as that line, its half width and skirt either side to its very ends (an
-    ellipse narrows towards them, and a bent scratch leaves it)."""
+    beside a rim as a groove's darkness running on)."""
     mask = np.zeros(shape, np.uint8)
     pad = 3.0 * blur + 2.0
     for d in found:
         if d.kind not in ("pore", "scratch"):
-            continue
-        if along_lines and d.kind == "scratch" and d.line_px:
-            pts = np.round(np.asarray(d.line_px, np.float64)).astype(np.int32)
-            cv2.polylines(mask, [pts], False, 1, int(np.ceil(d.width_px + 2.0 * pad)) | 1)
             continue
         axes = (int(np.ceil(d.length_px / 2.0 + pad)), int(np.ceil(d.width_px / 2.0 + pad)))
         cv2.ellipse(mask, (int(round(d.x_px)), int(round(d.y_px))), axes, float(d.angle_deg), 0.0, 360.0, 1, -1)
@@ -2278,17 +2241,14 @@ def _rim_noise(dev: np.ndarray, k: float, rounds: int = 4) -> float:
 
 
 def _rim_defects(img: np.ndarray, hole, index: int, zone_others: np.ndarray, wall_level: np.ndarray, angles_deg,
-                 cfg: DefectConfig, mm_per_px: float, marks: np.ndarray | None = None,
-                 footprints: np.ndarray | None = None) -> list[Defect]:
+                 cfg: DefectConfig, mm_per_px: float, marks: np.ndarray | None = None) -> list[Defect]:
     """Burrs and chips on one hole's rim: where the rim's edge stands out of its own
     low harmonics, inwards (burr) or outwards (chip). ``marks``: the frame's pores and
-    scratches found (``_marks_mask``), which a chip's run-on test does not read;
-    ``footprints``: the same with the scratches along their centre lines, where a mark
-    crossing the rim's outer ring leaves the rays read (``_rim_profile``)."""
+    scratches found (``_marks_mask``), which a chip's run-on test does not read."""
     blur = _hole_blur(hole) if getattr(hole, "edge_sigma_px", None) else 1.3
     reach = cfg.rim_reach_mm / mm_per_px + 2.5 * blur + 2.0
     prof = _rim_profile(img, hole, zone_others, reach, wall_level, angles_deg, blur, cfg.rim_crossing,
-                        cfg.rim_find_smooth_px, cfg.rim_groove_sides, footprints=footprints)
+                        cfg.rim_find_smooth_px, cfg.rim_groove_sides)
     if prof is None:
         return []
     theta, valid = prof.theta, prof.valid
@@ -2925,7 +2885,6 @@ def detect_defects(image: np.ndarray, mm_per_px: float, *, holes=None, blur_px: 
     others = [_hole_zone(img.shape, [h for j, h in enumerate(holes) if j != i], reach_px) for i in range(len(holes))]
     blur_rim = blur_hint if blur_hint is not None else BLUR_PRIOR_PX[0]
     marks = _marks_mask(img.shape, found, blur_rim) if holes else None
-    footprints = marks | _marks_mask(img.shape, found, blur_rim, along_lines=True) if holes else None
     grown, labels = None, None
     if holes and claimed_regions.any():
         # a mark that reaches a rim's band, with its blurred skirt (2.5 blur + 1 px): a
@@ -2946,7 +2905,7 @@ def detect_defects(image: np.ndarray, mm_per_px: float, *, holes=None, blur_px: 
             if near.size:
                 marks_i = claimed_regions | np.isin(labels, near)
         found += _rim_defects(img, hole, i, others[i] | (marks_i & ~own),
-                              level_full, wall.angles_deg, cfg, mm_per_px, marks=marks, footprints=footprints)
+                              level_full, wall.angles_deg, cfg, mm_per_px, marks=marks)
     out = []
     model = {k: (a, b) for k, a, b in cfg.model_u_px}
     for d in found:

@@ -439,31 +439,6 @@ def test_a_group_that_is_no_defect_has_each_of_its_members_judged_alone():
     assert _within(d.width_mm, t.width_mm), (d.width_mm, t.width_mm)
 
 
-def test_a_mark_across_a_rims_outer_ring_leaves_the_rim_read():
-    """A station frame (bench seed 190003): a 1 mm scratch runs 27 px below a 64 px hole,
-    across the ring beyond the rim's band that recalibrates the wall, its skirt just
-    touching the band's end. Every ray there was dropped, 36 deg of the rim were never
-    read, and a 0.18 x 0.064 mm chip, plain to see, was lost. The ring is read on what it
-    holds clear of a found defect's footprint (or borrowed from the rays beside), and a
-    footprint in the band's last stretch, beyond the deepest rim defect, drops no ray:
-    the chip is found at its size, and nothing false. Not a claimed region beyond a
-    defect's footprint: on wide frame 82083 a scratch's region grown along a groove
-    reached a hole's ring where the groove enters the rim, and read there, the groove
-    was a false 0.11 mm chip; it still is not read."""
-    f = random_defect_frame(190003, None, mm_per_px=MM_PER_PX, envelope="station")
-    found = detect_defects(f.image, MM_PER_PX)
-    pairs, false = match(f.defects, found, MM_PER_PX)
-    assert not false, [found[k] for k in false]
-    (t, d), = [(t, d) for t, d in pairs if t.kind == "chip"]
-    assert d is not None and d.kind == "chip", found
-    assert _within(d.length_mm, t.length_mm) and _within(d.width_mm, t.width_mm), (d, t)
-    assert all(d is not None and d.kind == t.kind for t, d in pairs)
-    f = random_defect_frame(82083, None, mm_per_px=MM_PER_PX, envelope="wide")
-    found = detect_defects(f.image, MM_PER_PX)
-    pairs, false = match(f.defects, found, MM_PER_PX)
-    assert not false, [found[k] for k in false]
-
-
 def test_a_scratch_that_ends_on_a_deep_groove_is_not_followed_along_the_groove():
     """A frame of the camera twin (the bench's seed 2087087): a 1.57 mm scratch, 12 deg off
     the hatch, ends where a deep groove runs on from it. The following of its furrow
