@@ -43,6 +43,7 @@ from station.bench.vision import fmt_cell
 
 #: (length, width) limits per kind, mm: recall is judged on the defects at or above both
 LIMITS_MM = {"pore": (0.2, 0.0), "scratch": (0.2, 0.0), "burr": (0.05, 0.02), "chip": (0.05, 0.02)}
+
 #: a size is right within 10 % or 0.02 mm, whichever is larger (issue 23)
 SIZE_TOL_REL, SIZE_TOL_MM = 0.10, 0.02
 KINDS = ("pore", "scratch", "burr", "chip")
@@ -58,6 +59,12 @@ TWIN_OFFSET_MM = 1.0
 LONG_SCRATCH_MM = 1.0
 #: the scale the twin's wall texture is drawn for (``--texture-in-mm`` scales it from here)
 STATION_MM_PER_PX = 0.010
+
+
+def above_limit(kind: str, length_mm: float, width_mm: float) -> bool:
+    """A defect of this size is at or above its kind's limit (``LIMITS_MM``): recall is judged there."""
+    lim_l, lim_w = LIMITS_MM[kind]
+    return length_mm >= lim_l and width_mm >= lim_w
 
 
 def match(truths, found, mm_per_px: float) -> tuple[list[tuple], list[int]]:
@@ -229,8 +236,7 @@ def run(frames: int = 100, seed: int = 50000, envelope: str = "station", mm_per_
             pairs, false = match(f.defects, found, mm_per_px)
             for t, d in pairs:
                 per_kind[t.kind].append((t, d))
-                lo_len, lo_wid = LIMITS_MM[t.kind]
-                if t.length_mm >= lo_len and t.width_mm >= lo_wid and (d is None or d.kind != t.kind):
+                if above_limit(t.kind, t.length_mm, t.width_mm) and (d is None or d.kind != t.kind):
                     misses.append(dict(seed=s, kind=t.kind, length_mm=round(t.length_mm, 4),
                                        width_mm=round(t.width_mm, 4), x_px=round(t.image_x_px, 1),
                                        y_px=round(t.image_y_px, 1), found_as=None if d is None else d.kind))
@@ -242,7 +248,7 @@ def run(frames: int = 100, seed: int = 50000, envelope: str = "station", mm_per_
     for kind in KINDS:
         rows = per_kind.get(kind, [])
         lo_len, lo_wid = LIMITS_MM[kind]
-        above = [(t, d) for t, d in rows if t.length_mm >= lo_len and t.width_mm >= lo_wid]
+        above = [(t, d) for t, d in rows if above_limit(kind, t.length_mm, t.width_mm)]
         right = [(t, d) for t, d in rows if d is not None and d.kind == kind]
         kinds[kind] = {
             "seeded": len(rows),
@@ -254,7 +260,7 @@ def run(frames: int = 100, seed: int = 50000, envelope: str = "station", mm_per_
             "recall_above_limit": (sum(1 for _, d in above if d is not None and d.kind == kind) / len(above)
                                    if above else None),
             "below_limit": len(rows) - len(above),
-            "recall_below_limit": (sum(1 for t, d in rows if (t.length_mm < lo_len or t.width_mm < lo_wid)
+            "recall_below_limit": (sum(1 for t, d in rows if not above_limit(kind, t.length_mm, t.width_mm)
                                        and d is not None and d.kind == kind) / (len(rows) - len(above))
                                    if len(rows) > len(above) else None),
             "sizes": _sizes(right),

@@ -28,7 +28,7 @@ from types import SimpleNamespace
 import numpy as np
 import typer
 
-from station.bench.defects import LIMITS_MM, SIZE_TOL_MM, SIZE_TOL_REL
+from station.bench.defects import LIMITS_MM, SIZE_TOL_MM, SIZE_TOL_REL, above_limit
 
 #: the issue's bar for a defect's place on the part (mm)
 PLACE_TOL_MM = 0.05
@@ -122,11 +122,6 @@ def random_defects(rng: np.random.Generator, part, band_mm: tuple[float, float],
     return tuple(out)
 
 
-def _above(kind: str, length: float, width: float) -> bool:
-    lim_l, lim_w = LIMITS_MM[kind]
-    return length >= lim_l and width >= lim_w
-
-
 def _within(err: float, truth: float) -> bool:
     return abs(err) <= max(SIZE_TOL_REL * truth, SIZE_TOL_MM)
 
@@ -169,7 +164,7 @@ def run(parts: int = 3, seed: int = 23000, n_wall: int = 8, n_rim: int = 2, time
             ax, an = defect_truth_place(truth, t)
             length, width = rendered_size(truth, t)  # the outline's own (a pore's width is nominal only)
             rows.append({"part": k, "name": t.name, "kind": t.kind, "length_mm": length, "width_mm": width,
-                         "above_limit": _above(t.kind, length, width), "found": d is not None,
+                         "above_limit": above_limit(t.kind, length, width), "found": d is not None,
                          "place_error_mm": None if d is None else d.truth["place_error_mm"],
                          "middle_error_mm": None if d is None else d.truth.get("middle_error_mm"),
                          "long": t.name.startswith("long_"),
