@@ -2197,12 +2197,22 @@ def _robust_harmonics(theta: np.ndarray, edge: np.ndarray, valid: np.ndarray, or
     return a @ coef
 
 
+def camera_blur_from_edge(edge_sigma_px: float) -> float:
+    """The camera's blur (Gaussian sigma, px) from a hole's measured rim: the rays' edge
+    profile width (``HoleMeasurement.edge_sigma_px``) less the measurer's 1 px smoothing
+    and the 1/6 px^2 of bilinear sampling (``station.vision.measure``), never below
+    0.5 px; dev frames: within ~0.05 px of the rendered blur.
+
+    Public because the blur is the camera's, not the frame's: the coverage scan reads it
+    at the holes' edges during the bore scan and gives it to every surface frame
+    (``detect_defects(blur_px=...)``), most of which show no hole to read it from."""
+    return float(np.sqrt(max(edge_sigma_px**2 - 1.0 - 1.0 / 6.0, 0.25)))
+
+
 def _hole_blur(hole) -> float:
-    """The camera's blur at a hole's rim (px): the rays' edge profile width
-    (``HoleMeasurement.edge_sigma_px``) less the measurer's 1 px smoothing and the 1/6 px^2
-    of bilinear sampling (``station.vision.measure``); dev frames: within ~0.05 px of
-    the rendered blur."""
-    return float(np.sqrt(max(hole.edge_sigma_px**2 - 1.0 - 1.0 / 6.0, 0.25)))
+    """The camera's blur at a hole's rim (px): :func:`camera_blur_from_edge` of its
+    ``edge_sigma_px``."""
+    return camera_blur_from_edge(hole.edge_sigma_px)
 
 
 def _marks_mask(shape: tuple[int, int], found, blur: float) -> np.ndarray:
@@ -2731,12 +2741,18 @@ def detect_defects(image: np.ndarray, mm_per_px: float, *, holes=None, blur_px: 
     ``holes``: the frame's holes (``HoleMeasurement``) if already measured; None
     measures them (``measure_holes``). Holes smaller than ``cfg.min_hole_diameter_mm``
     are not holes but dark marks, and are judged as such.
-    ``blur_px``: the camera's blur (Gaussian sigma, px) if known (a calibration's MTF);
-    otherwise it is read from the holes' edges, else from each scratch itself (its mean
-    cross profile, its ends and a prior, ``_scratch_blur``): a thin scratch's width is
+    ``blur_px``: the camera's blur (Gaussian sigma, px) if known (a calibration's MTF, or
+    what the coverage scan read at the holes' edges in the bore scan,
+    :func:`camera_blur_from_edge`); otherwise it is read from the frame's holes' edges,
+    else from each scratch itself (its mean cross profile, its ends and a prior,
+    ``_scratch_blur``) and each pore's own fit: a thin scratch's width is
     fixed only as well as the blur is known (its cross profile is the blur's, widened by
-    w^2/12). (A pore's fitted edge blur was tried as a third
+    w^2/12), and a small pore's size trades off against its blur (a 0.085 x 0.076 mm
+    pore read 0.050 mm wide with the blur free, 0.090 x 0.072 mm with 1.2 px given:
+    ``station bench surface``). (A pore's fitted edge blur was tried as a third
     source and dropped: its ragged outline reads as extra blur, up to 3 px on dev frames.)
+    Given, it stands for the blur everywhere but at the rims, which each read their own
+    hole's (``_rim_defects``).
     Sorted by y then x.
     """
     if not (mm_per_px and mm_per_px > 0):
