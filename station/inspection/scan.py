@@ -181,6 +181,11 @@ class FrameObservation:
     #: where the station's model put the carriage for this frame's command (mm): the
     #: grating's reading minus it is what the model did not know (the monitors watch it)
     carriage_pred_mm: float | None = None
+    #: the hole's edge profile width in this frame (``HoleMeasurement.edge_sigma_px``, px),
+    #: None when the vision stage gives none: the camera's blur is read from it
+    #: (``station.vision.defects.camera_blur_from_edge``) and given to the coverage
+    #: scan's frames, most of which show no hole to read it from
+    edge_sigma_px: float | None = None
 
 
 @dataclass
@@ -669,7 +674,8 @@ class _BoreScan:
             obs = FrameObservation(axial, angle, h.diameter_px * s, h.x_px, h.y_px, h.diameter_px,
                                    float(getattr(h, "confidence", 1.0)), grating, z_cmd, c_cmd,
                                    None if reading is None else float(reading.timestamp),
-                                   getattr(h, "diameter_u_px", None), getattr(h, "y_u_px", None), carriage_pred)
+                                   getattr(h, "diameter_u_px", None), getattr(h, "y_u_px", None), carriage_pred,
+                                   getattr(h, "edge_sigma_px", None))
             result.frames.append(obs)
             yield m.Emit("frame", (t.name, len(result.frames) - 1, obs))
             if result.crop is None:

@@ -31,20 +31,23 @@ STANDARD = load_part("ZDZG-22.2-12.3851")
 Z_TRAVEL = IDEAL.z_travel_mm
 
 
-def sees(holes):
+def sees(holes, edge_sigma_px=None):
     """A vision stage for the ideal station: the true holes ``(axial mm, angle deg,
-    diameter mm)`` whole in the frame taken at ``pose``, at their pixel places."""
+    diameter mm)`` whole in the frame taken at ``pose``, at their pixel places.
+    ``edge_sigma_px``: each hole's edge profile width (px), in the holes' order; None:
+    the measurements carry none."""
     cx, cy = GEO.centre_px
     s = GEO.mm_per_px
 
     def measure(pose):
         out = []
-        for axial, angle, d in holes:
+        for i, (axial, angle, d) in enumerate(holes):
             du = math.radians((angle - pose["C"] + 180.0) % 360.0 - 180.0) * GEO.bore_radius_mm
             x, y, r = cx + du / s, cy - (axial - pose["Z"]) / s, d / s / 2
             if r < x < GEO.width_px - 1 - r and r < y < GEO.height_px - 1 - r:
+                edge = {} if edge_sigma_px is None else {"edge_sigma_px": edge_sigma_px[i]}
                 out.append(SimpleNamespace(x_px=x, y_px=y, diameter_px=d / s, partial=False, confidence=0.95,
-                                           diameter_u_px=0.02, y_u_px=0.02))
+                                           diameter_u_px=0.02, y_u_px=0.02, **edge))
         return out
 
     return measure
@@ -88,6 +91,21 @@ def test_bore_scan_of_the_standard_part_asks_for_what_the_scan_must():
     # the survey turns the table once round, forward: 360 deg in equal columns
     angles = sorted({round(f.pose["C"], 6) for f in survey})
     assert len(angles) >= 2 and all(b > a for a, b in zip(angles, angles[1:]))
+
+
+def test_each_measurement_frame_keeps_its_holes_edge_width_for_the_cameras_blur():
+    """The vision stage's edge profile width of the hole (``edge_sigma_px``) goes with each
+    measurement frame's observation: the coverage scan reads the camera's blur from it
+    for its frames, most of which show no hole. A vision stage that gives none: None."""
+    world = SimWorld({"Z": 0.0, "C": 0.0}, measure=sees([(71.03, 0.0, 0.70), (85.19, 0.0, 0.70)],
+                                                        edge_sigma_px=(1.62, 1.71)))
+    result = summarize_plan(scan_plan(IDEAL, STANDARD, GEO, SETTINGS), world).result
+    h1, h2 = (h for h in result.holes if h.found)
+    assert [f.edge_sigma_px for f in h1.frames] == [1.62] * SETTINGS.frames_per_hole
+    assert [f.edge_sigma_px for f in h2.frames] == [1.71] * SETTINGS.frames_per_hole
+    plain = summarize_plan(scan_plan(IDEAL, STANDARD, GEO, SETTINGS), standard_world()).result
+    frames = [f for h in plain.holes for f in h.frames]
+    assert len(frames) == 2 * SETTINGS.frames_per_hole and all(f.edge_sigma_px is None for f in frames)
 
 
 def test_the_compensated_plan_stays_inside_the_z_travel_and_approaches_from_below():
