@@ -43,11 +43,13 @@ def vision_measure(mm_per_px: float):
 def vision_defects(mm_per_px: float):
     """The surface inspection as the engine calls it: image -> defects
     (``station.vision.defects.detect_defects``: pores, scratches, and burrs and chips at
-    the frame's holes, which it measures itself)."""
+    the frame's holes, which it measures itself). ``blur_px``: the camera's blur as the
+    bore scan read it at the holes' edges (``MeasureSurface.blur_px``); None: read in
+    the frame itself."""
     from station.vision.defects import detect_defects
 
-    def surface(image):
-        return detect_defects(image, mm_per_px)
+    def surface(image, blur_px: float | None = None):
+        return detect_defects(image, mm_per_px, blur_px=blur_px)
 
     return surface
 

@@ -131,8 +131,9 @@ class Devices:
     camera: Camera | None = None
     #: image -> list of hole measurements (the vision stage), run off the event loop
     measure: Callable[[Any], Any] | None = None
-    #: image -> list of surface defects (the vision stage's defect detection), off the loop
-    surface: Callable[[Any], Any] | None = None
+    #: (image, blur_px=camera blur px or None) -> list of surface defects (the vision
+    #: stage's defect detection), off the loop
+    surface: Callable[..., Any] | None = None
 
     def axis(self, name: str):
         if name == "Z":
@@ -503,7 +504,7 @@ class Engine:
         if self.devices.surface is None:
             raise EngineStateError("the plan inspects the surface, but the station has no defect detection")
         t0 = time.perf_counter()
-        out = await asyncio.to_thread(self.devices.surface, msg.image)
+        out = await asyncio.to_thread(self.devices.surface, msg.image, blur_px=msg.blur_px)
         self.ledger.add(Step("vision", time.perf_counter() - t0))
         return out
 

@@ -77,9 +77,12 @@ class Measure(Msg):
 @dataclass(frozen=True)
 class MeasureSurface(Msg):
     """Run the surface inspection on a frame's image; returns its defects
-    (``station.vision.defects.Defect``, image px and mm)."""
+    (``station.vision.defects.Defect``, image px and mm). ``blur_px``: the camera's blur
+    (Gaussian sigma, px) as the bore scan read it at the holes' edges; None: the frame's
+    defect detection reads it itself (from a hole in the frame, else each mark's own)."""
 
     image: Any
+    blur_px: float | None = None
 
 
 @dataclass(frozen=True)

@@ -48,6 +48,30 @@ def test_plan_runs_and_returns_its_value():
     assert states[:3] == [State.HOMING, State.READY, State.RUNNING]
 
 
+def test_the_surface_device_is_given_the_camera_blur_the_plan_names():
+    """``MeasureSurface.blur_px`` reaches the station's defect detection as its keyword
+    (the camera's blur from the bore scan's holes), None when the plan names none."""
+    calls = []
+
+    def surface(image, blur_px=None):
+        calls.append((image, blur_px))
+        return [image]
+
+    def plan():
+        a = yield m.MeasureSurface("frame a", blur_px=1.21)
+        b = yield m.MeasureSurface("frame b")
+        return a + b
+
+    async def go():
+        z, c = InstantMockLinearAxis("Z"), InstantMockRotaryAxis("C")
+        eng = Engine(Devices(z, c, surface=surface), retry_backoff_s=0.0, sleep=lambda s: asyncio.sleep(0))
+        await eng.home()
+        return await eng.run(plan())
+
+    assert asyncio.run(go()) == ["frame a", "frame b"]
+    assert calls == [("frame a", 1.21), ("frame b", None)]
+
+
 def test_pause_takes_effect_at_a_checkpoint_and_resume_continues():
     async def go():
         eng, z, c, states = make_engine()
