@@ -107,7 +107,8 @@ def synthetic_surface(seed: int = 7, *, with_picture: bool = True) -> SurfaceRes
                for i, kind, axial, angle, length, width, hole, zone, rejects in DEFECTS]
     return SurfaceResult(defects, synthetic_picture(seed) if with_picture else None, frames=48, recentred=3,
                          axial_from_mm=AXIAL_FROM_MM, axial_to_mm=AXIAL_TO_MM, coverage=0.996,
-                         notes=["frame 17 (z 82.5 mm, c 140 deg): glare, analysed in its neighbours' overlap"])
+                         notes=["frame 17 (z 82.5 mm, c 140 deg): glare, analysed in its neighbours' overlap"],
+                         blur_px=1.21)
 
 
 def store_surface_record(store, serial: str, surface: SurfaceResult | None, *, part: str = "ZDZG-22.2-12.3851",

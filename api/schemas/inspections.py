@@ -112,6 +112,10 @@ class Surface(OpenModel):
     axial_to_mm: Number | None = Field(description="the band of the bore scanned, to")
     coverage: Number | None = Field(description="share of that band's wall inside some frame's usable area, 0..1")
     notes: list[str] = Field(description="for the operator: a frame that could not be analysed, ...")
+    blur_px: Number | None = Field(default=None, description="the camera's blur (Gaussian sigma, px) every frame's "
+                                                             "defects were measured with, read at the holes' edges "
+                                                             "in the bore scan; null: not known (each frame read "
+                                                             "its own) or a record older than it")
 
 
 class InspectionSummary(ClosedModel):

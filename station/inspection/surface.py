@@ -106,7 +106,8 @@ class SurfaceResult:
     """What the coverage scan found: the defects, the picture, and how it was made
     (``frames``: coverage frames; ``recentred``: frames taken re-centred on a defect;
     ``axial_from_mm``/``axial_to_mm``: the band scanned; ``coverage``: the share of that
-    band's wall inside some frame's usable area)."""
+    band's wall inside some frame's usable area; ``blur_px``: the camera's blur every
+    frame's defects were measured with)."""
 
     defects: list[SurfaceDefect] = field(default_factory=list)
     picture: SurfacePicture | None = None
@@ -117,13 +118,17 @@ class SurfaceResult:
     coverage: float = math.nan
     #: notes for the operator (a frame that could not be analysed, a defect lost on re-centring)
     notes: list[str] = field(default_factory=list)
+    #: the camera's blur (Gaussian sigma, px) given to every frame's defect detection, as
+    #: the bore scan read it at the holes' edges; None: not known (no hole's edge
+    #: measured, or a record older than it), each frame read its own
+    blur_px: float | None = None
 
     def to_json(self, with_truth: bool = False) -> dict:
         return {"defects": [d.to_json(with_truth) for d in self.defects],
                 "picture": None if self.picture is None else self.picture.meta(),
                 "frames": self.frames, "recentred": self.recentred,
                 "axial_from_mm": _finite(self.axial_from_mm), "axial_to_mm": _finite(self.axial_to_mm),
-                "coverage": _finite(self.coverage), "notes": list(self.notes)}
+                "coverage": _finite(self.coverage), "notes": list(self.notes), "blur_px": _finite(self.blur_px)}
 
 
 def _finite(v: float) -> float | None:

@@ -10,7 +10,8 @@ The plan (after the holes, so burrs and chips are put at the holes the scan foun
    than the largest pore), so every pore is whole in some frame; a scratch longer than
    a frame is cut by the frames' edges and is joined across them (3.).
 2. **Each frame's defects** (``MeasureSurface``: ``station.vision.defects``), analysed
-   while the axes move to the next frame, are placed on the part as the holes are
+   while the axes move to the next frame with the camera's blur the bore scan read at
+   the holes' edges (:func:`camera_blur`), are placed on the part as the holes are
    (``scan.py``): where compensation put the detection point, moved by what the grating
    saw that the model did not, plus the defect's offset from the frame's centre. Off
    the centre that offset carries the lens's distortion (the endoscope's: up to 2.7 % at
@@ -52,7 +53,7 @@ from station.kinematics.model import StationModel
 from station.motion import AxisLimits
 from station.parts.spec import PartSpec, SURFACE_RIM_KINDS
 from station.sequencer import messages as m
-from station.vision.defects import DefectConfig
+from station.vision.defects import DefectConfig, camera_blur_from_edge
 
 
 @dataclass(frozen=True)
@@ -308,6 +309,10 @@ class _SurfaceScan:
         self.plan = coverage_plan(part.surface_band_mm(), geo, cfg.overlap_mm)
         self.looks: list[_Look] = []
         self.notes: list[str] = []
+        #: the camera's blur (Gaussian sigma, px) for every frame's defect detection, from
+        #: the holes' edges in the bore scan (:func:`camera_blur`); None: none was read,
+        #: and each frame reads it itself
+        self.blur_px, self.blur_frames = camera_blur(self.holes)
         #: the camera's calibration when it fits the frames: defects are then measured
         #: where a coverage frame saw them, undistorted (re-centred only when no frame saw
         #: them whole); None: every defect re-centred
@@ -364,7 +369,7 @@ class _SurfaceScan:
 
     def frame(self):
         frame = yield m.Capture()
-        defects = yield m.MeasureSurface(frame.image)
+        defects = yield m.MeasureSurface(frame.image, blur_px=self.blur_px)
         return frame.image, list(defects or [])
 
     def run(self):
@@ -377,6 +382,9 @@ class _SurfaceScan:
         total = plan.frames
         yield m.Note(f"surface: {len(plan.axials_mm)} rings of {len(plan.angles_deg)} frames over "
                      f"{plan.band_mm[0]:g}..{plan.band_mm[1]:g} mm")
+        yield m.Note("surface: the camera's blur " + (
+            f"{self.blur_px:.2f} px, the median over the holes' edges in {self.blur_frames} bore scan frame(s)"
+            if self.blur_px is not None else "not known (no hole's edge measured): each frame reads its own"))
         yield m.Emit("surface", "start")  # the service times the surface's part of the cycle from here
         cx, cy = self.geo.centre_px
         k = 0
@@ -391,7 +399,8 @@ class _SurfaceScan:
             yield m.Checkpoint(f"surface ring {ring + 1}")
             for angle in plan.angles_deg:
                 done: list = []
-                centre = yield from _measuring_on_the_way(self.move(axial, angle, forward=True), pending, done)
+                centre = yield from _measuring_on_the_way(self.move(axial, angle, forward=True), pending, done,
+                                                          self.blur_px)
                 if done:
                     analysed(*done[0])
                 frame = yield m.Capture()
@@ -400,7 +409,7 @@ class _SurfaceScan:
                 k += 1
                 yield m.Progress(k, total, f"surface frame {k} of {total}")
         if pending is not None:
-            defects = yield m.MeasureSurface(pending[2])
+            defects = yield m.MeasureSurface(pending[2], blur_px=self.blur_px)
             analysed(pending[0], pending[1], list(defects or []))
         sightings += yield from self.follow_scratches(sightings)
         chains, rest = self.join_scratches(sightings)
@@ -420,7 +429,7 @@ class _SurfaceScan:
             d.id = f"d{i + 1}"
         lo, hi = plan.band_mm
         out = SurfaceResult(sorted(defects, key=lambda d: (d.axial_mm, d.angle_deg)), picture.picture, plan.frames,
-                            len(self.looks), lo, hi, picture.coverage, self.notes)
+                            len(self.looks), lo, hi, picture.coverage, self.notes, self.blur_px)
         return out
 
     # -------------------------------------------------------------- merging
@@ -1069,25 +1078,42 @@ class _SurfaceScan:
                              float(d.confidence), hole=hole, zone=None if zone is None else zone.id, frames=frames)
 
 
-def _measuring_on_the_way(move, pending, done: list):
+def _measuring_on_the_way(move, pending, done: list, blur_px: float | None = None):
     """Run the ``move`` plan, and while its axes travel (after its moves are sent, before
-    its first wait) analyse the ``pending`` frame (k, centre, image); its defects go to
-    ``done`` as (k, centre, defects). The vision stage then costs no machine time of its
-    own while there is a move to hide it in."""
+    its first wait) analyse the ``pending`` frame (k, centre, image) with the camera's
+    blur ``blur_px``; its defects go to ``done`` as (k, centre, defects). The vision stage
+    then costs no machine time of its own while there is a move to hide it in."""
     try:
         msg = next(move)
         while True:
             if pending is not None and isinstance(msg, m.Wait):
-                defects = yield m.MeasureSurface(pending[2])
+                defects = yield m.MeasureSurface(pending[2], blur_px=blur_px)
                 done.append((pending[0], pending[1], list(defects or [])))
                 pending = None
             reply = yield msg
             msg = move.send(reply)
     except StopIteration as stop:
         if pending is not None:  # nothing moved: analyse it now
-            defects = yield m.MeasureSurface(pending[2])
+            defects = yield m.MeasureSurface(pending[2], blur_px=blur_px)
             done.append((pending[0], pending[1], list(defects or [])))
         return stop.value
+
+
+def camera_blur(holes: list[HoleResult]) -> tuple[float | None, int]:
+    """The camera's blur (Gaussian sigma, px) as the bore scan read it: the median of
+    ``camera_blur_from_edge`` over every measurement frame of the found ``holes`` whose
+    vision stage gave the hole's edge width (``FrameObservation.edge_sigma_px``), and how
+    many frames that is; (None, 0) when none did (the blur is then not invented: each
+    frame's detection reads it itself).
+
+    Why: the blur is the camera's (the same optics at the same distance to the wall in
+    every frame of an inspection), but most coverage frames show no hole to read it from,
+    and a small pore's size trades off against the blur its own fit finds (``station
+    bench surface``: a 0.085 mm pore read 0.050 mm wide, true 0.076, with the blur free;
+    0.090 x 0.072 mm with the camera's 1.2 px given)."""
+    blurs = [camera_blur_from_edge(float(e)) for h in holes if h.found for o in h.frames
+             if (e := getattr(o, "edge_sigma_px", None)) is not None and math.isfinite(e)]
+    return (float(np.median(blurs)) if blurs else None), len(blurs)
 
 
 def physical_limit(band_mm: tuple[float, float], geo: CameraGeometry, overlap_mm: float, camera,

@@ -36,15 +36,31 @@ def srv(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def records(srv):
-    """Three inspections: with a surface and its picture, with a surface but no picture,
-    and without surface inspection."""
+    """Four inspections: with a surface and its picture, with a surface but no picture,
+    without surface inspection, and with a surface stored before it held the camera's
+    blur (session 62)."""
     store = srv.runtime.store
     surface = synthetic_surface()
     return {
         "full": (store_surface_record(store, "SN-SURF", surface), surface),
         "no_picture": (store_surface_record(store, "SN-SURF-NOPIC", synthetic_surface(with_picture=False)), None),
         "none": (store_surface_record(store, "SN-PLAIN", None, result="pass"), None),
+        "older": (_older_record(store), None),
     }
+
+
+def _older_record(store) -> str:
+    """A record whose surface document has no ``blur_px`` (written before session 62)."""
+    from station.parts import load_part
+    from station.store import Measurement
+
+    c = load_part("ZDZG-22.2-12.3851").characteristic("hole_1.diameter")
+    doc = synthetic_surface(with_picture=False).to_json(with_truth=True)
+    del doc["blur_px"]
+    iid = store.begin_inspection("ZDZG-22.2-12.3851", serial="SN-SURF-OLD")
+    store.finish(iid, "complete", "fail", "surface defects reject the part",
+                 measurements=[Measurement.of(c, c.nominal, passed=True, uncertainty_k2=0.004)], surface=doc)
+    return iid
 
 
 def test_the_job_response_carries_the_surface(srv, records):
@@ -54,8 +70,9 @@ def test_the_job_response_carries_the_surface(srv, records):
     assert r.status_code == 200, r.text
     body = r.json()
     s = body["surface"]
-    assert set(s) == {"picture", "defects", "frames", "recentred", "axial_from_mm", "axial_to_mm", "coverage", "notes"}
-    assert (s["frames"], s["recentred"], s["coverage"]) == (48, 3, 0.996)
+    assert set(s) == {"picture", "defects", "frames", "recentred", "axial_from_mm", "axial_to_mm", "coverage", "notes",
+                      "blur_px"}
+    assert (s["frames"], s["recentred"], s["coverage"], s["blur_px"]) == (48, 3, 0.996, 1.21)
     assert (s["axial_from_mm"], s["axial_to_mm"]) == (60.0, 100.0)
     assert s["notes"] == surface.notes
     # the picture: where its pixels are on the part, and where to get it
@@ -111,6 +128,18 @@ def test_without_a_picture_404_says_why(srv, records):
         assert r.status_code == 404 and "made no picture" in r.json()["detail"]
         r = c.get("/api/v1/inspections/00000000-0000-4000-8000-000000000000/surface.png")
         assert r.status_code == 404 and r.json()["detail"].startswith("no inspection")
+
+
+def test_a_surface_stored_before_the_camera_blur_still_reads(srv, records):
+    """A record written before the surface held ``blur_px`` (session 62) is served as
+    stored, without it, everything else as before."""
+    older, _ = records["older"]
+    with srv.client("engineer") as c:
+        r = c.get(f"/api/v1/inspections/{older}")
+    assert r.status_code == 200, r.text
+    s = r.json()["surface"]
+    assert s.get("blur_px") is None and (s["frames"], s["recentred"]) == (48, 3)
+    assert len(s["defects"]) == len(DEFECTS)
 
 
 def test_the_list_carries_no_surface(srv, records):

@@ -9,7 +9,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from station.inspection.scan import CameraGeometry, HoleResult, ScanSettings
+from station.inspection.scan import CameraGeometry, FrameObservation, HoleResult, ScanSettings
 from station.inspection.service import judge_surface, wants_surface
 from station.inspection.surface import SurfaceDefect, SurfaceResult
 from station.inspection.surface_scan import (SurfaceSettings, _Picture, coverage_plan, physical_limit,
@@ -145,24 +145,8 @@ def test_the_plan_turns_the_table_forward_and_analyses_each_frame_while_the_axes
     move and its wait (hidden in the motion), the last one after."""
     p = spec()
     plan = coverage_plan(p.surface_band_mm(), GEO, SurfaceSettings().overlap_mm)
-    gen = surface_scan(load_ideal_model(), p, GEO,
-                       ScanSettings(), [HoleResult("hole_1", True, 71.03, 0.001, 0.7, 0.001, 0.0)])
-    log = []
-    reply = None
-    image = np.full((GEO.height_px, GEO.width_px), 120, np.uint8)
-    try:
-        while True:
-            msg = gen.send(reply)
-            log.append(msg)
-            reply = None
-            if isinstance(msg, m.ReadAxis):
-                reply = 0.0
-            elif isinstance(msg, m.Capture):
-                reply = SimpleNamespace(image=image)
-            elif isinstance(msg, m.MeasureSurface):
-                reply = []
-    except StopIteration as stop:
-        result = stop.value
+    log, result = _drive(surface_scan(load_ideal_model(), p, GEO,
+                                      ScanSettings(), [HoleResult("hole_1", True, 71.03, 0.001, 0.7, 0.001, 0.0)]))
     captures = [i for i, x in enumerate(log) if isinstance(x, m.Capture)]
     assert len(captures) == plan.frames == result.frames
     c_targets = [x.position for x in log if isinstance(x, m.Move) and x.axis == "C"]
@@ -182,6 +166,93 @@ def load_ideal_model():
     from station.kinematics.model import load_model
 
     return load_model(None).without_errors()
+
+
+def _drive(gen, defects=lambda n: []):
+    """Run a surface scan plan message by message as the station would: the table at 0,
+    a grey frame for every capture, ``defects(n)`` for the n-th ``MeasureSurface``
+    (0-based). Returns the messages and the plan's result."""
+    log = []
+    reply = None
+    image = np.full((GEO.height_px, GEO.width_px), 120, np.uint8)
+    analysed = 0
+    try:
+        while True:
+            msg = gen.send(reply)
+            log.append(msg)
+            reply = None
+            if isinstance(msg, m.ReadAxis):
+                reply = 0.0
+            elif isinstance(msg, m.Capture):
+                reply = SimpleNamespace(image=image)
+            elif isinstance(msg, m.MeasureSurface):
+                reply = defects(analysed)
+                analysed += 1
+    except StopIteration as stop:
+        return log, stop.value
+
+
+def _observation(edge_sigma_px):
+    """A bore scan's measurement frame of a hole, with the vision stage's edge width."""
+    return FrameObservation(71.03, 0.0, 0.7, 640.0, 512.0, 70.0, 0.95, 71.0, 71.0, 0.0,
+                            edge_sigma_px=edge_sigma_px)
+
+
+def test_every_frame_s_defects_get_the_camera_blur_the_bore_scan_read_at_the_holes_edges():
+    """The camera's blur is the same in every frame of an inspection, but most coverage
+    frames show no hole to read it from: the scan takes the median of the blur read at
+    the found holes' edges in the bore scan's frames (``camera_blur_from_edge``; a frame
+    without an edge width, and a hole not found, give none) and hands it to every
+    ``MeasureSurface``, the coverage frames' and the re-centred ones' alike, and records
+    it with the result. No edge measured: None, the detection reads the blur itself."""
+    from station.vision.defects import Defect
+
+    edges = [1.55, 1.60, 1.58, 1.62, 1.70]
+    holes = [HoleResult("hole_1", True, 71.03, 0.001, 0.7, 0.001, 0.0,
+                        frames=[_observation(e) for e in edges[:3]] + [_observation(None)]),
+             HoleResult("hole_2", True, 85.19, 0.001, 0.7, 0.001, 0.0, frames=[_observation(e) for e in edges[3:]]),
+             HoleResult("hole_3", False, frames=[_observation(3.0)])]
+    want = float(np.median([math.sqrt(e * e - 1.0 - 1.0 / 6.0) for e in edges]))
+    assert want == pytest.approx(1.1804, abs=1e-4)  # the median edge's, 1.60 px
+    cx, cy = GEO.centre_px
+    # a pore 400 px off the first frame's centre: measured again in a frame centred on it
+    pore = Defect("pore", cx + 400.0, cy, 20.0, 15.0, 0.9, 0.0, 1.0, 1.0, 30.0, False, None, 0.2, 0.15, 0.2,
+                  0.01, 0.01)
+    p = spec()
+    log, result = _drive(surface_scan(load_ideal_model(), p, GEO, ScanSettings(), holes),
+                         defects=lambda n: [pore] if n == 0 else [])
+    asked = [x for x in log if isinstance(x, m.MeasureSurface)]
+    plan = coverage_plan(p.surface_band_mm(), GEO, SurfaceSettings().overlap_mm)
+    assert len(asked) == plan.frames + result.recentred and result.recentred == 1
+    assert all(x.blur_px == pytest.approx(want, rel=1e-12) for x in asked), {x.blur_px for x in asked}
+    assert result.blur_px == pytest.approx(want, rel=1e-12) and result.to_json()["blur_px"] == result.blur_px
+    assert any("blur 1.18 px" in x.text and "5 bore scan frame" in x.text for x in log if isinstance(x, m.Note))
+    # the holes' frames without an edge width (a vision stage that gives none): no blur given
+    bare = [HoleResult("hole_1", True, 71.03, 0.001, 0.7, 0.001, 0.0, frames=[_observation(None)] * 3)]
+    for found in (bare, [HoleResult("hole_1", True, 71.03, 0.001, 0.7, 0.001, 0.0)], []):
+        log, result = _drive(surface_scan(load_ideal_model(), p, GEO, ScanSettings(), found))
+        asked = [x for x in log if isinstance(x, m.MeasureSurface)]
+        assert asked and all(x.blur_px is None for x in asked)
+        assert result.blur_px is None and result.to_json()["blur_px"] is None
+
+
+def test_the_station_s_defect_detection_is_given_the_camera_blur(monkeypatch):
+    """``vision_defects`` (the engine's ``surface`` device) hands ``blur_px`` on to
+    ``detect_defects``; without it, None (the frame reads the blur itself)."""
+    import station.vision.defects as defects
+    from station.inspection.session import vision_defects
+
+    calls = []
+
+    def fake(image, mm_per_px, **kw):
+        calls.append((image, mm_per_px, kw))
+        return ["found"]
+
+    monkeypatch.setattr(defects, "detect_defects", fake)
+    surface = vision_defects(0.01)
+    assert surface("frame", blur_px=1.17) == ["found"]
+    assert surface("frame 2") == ["found"]
+    assert calls == [("frame", 0.01, {"blur_px": 1.17}), ("frame 2", 0.01, {"blur_px": None})]
 
 
 def test_the_picture_puts_a_mark_of_a_frame_at_its_place_on_the_part():
