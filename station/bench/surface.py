@@ -180,7 +180,9 @@ def run(parts: int = 3, seed: int = 23000, n_wall: int = 8, n_rim: int = 2, time
                          "frames": sf.frames, "recentred": sf.recentred, "coverage": sf.coverage,
                          "machine_s": cyc.get("machine_s"), "limit_s": cyc.get("limit_s"),
                          "limit_frames": cyc.get("limit_frames"), "ratio": cyc.get("ratio"),
-                         "result": outcome.result, "notes": sf.notes})
+                         "result": outcome.result, "notes": sf.notes,
+                         # the camera's blur every frame's defects were measured with (px), from the holes
+                         "blur_px": sf.blur_px})
         if progress is not None:
             progress()
     found = [r for r in rows if r["found"]]
