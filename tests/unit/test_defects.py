@@ -414,6 +414,34 @@ def test_a_scratch_whose_region_a_grooves_residue_joins_is_examined_along_its_ow
     assert _within(d.width_mm, t.width_mm), (d.width_mm, t.width_mm)
 
 
+def test_a_bent_scratch_with_a_grooves_spur_at_its_end_is_examined_along_its_own_line():
+    """A frame of the camera twin (the bench's seed 2260004): a bent 1.18 mm scratch,
+    plain to see, ends on a deep groove, and the groove's residue there joined its seed as
+    a spur (0.21 of it). Its principal axis, tilted by the spur, held 0.79 of the seed
+    (0.85 needed), so it was not taken for one furrow, its unconfined region was no
+    defect, and nothing was reported. The axis of the points within reach of it holds
+    enough of the seed, and the scratch is examined along it."""
+    from station.vision.defects import _one_furrow
+
+    seed = np.zeros((220, 140), bool)
+    rr = np.arange(40, 210)
+    cols = (40 + 0.25 * (rr - 40) + 4e-4 * (rr - 40) ** 2).astype(int)  # a bent furrow 170 px long
+    for r, c in zip(rr, cols):
+        seed[r, c - 2:c + 3] = True
+    ref = _one_furrow(seed)  # one furrow without the spur
+    assert ref is not None
+    spur = seed.copy()
+    for k in range(50):  # a groove's stretch 7 px wide at 30 deg from its top end
+        r, c = int(42 - 0.5 * k), int(40 + 0.87 * k)
+        spur[r - 3:r + 4, c:c + 2] = True
+    line = _one_furrow(spur)
+    assert line is not None
+    # the furrow's own direction, not one the spur tilts
+    assert abs((np.degrees(line[2] - ref[2]) + 90.0) % 180.0 - 90.0) < 4.0, (line, ref)
+    t, d = _the_twin_scratch_found(2260004)
+    assert _within(d.width_mm, t.width_mm), (d.width_mm, t.width_mm)
+
+
 def test_a_group_that_is_no_defect_has_its_dominant_member_judged_alone():
     """A frame of the camera twin (the bench's seed 2180009): a bent 1.63 mm scratch, 5.9
     px wide and plain to see, has a groove's stretch on its line beyond one end; the two
