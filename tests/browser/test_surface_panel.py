@@ -166,6 +166,9 @@ def test_the_surface_is_shown_with_every_defect_at_its_place(browser, surface_st
         screenshot(page, "surface-panel")
         expect(section.locator("h2")).to_have_text("Surface")
         expect(section.locator(".surface-summary")).to_contain_text(f"{len(DEFECTS)} defects, 2 rejecting the part")
+        # the camera's blur the defects were measured with, as the record keeps it
+        expect(section.locator(".surface-summary")).to_contain_text(
+            f"camera blur {surface.blur_px:.2f} px (from the holes' edges)")
 
         # one marker per defect, each on its defect (within 0.05 mm on the part)
         markers = section.locator("g.surface-marker")

@@ -303,6 +303,9 @@ function summaryText(surface) {
   const parts = [`${n} defect${n === 1 ? "" : "s"}` + (rejecting ? `, ${rejecting} rejecting the part` : "")];
   parts.push(`${surface.frames} frames` + (surface.recentred ? ` + ${surface.recentred} re-centred` : ""));
   if (has(surface.coverage)) parts.push(`coverage ${fmt(surface.coverage * 100, 1)} %`);
+  // the camera's blur the frames' defects were measured with, as the bore scan read it
+  // at the holes' edges (absent: each frame read its own)
+  if (has(surface.blur_px)) parts.push(`camera blur ${fmt(surface.blur_px, 2)} px (from the holes' edges)`);
   if (has(surface.axial_from_mm) && has(surface.axial_to_mm)) {
     parts.push(`axial ${fmt(surface.axial_from_mm, 2)} to ${fmt(surface.axial_to_mm, 2)} mm`);
   }
