@@ -375,6 +375,8 @@ def _ray_stage(image: np.ndarray, cand: Candidate, cfg: MeasureConfig, rng: np.r
     if coverage < cfg.min_coverage or inlier_fraction < cfg.min_inlier_fraction:
         return None
     sigma_px = float(np.sqrt(profile_width2(edges.profiles[fit.inliers], edges.step_px)))
+    if not np.isfinite(sigma_px):
+        return None  # no inlier's profile to read the edge's width from (gates relaxed to 0)
     if relative_contrast(image, cx, cy, r, sigma_px) < cfg.min_relative_contrast:
         return None  # too faint for a through-hole: crossing grooves
     # a Gaussian-blurred step of height c has a derivative peak c / (sqrt(2 pi) sigma)

@@ -574,3 +574,19 @@ def test_holes_on_a_25_degree_hatch_are_measured_with_the_hatch_the_frame_shows(
     rms = {k: float(np.sqrt(np.mean(np.square(v)))) for k, v in errors.items()}
     assert len(errors[True]) >= 20
     assert rms[True] < 0.85 * rms[False], rms
+
+
+def test_a_candidate_with_no_agreeing_ray_is_no_hole_under_relaxed_gates():
+    """With the rays' gates relaxed to nothing (``MeasureConfig`` is the user's), a dark
+    blob whose rays agree on no circle (wide bench frame 1300047: a 0.48 mm pore) has no
+    inlier profile to read its edge width from: the candidate is no hole, where the
+    contrast's read of a NaN width raised."""
+    from sim.camera.defects import random_defect_frame
+    from station.vision.detect import detect_candidates, for_scale
+    from station.vision.measure import _ray_stage
+
+    f = random_defect_frame(1300047, None, mm_per_px=0.01, envelope="wide")
+    cfg = MeasureConfig(photometric=None, min_inlier_fraction=0.0, min_coverage=0.0, min_relative_contrast=0.0)
+    cfg = replace(cfg, detect=for_scale(cfg.detect, 0.01))
+    (cand,) = [c for c in detect_candidates(f.image, cfg.detect) if abs(c.x_px - 881) < 3 and abs(c.y_px - 619) < 3]
+    assert _ray_stage(f.image, cand, cfg) is None
