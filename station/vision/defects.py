@@ -121,6 +121,18 @@ class DefectConfig:
     #: and station frames the candidates of a hole's size that are no hole agree 0.29 at
     #: most (and their contrast, 0.10 at most, fails ``min_relative_contrast`` besides)
     rim_hole_min_inlier_fraction: float = 0.4
+    #: ... and the confidence it must reach there (``MeasureConfig.min_confidence`` is
+    #: 0.15): a dim hole's noisy rim (31 % contrast, 1.9 px of blur, rays' RMS 0.47 px)
+    #: with a burr and two chips read 0.116, was no hole, and its defects were lost (wide
+    #: bench frame 270025). The rims need its place to within a px, not its diameter. Over
+    #: 400 fresh wide and station frames (1300000-199, 1310000-199) the candidates of a
+    #: hole's size that are no hole and pass the inliers and the contrast read 0.027 at most
+    rim_hole_min_confidence: float = 0.05
+    #: a coarse candidate is measured for the rims from this share of the least hole's
+    #: diameter: the coarse detector read a dim hole with two large burrs (wide bench frame
+    #: 270027: 70 px) as a 44 px blob, under the 0.8 taken before; its rays then measure it
+    #: whole, and only a disc of a hole's size is kept
+    rim_hole_coarse_share: float = 0.5
     #: the honing cross-hatch's line directions (deg, image sense); None: estimated per
     #: frame from its power spectrum (``honing_directions``), falling back to +/-30 deg
     #: (the renderer's and the Sunnen/Nagel guides' typical cross-hatch half-angle)
@@ -2732,11 +2744,12 @@ def _measure_holes_for_rims(img: np.ndarray, mm_per_px: float, cfg: DefectConfig
 
     # the rims need no grain-aware step: the weighted fit places them well within a px
     holes = list(measure_holes(img, mm_per_px, cfg=MeasureConfig(gls_steps=0)))
-    rays_only = MeasureConfig(photometric=None, min_inlier_fraction=cfg.rim_hole_min_inlier_fraction)
+    rays_only = MeasureConfig(photometric=None, min_inlier_fraction=cfg.rim_hole_min_inlier_fraction,
+                              min_confidence=cfg.rim_hole_min_confidence)
     rays_only = replace(rays_only, detect=for_scale(rays_only.detect, mm_per_px))
     for cand in detect_candidates(img, rays_only.detect):
-        if 2.0 * cand.radius_px * mm_per_px < 0.8 * cfg.min_hole_diameter_mm:
-            continue  # the coarse radius is good to ~1 coarse px: 20 % slack
+        if 2.0 * cand.radius_px * mm_per_px < cfg.rim_hole_coarse_share * cfg.min_hole_diameter_mm:
+            continue  # too small to be a hole, even as a coarse blob that rim defects cut into
         if any(np.hypot(cand.x_px - h.x_px, cand.y_px - h.y_px) < h.diameter_px / 2 for h in holes):
             continue
         m = measure_candidate(img, cand, rays_only)
