@@ -795,8 +795,9 @@ def _one_furrow(seed: np.ndarray, band_px: float = 3.0, min_len_px: float = 40.0
                 ) -> tuple[float, float, float, float] | None:
     """The line of a candidate's seed that is one furrow (``_furrows``'s test for one
     mark: its principal axis holds 85 % of its half-res pixels within ``band_px``, bent
-    by 2.5 % of its length), at least ``min_len_px`` long (full px), as ``_furrows``'s
-    lines (box px); None for any other seed."""
+    by 2.5 % of its length; or, where a spur tilts that axis, the axis of the points
+    within reach of it holds ``min_share`` of them), at least ``min_len_px`` long (full
+    px), as ``_furrows``'s lines (box px); None for any other seed."""
     yy, xx = np.nonzero(seed[::2, ::2])
     if yy.size < min_len_px / 2.0:
         return None
