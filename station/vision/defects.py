@@ -76,6 +76,7 @@ import numpy as np
 from scipy.ndimage import gaussian_filter1d, map_coordinates, maximum_filter1d
 from scipy.special import ive, ndtr
 
+from station.vision.edges import SMOOTH_SIGMA_PX
 from station.vision.grooves import honing_directions
 from station.vision.imageio import to_8bit, to_grey
 
@@ -2231,7 +2232,7 @@ def camera_blur_from_edge(edge_sigma_px: float) -> float:
     Public because the blur is the camera's, not the frame's: the coverage scan reads it
     at the holes' edges during the bore scan and gives it to every surface frame
     (``detect_defects(blur_px=...)``), most of which show no hole to read it from."""
-    return float(np.sqrt(max(edge_sigma_px**2 - 1.0 - 1.0 / 6.0, 0.25)))
+    return float(np.sqrt(max(edge_sigma_px**2 - SMOOTH_SIGMA_PX**2 - 1.0 / 6.0, 0.25)))
 
 
 def _hole_blur(hole) -> float:
