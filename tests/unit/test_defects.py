@@ -20,7 +20,9 @@ from sim.camera.defects import DefectSpec, geometry, random_defect_frame
 from sim.camera.render import FrameParams, HoleSpec, random_frame, render_frame, wall_patch
 from station.bench.defects import above_limit, match
 from station.cli import app
-from station.vision.defects import _groove_profiles, detect_defects, honing_directions
+from station.vision.defects import detect_defects
+from station.vision.defects.wall import _groove_profiles
+from station.vision.grooves import honing_directions
 
 MM_PER_PX = 0.010
 SMALL = dict(width_px=640, height_px=512)
@@ -421,7 +423,7 @@ def test_a_bent_scratch_with_a_grooves_spur_at_its_end_is_examined_along_its_own
     (0.85 needed), so it was not taken for one furrow, its unconfined region was no
     defect, and nothing was reported. The axis of the points within reach of it holds
     enough of the seed, and the scratch is examined along it."""
-    from station.vision.defects import _one_furrow
+    from station.vision.defects.wall import _one_furrow
 
     seed = np.zeros((220, 140), bool)
     rr = np.arange(40, 210)
@@ -451,7 +453,7 @@ def test_a_group_that_is_no_defect_has_its_dominant_member_judged_alone():
     any candidate is. (Members alike in strength are not: pieces of groove residue each
     examined alone read as a false scratch, frame 93401 of
     ``test_a_long_scratch_a_few_degrees_off_the_hatch_crosses_its_lines_and_is_found``.)"""
-    import station.vision.defects as D
+    import station.vision.defects.frame as D
 
     calls = []
     real = D._group_collinear
@@ -568,7 +570,8 @@ def test_a_mark_runs_along_the_hatch_when_it_crosses_few_of_its_lines_and_the_ha
     """``_along_hatch``: within 7.5 deg of a family and crossing at most 8 px of its lines
     over its length; when the two families read are no mirrored pair (a scratch drew one
     reading to itself), every mark within 7.5 deg is along it, as before."""
-    from station.vision.defects import DefectConfig, _along_hatch
+    from station.vision.defects import DefectConfig
+    from station.vision.defects.common import _along_hatch
 
     cfg = DefectConfig()
     hatch = (30.0, 150.0)
@@ -583,7 +586,8 @@ def test_a_groove_that_fades_is_no_scratch_and_a_cut_furrow_is():
     """``_square_end``: along a line of the hatch, a dark band that fades over tens of
     px (a groove's amplitude along its length) has no square end; the same band cut off
     square (a furrow), blurred by the camera alone, has."""
-    from station.vision.defects import DefectConfig, _square_end
+    from station.vision.defects import DefectConfig
+    from station.vision.defects.examine import _square_end
 
     h, w = 120, 400
     level = np.full((h, w), 150.0, np.float32)
@@ -602,7 +606,9 @@ def test_a_groove_that_fades_is_no_scratch_and_a_cut_furrow_is():
 def test_a_piece_of_a_longer_scratch_is_not_reported_beside_it_but_a_crossing_scratch_is():
     """``_drop_scratch_pieces``: a scratch whose cover lies mostly in a longer one's is a
     piece of it, measured from its own candidate first; a scratch crossing it is not."""
-    from station.vision.defects import Defect, _drop_scratch_pieces, _Examined
+    from station.vision.defects import Defect
+    from station.vision.defects.tracking import _drop_scratch_pieces
+    from station.vision.defects.examine import _Examined
 
     def scratch(x0, y0, x1, y1, length):
         cover = np.zeros((200, 300), np.uint8)
@@ -668,7 +674,7 @@ def test_a_pore_or_one_bent_scratch_is_one_mark_and_an_x_is_two_furrows():
     """``_furrows`` splits only what crossing furrows leave: a disc of any size (a band
     through a blob always holds pixels; the first version split 0.4-0.47 mm pores in two,
     29 false pores per 100 frames of the bench) and one bent scratch stay one mark."""
-    from station.vision.defects import _furrows
+    from station.vision.defects.wall import _furrows
 
     for diameter in (40, 50, 60, 80, 100):
         m = np.zeros((160, 160), np.uint8)
@@ -917,7 +923,7 @@ def test_a_rim_defect_must_stand_out_of_the_rim_either_side_of_it():
 def test_the_rims_level_either_side_of_a_defect():
     """``_flank_level``: the lower of the two flanks' medians past the blur's spill, never
     below 0; a flank cut off by an unread arc gives 0 (nothing to compare with)."""
-    from station.vision.defects import _flank_level
+    from station.vision.defects.rims import _flank_level
 
     n, step = 400, 0.5
     v = np.zeros(n)
@@ -1010,7 +1016,7 @@ def test_a_straight_furrow_runs_along_itself_and_crossing_grooves_residue_does_n
     """``_along_share``: one straight furrow 70 deg off the x axis puts ~all its oriented
     energy along itself; the V and the X that deep crossing grooves leave (arms along the
     30 / 150 deg hatch) put almost none along their long axis, the hatch's bisector."""
-    from station.vision.defects import _along_share
+    from station.vision.defects.examine import _along_share
 
     hatch = (30.0, 150.0)
     c, s = np.cos(np.deg2rad(70.0)), np.sin(np.deg2rad(70.0))
@@ -1072,7 +1078,7 @@ def test_a_rim_defects_end_is_read_on_its_own_side():
     its shoulder (2-3 px deep over its last 3 px of arc) lies under the half height the
     end is read at, so the chip reads 0.059 mm (0.082 before; a ragged chip's shallow
     end, docs/surface.md's known limits). It is found, and its length is its notch's."""
-    from station.vision.defects import _fit_end
+    from station.vision.defects.common import _fit_end
 
     s = 210.68 + 0.4985 * np.arange(34)
     data = np.array([-0.02, -0.02, -0.028, -0.034, -0.021, 0.021, 0.094, 0.197, 0.328, 0.503, 0.754, 1.127,
@@ -1189,7 +1195,7 @@ def test_a_large_pore_with_a_ragged_outline_is_not_taken_for_a_soft_shading():
 
 
 def test_an_outlines_roughness_is_its_departure_from_an_ellipse():
-    from station.vision.defects import _outline_roughness
+    from station.vision.defects.pores import _outline_roughness
 
     th = np.linspace(-np.pi, np.pi, 360, endpoint=False)
     for aspect in (1.0, 1.3, 2.5):  # an ellipse has none, however elongated
@@ -1249,7 +1255,7 @@ def test_the_walls_level_is_raised_only_where_it_reads_brighter_beyond_the_rim()
     hole's side are left as they were."""
     from scipy.special import ndtr
 
-    from station.vision.defects import _lift_wall
+    from station.vision.defects.rims import _lift_wall
 
     rb = np.arange(20.0, 50.0, 0.5)
     n = 400
@@ -1481,7 +1487,8 @@ def test_a_groove_crossed_where_it_fades_has_no_cut_end_and_a_furrow_cut_there_h
     end fades as it does, and a furrow cut at the crossing steps by all of its darkness
     over the blur alone (1.4 px). Wide clean frames 1097042 and 1097051 (22 deg hatch) are
     below: such stretches were 1.14 and 0.84 mm "scratches"."""
-    from station.vision.defects import DefectConfig, _end_steps
+    from station.vision.defects import DefectConfig
+    from station.vision.defects.examine import _end_steps
 
     cfg = DefectConfig()
     blur = 1.4
@@ -1516,7 +1523,8 @@ def test_a_tapering_furrows_cut_end_reads_square():
     bends off its chord) read over all 30 px, in grain, was a step as wide as the taper
     about half the time (10 of 20 renders square; 0.7 or 12 px on bench frame 542006 as
     the data moved by a few thousandths), and an untapered furrow's end reads as before."""
-    from station.vision.defects import DefectConfig, _end_steps
+    from station.vision.defects import DefectConfig
+    from station.vision.defects.examine import _end_steps
 
     cfg = DefectConfig()
     h, w, blur = 200, 480, 1.4
@@ -1556,7 +1564,7 @@ def test_a_rims_edge_is_where_the_share_falls_for_good_not_where_the_noise_dips(
     read at its tip."""
     from types import SimpleNamespace
 
-    from station.vision.defects import _rim_profile
+    from station.vision.defects.rims import _rim_profile
 
     h = w = 160
     cx = cy = 80.0
@@ -1594,7 +1602,7 @@ def test_a_stretch_the_grooves_scaling_adds_along_a_groove_at_a_level_of_its_own
     the scratch through a groove it crosses, or the scratch narrows a little, or no groove
     runs along it (a faint end its straight line leaves: 91044), the stretch is the
     scratch's; and a stretch under ``SHELF_MIN_PX`` says nothing."""
-    from station.vision.defects import SHELF_MAX_SHARE, SHELF_MIN_GROOVE_SHARE, SHELF_MIN_PX, _shelf_beyond
+    from station.vision.defects.scratches import SHELF_MAX_SHARE, SHELF_MIN_GROOVE_SHARE, SHELF_MIN_PX, _shelf_beyond
 
     rng = np.random.default_rng(110048)
     step = 0.5
@@ -1632,7 +1640,8 @@ def test_a_run_on_that_turns_onto_a_groove_is_the_groove():
     30 deg hatch ends on a deep groove; its first box took the groove's residue in (1.82
     mm, a false scratch and a miss), and, its box cut at its own end, the run on followed
     the groove to the frame's border (8.3 mm). Now it is found and sized."""
-    from station.vision.defects import DefectConfig, _turns_onto_hatch
+    from station.vision.defects import DefectConfig
+    from station.vision.defects.tracking import _turns_onto_hatch
 
     cfg = DefectConfig()
     hatch = (30.0, 150.0)
@@ -1724,7 +1733,8 @@ def test_a_run_on_off_the_hatch_that_the_residual_does_not_carry_is_the_grooves(
     angle) ran on 15 and 14 px through the groove's band (0.08 mm off); 2091057's true
     run on (16 px, at 0.76 of the body's residual) is kept."""
     from station.bench.defects import PLACE_TOL_MM, twin_scratch_frame
-    from station.vision.defects import DefectConfig, _run_on_grooves_only
+    from station.vision.defects import DefectConfig
+    from station.vision.defects.tracking import _run_on_grooves_only
 
     cfg = DefectConfig()
     hatch = (30.0, 150.0)
@@ -1757,7 +1767,7 @@ def test_the_grooves_scaling_does_not_split_what_the_raw_read_holds_together():
     holds; a gap the raw read has too still does (the larger piece is kept). And the
     twin's 2170043, a faint 1.6 mm scratch whose lesser half was lost that way (read
     0.66 mm, 0.48 mm off), is found whole."""
-    from station.vision.defects import _scratch_extent
+    from station.vision.defects.scratches import _scratch_extent
 
     step = 0.5
     raw = np.zeros(400)
@@ -1786,7 +1796,7 @@ def test_a_scratchs_peaks_that_turn_onto_the_hatch_at_its_end_are_the_groove():
     when the body is along it, when the tail is nearly as dark as the body, or when the
     line is straight or bends smoothly (a cubic fits it 4x better than two lines). Then the twin's frame
     2131037 (a 1.33 mm scratch read 2.36 mm, its place 0.5 mm off)."""
-    from station.vision.defects import _hatch_tail
+    from station.vision.defects.scratches import _hatch_tail
 
     rng = np.random.default_rng(2131037)
     hatch = (30.0, 150.0)
@@ -1876,7 +1886,7 @@ def test_a_scratch_end_read_at_half_its_local_height_does_not_walk_out_over_a_sh
     and 0.05 mm. ``_fit_end`` with a known height crosses at its half."""
     from scipy.ndimage import gaussian_filter1d
 
-    from station.vision.defects import _fit_end
+    from station.vision.defects.common import _fit_end
 
     s = np.arange(-30.0, 30.0, 0.5)
     # a scratch ending at 0, a shelf fading to 16 (blurred), the end's first guess 3 px out

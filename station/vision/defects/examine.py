@@ -1,0 +1,507 @@
+"""Each candidate at full resolution: its patch and local wall model, a pore or a scratch
+measured, and the tests that accept it as a defect or leave it as the cross-hatch's
+residue (the ends' steps, a square end, the share along the hatch).
+
+Part of ``station.vision.defects`` (its docstring tells the method).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+import warnings
+
+import cv2
+import numpy as np
+from scipy.special import ndtr
+
+from station.vision.defects.config import Defect, DefectConfig, NOISE_FLOOR
+from station.vision.defects.common import (
+    _along_hatch, _circ_diff_deg, _confidence, _gauss_newton, _mad_sigma, _near_hatch, _weighted_pca,
+)
+from station.vision.defects.wall import _band, _local_patch, _Patch
+from station.vision.defects.rims import _darkness_reader
+from station.vision.defects.scratches import BLUR_PRIOR_PX, _measure_scratch
+from station.vision.defects.pores import _measure_pore
+
+
+@dataclass
+class _Examined:
+    """One candidate examined at full resolution: the defect it is, if any, and the
+    region it covers (claimed, so that another candidate's seed in it is not measured
+    twice)."""
+
+    defect: Defect | None
+    region: np.ndarray
+    box: tuple[int, int, int, int] | None = None  # the region's box (None: the candidate's)
+    #: a scratch's cover over the same box: its centre line, half its width plus the blur's
+    #: reach either side (claimed too; None: the region alone)
+    cover: np.ndarray | None = None
+    #: a scratch's centre line (frame px, (n, 2), end to end) and its blur (px)
+    line: np.ndarray | None = None
+    blur: float | None = None
+    #: which of a scratch's line's ends (its first point, its last) the measurement read
+    #: where a groove's stretch begins (``_groove_beyond_end``, ``_shelf_beyond``): not
+    #: followed on (``_track_scratches``)
+    groove_ends: tuple[bool, bool] = (False, False)
+
+
+def _examine(img: np.ndarray, box, seed: np.ndarray, zone: np.ndarray, angles_deg, wall_level: np.ndarray,
+             cfg: DefectConfig, blur_hint: float | None, max_width_px: float, excl: np.ndarray | None = None,
+             confine: tuple[float, float, float, float] | None = None, others: np.ndarray | None = None) -> _Examined:
+    """One candidate at full resolution: the local wall model, its region, its kind,
+    its measurement and the tests it must pass.
+
+    A scratch whose end the patch cuts (its strip runs out of the patch within reach
+    of the end) is examined again in a patch grown along it: the patch is the box of
+    the candidates that were found, and a long scratch near a groove direction breaks
+    into pieces that are not joined (the twin's frames: a 161 px scratch 10 deg off the
+    hatch measured as three overlapping scratches of 73, 99 and 129 px). So is a piece of
+    a scratch along a groove direction that ends square at one end and runs on at the
+    other (``_square_end``): the wall model's grooves along its line took the rest of it
+    in, and the line is left out of them the second time. What a scratch covers, its
+    centre line and blur, is claimed with its region, so that its other pieces are not
+    measured again.
+
+    ``excl``: what the first wall model leaves out besides the seed (a crossing furrow);
+    ``confine``: a line the region keeps to (one furrow of several, ``_furrows``);
+    ``others``: what the defects measured so far cover over the frame, which the wall
+    model leaves out in every patch."""
+    hh, ww = img.shape
+
+    def beside(b) -> np.ndarray:
+        return others[b[1]:b[3], b[0]:b[2]] if others is not None else False
+
+    excl = (seed if excl is None else (seed | excl)) | beside(box)
+    ex = None
+    box0 = tuple(box)
+    for attempt in range(3):
+        again, m, kind = _examine_once(img, box, seed, excl, zone, angles_deg, wall_level, cfg, blur_hint,
+                                       max_width_px, confine, line_out=attempt > 0)
+        if ex is not None and again.defect is None and not (box0[0] == 0 or box0[1] == 0 or box0[2] == ww
+                                                             or box0[3] == hh):
+            # the grown patch lost it (bench frames: short scratches of 0.14-0.17 mm, taken for
+            # a mark there): the cut one stands; but at the frame's border, where the first
+            # patch had half a wall model round it, the grown patch's verdict (twin frames:
+            # the hatch's residue at the border, 7 deg off a groove, stood as a 0.32 mm scratch)
+            break
+        ex = again
+        if kind != "scratch" or m is None or not (m.get("cut") or m.get("runs_on")) or attempt == 2:
+            break
+        # the ends (frame px), each moved out by as much again as the scratch is long
+        (xa, ya), (xb, yb) = ((m["line"][0][i] + box[0], m["line"][1][i] + box[1]) for i in (0, -1))
+        reach = max(60.0, m["length"])
+        ux, uy = (xb - xa) / max(np.hypot(xb - xa, yb - ya), 1e-6), (yb - ya) / max(np.hypot(xb - xa, yb - ya), 1e-6)
+        pa, pb = (xa - reach * ux, ya - reach * uy), (xb + reach * ux, yb + reach * uy)
+        pad = 20
+        new = (int(max(min(box[0], min(pa[0], pb[0]) - pad), 0)), int(max(min(box[1], min(pa[1], pb[1]) - pad), 0)),
+               int(min(max(box[2], max(pa[0], pb[0]) + pad), ww)), int(min(max(box[3], max(pa[1], pb[1]) + pad), hh)))
+        # no larger than the frame's quarter each way: a bound on the time, far beyond a scratch
+        if (new == tuple(box) and not m.get("runs_on")) or (new[2] - new[0]) * (new[3] - new[1]) > ww * hh / 4:
+            break
+        shape = (new[3] - new[1], new[2] - new[0])
+        grown_seed = np.zeros(shape, bool)
+        grown_seed[box[1] - new[1]:box[3] - new[1], box[0] - new[0]:box[2] - new[0]] = seed | ex.region
+        # the wall model leaves out the scratch's line over the reach it may continue
+        line_mask = np.zeros(shape, np.uint8)
+        cv2.line(line_mask, (int(round(pa[0] - new[0])), int(round(pa[1] - new[1]))),
+                 (int(round(pb[0] - new[0])), int(round(pb[1] - new[1]))), 1, int(2 * m["half_band"] + 1))
+        seed, excl, box = grown_seed, grown_seed | line_mask.astype(bool) | beside(new), new
+    return ex
+
+
+def _examine_once(img: np.ndarray, box, seed: np.ndarray, excl: np.ndarray, zone: np.ndarray, angles_deg,
+                  wall_level: np.ndarray, cfg: DefectConfig, blur_hint: float | None, max_width_px: float,
+                  confine: tuple[float, float, float, float] | None = None, line_out: bool = False):
+    """``_examine`` in one patch: (the examined candidate, its measurement, its kind).
+    ``excl``: what the local wall model leaves out (the seed, or more); ``confine``: the
+    line the region keeps to (``_examine``); ``line_out``: ``excl`` holds the mark's line
+    (an examination again along it)."""
+    patch = _local_patch(img, box, excl, zone, angles_deg, wall_level)
+    x0, y0, x1, y1 = box
+    empty = np.zeros((y1 - y0, x1 - x0), bool)
+    if patch is None:
+        return _Examined(None, empty, tuple(box)), None, None
+    rs = cv2.GaussianBlur(patch.residual, (0, 0), 1.0)
+    use = ~patch.excluded
+    noise_s = max(_mad_sigma(rs[use]), NOISE_FLOOR)
+    peak = float(rs[seed].max()) if seed.any() else 0.0
+    # grown down to the noise, or to a share of the peak for a dark mark: a pore must not
+    # run out along a groove's faint residue that touches it
+    grow = (rs > max(cfg.grow_k * noise_s, cfg.grow_share * peak)) & ~zone[y0:y1, x0:x1]
+    if confine is not None:
+        grow &= _band(grow.shape, (x0, y0), confine, cfg.furrow_half_band_px)
+    n_lab, labels = cv2.connectedComponents(grow.astype(np.uint8), connectivity=8)
+    hit = np.unique(labels[seed & grow])
+    hit = hit[hit > 0]
+    if hit.size:
+        region = np.isin(labels, hit)
+    else:
+        # a faint scratch found by the line response may leave no pixel above the growth
+        # threshold at full resolution: the seed's darker half is its region
+        region = seed & (rs > 0) & ~zone[y0:y1, x0:x1]
+        if region.sum() < 8:
+            return _Examined(None, empty, tuple(box)), None, None
+    def at_border_of(reg: np.ndarray) -> bool:
+        touches = reg[0, :].any() or reg[-1, :].any() or reg[:, 0].any() or reg[:, -1].any()
+        return bool(touches and (x0 == 0 or y0 == 0 or x1 == img.shape[1] or y1 == img.shape[0]))
+
+    yy, xx = np.nonzero(region)
+    wts = np.clip(rs[region], 1e-6, None)
+    mx_, my_, ang, ext_l, ext_w = _extents(xx, yy, wts)
+    ca, sa = np.cos(ang), np.sin(ang)
+    elongated = ext_l >= cfg.scratch_elongation * ext_w and ext_l >= 12.0
+    if elongated and _along_hatch(float(np.rad2deg(ang) % 180.0), ext_l, angles_deg, cfg):
+        # along the hatch: most such marks are the grooves' residue, and measuring each as a
+        # scratch cost the twin's frames 1.26x their time; the ends' test on the region's
+        # own axis first (loosely: a piece that runs on may be a longer scratch's)
+        along = (xx - mx_) * ca + (yy - my_) * sa
+        ends = np.array([along.min(), along.max()])
+        blur0 = float(blur_hint) if blur_hint is not None else BLUR_PRIOR_PX[0]
+        pre = dict(line=(mx_ + ends * ca, my_ + ends * sa), blur=blur0, width=max(ext_w - 2.0 * blur0, 1.0))
+        if not any(_square_end(img, wall_level, x0, y0, pre, cfg, angles_deg, zone)):
+            # a piece of groove the wall model left, or a pore with such a piece attached
+            return _core_pore(patch, rs, seed, region, zone[y0:y1, x0:x1], peak, box, at_border_of(region),
+                              angles_deg, cfg, max_width_px, blur_hint)
+
+    def as_pore(reg: np.ndarray, allow_scratch: bool = True):
+        # a pore is one cavity: of a region in parts, the part round the peak when it
+        # passes as a pore alone (``_peak_part``); else the whole region, as it stood
+        part, beside = _peak_part(reg, rs, seed)
+        if beside is not None:
+            mp = _measure_pore(patch, part, cfg, blur_hint=blur_hint, beside=beside)
+            if mp is not None and not mp.get("scratch") and \
+                    _accept(mp, "pore", box, at_border_of(part), angles_deg, cfg, max_width_px) is not None:
+                return part, mp
+        return reg, _measure_pore(patch, reg, cfg, allow_scratch=allow_scratch, blur_hint=blur_hint)
+
+    if elongated:
+        m = _measure_scratch(patch, region, blur_hint, angles_deg, cfg.groove_alignment_deg)
+    else:
+        region, m = as_pore(region)
+    if m is not None and m.get("scratch"):
+        elongated = True
+        m = _measure_scratch(patch, region, blur_hint, angles_deg, cfg.groove_alignment_deg)
+    kind = "scratch" if elongated else "pore"
+    if kind == "scratch" and m is not None and m["length"] < cfg.scratch_elongation * m["width"]:
+        region, m = as_pore(region, allow_scratch=False)  # short, broad
+        kind = "pore"
+    at_border = at_border_of(region)
+    if kind == "scratch" and m is not None:
+        m["along_share"] = _along_share(rs, region, m["angle"], angles_deg)
+        m["along_hatch"] = _along_hatch(m["angle"], m["length"], angles_deg, cfg)
+        if _near_hatch(m["angle"], angles_deg, cfg) is not None:
+            # near the hatch: along it, a scratch if it ends in cuts (``_accept``); one cut end
+            # and the other running on is a piece of a longer scratch (the wall model's
+            # grooves along its line took the rest in), measured again along it (``_examine``),
+            # as is a piece of one that crosses the lines (``_along_hatch``)
+            m["square_end"], m["runs_on"] = _square_end(img, wall_level, x0, y0, m, cfg, angles_deg, zone)
+            if line_out and not m["square_end"]:
+                # measured again with its line left out of the grooves (``_examine``): its ends
+                # read on the residual too, where a groove it ran into is modelled from beside
+                # its line rather than read as the mark running on (dev frames within 7.5 deg
+                # of the hatch: 2 more of 114 scratches; none of the clean frames' pieces)
+                # the holes' zone is not read there (NaN: an end it meets is not read, as one
+                # the frame cuts is not): the residual is 0 in it, and a groove's stretch that
+                # runs into a rim read as cut there (wide clean frame 1096029: a 0.63 mm
+                # "scratch" between a crossing and a hole)
+                res_img = np.where(patch.zone, np.nan, 1.0 - patch.residual).astype(np.float32)
+                m["square_end"] = _square_end(res_img, np.ones_like(res_img), 0, 0, m, cfg, angles_deg)[0]
+    defect = _accept(m, kind, box, at_border, angles_deg, cfg, max_width_px)
+    if defect is None:
+        core = _core_pore(patch, rs, seed, region, zone[y0:y1, x0:x1], peak, box, at_border, angles_deg, cfg,
+                          max_width_px, blur_hint)
+        if core[0].defect is not None:
+            return core
+        # else as it stood: a cut scratch that failed is examined again in a grown patch
+    cover = None
+    if defect is not None and kind == "scratch":
+        # what the scratch covers: its centre line, its half width and blur either side
+        lines = np.zeros(region.shape, np.uint8)
+        pts = np.round(np.column_stack(m["line"])).astype(np.int32)
+        cv2.polylines(lines, [pts], False, 1, int(2 * m["half_band"] + 1))
+        cover = lines.astype(bool)
+        line = np.column_stack(m["line"]) + np.array([x0, y0], float)
+        return _Examined(defect, region, tuple(box), cover, line, float(m["blur"]),
+                         m.get("groove_ends", (False, False))), m, kind
+    return _Examined(defect, region, tuple(box), cover), m, kind
+
+
+def _round_peak(mask: np.ndarray, rs: np.ndarray, seed: np.ndarray) -> tuple[np.ndarray, int]:
+    """The connected part (8-connected) of ``mask`` round the seed's darkest pixel in it
+    (the seed must meet the mask), and how many parts the mask has."""
+    n_lab, labels = cv2.connectedComponents(mask.astype(np.uint8), connectivity=8)
+    at = np.unravel_index(int(np.argmax(np.where(seed & mask, rs, -np.inf))), rs.shape)
+    return labels == labels[at], n_lab - 1
+
+
+def _extents(xx: np.ndarray, yy: np.ndarray, wts: np.ndarray) -> tuple[float, float, float, float, float]:
+    """Pixels' weighted centre, principal direction (rad) and their extents along it and
+    across it (px, end pixels included): (mx, my, angle, along, across)."""
+    mx, my, ang, _ = _weighted_pca(xx.astype(float), yy.astype(float), wts)
+    ca, sa = np.cos(ang), np.sin(ang)
+    return mx, my, ang, float(np.ptp(xx * ca + yy * sa)) + 1.0, float(np.ptp(-xx * sa + yy * ca)) + 1.0
+
+
+def _peak_part(region: np.ndarray, rs: np.ndarray, seed: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+    """Of a region in several parts, the part round the seed's darkest pixel, and the
+    rest (None: one part): a pore is one cavity. A deep groove's stretch in line with a
+    pore is a candidate grouped with it (``_group_collinear``, which joins a faint
+    scratch's pieces), and the pore was measured with the stretch beside it (a 30 px pore
+    20 px from a stretch's end read 42 px, its place 8 px off; the surface bench's seed
+    24203 lost a 0.31 mm pore so, read with the stretch as one broad faint mark)."""
+    if not (seed & region).any():
+        return region, None
+    part, parts = _round_peak(region, rs, seed)
+    if parts <= 1:
+        return region, None
+    return part, region & ~part
+
+
+def _core_pore(patch: _Patch, rs: np.ndarray, seed: np.ndarray, region: np.ndarray, zone: np.ndarray,
+               peak: float, box, at_border: bool, angles_deg, cfg: DefectConfig, max_width_px: float,
+               blur_hint: float | None):
+    """A candidate whose region was no defect (``_examine_once``), looked at again for a
+    pore in it: the region's part darker than ``cfg.core_share`` of its peak, round the
+    peak. A deep groove's stretch that the frame's wall model does not hold (a groove
+    that fades out along its line) joins a pore beside it in one region, and the pore
+    was measured with it as one broad, faint mark or a piece of groove, and lost (the
+    surface bench's seed 24203: a 0.31 mm pore of contrast ~0.6 at a groove's end, in a
+    region three times its size). Only a compact core smaller than the region, measured
+    as a pore and passing a pore's tests, stands, and only a dark one away from the
+    frame's border (``cfg.core_min_peak``); else the candidate is nothing, as before.
+    Returns what ``_examine_once`` does."""
+    none = _Examined(None, region, tuple(box)), None, None
+    if peak < cfg.core_min_peak or at_border or not seed.any():
+        return none
+    dark = (rs > cfg.core_share * peak) & region & ~zone
+    if not (seed & dark).any():
+        return none
+    core, _ = _round_peak(dark, rs, seed)
+    n = int(core.sum())
+    if n < 8 or n > cfg.core_max_share * int(region.sum()):
+        return none  # no core, or the region is its core: measured as it stood
+    yy, xx = np.nonzero(core)
+    *_, ext_l, ext_w = _extents(xx, yy, np.clip(rs[core], 1e-6, None))
+    if ext_l >= cfg.scratch_elongation * ext_w:
+        return none  # a line: the furrows' and the scratches' business, not a pore's
+    m = _measure_pore(patch, core, cfg, allow_scratch=False, blur_hint=blur_hint)
+    defect = _accept(m, "pore", box, at_border, angles_deg, cfg, max_width_px)
+    if defect is None:
+        return none
+    return _Examined(defect, core, tuple(box)), m, "pore"
+
+
+def _end_steps(img: np.ndarray, level: np.ndarray, x0: int, y0: int, m: dict,
+               ends: tuple[int, ...] = (0, -1), other_deg: float | None = None,
+               unread: np.ndarray | None = None) -> list[tuple[float, float]]:
+    """How a mark measured as a line (``m``: its centre line, width and blur; patch offset
+    ``x0``, ``y0``) steps down at each of its ``ends`` read (0: the first, -1: the last):
+    (the step's width, px; its height as a share of the darkness inside). The raw
+    relative darkness ``1 - img / level`` (the grooves kept) is read along the centre
+    line's chord from up to 30 px inside the end to 30 px beyond it, the mean across the
+    mark's core less that of its 4 px flanks (the other family's grooves cross both
+    alike), and fitted as a blurred step (height, place, width, offset). An end the frame
+    cuts is not read (no entry); a mark no darker inside than beyond reads (inf, 0).
+
+    The step is fitted over its last ``_END_FIT_INSIDE_PX`` inside; the darkness inside
+    it is measured against is the median over all of the inside read.
+
+    ``other_deg``: the direction of the groove family that crosses a mark lying along the
+    other (``_crossing_family``). Its grooves cross the core and the flanks at places
+    along the line that differ by the flanks' offset over the tangent of the crossing
+    angle (5-10 px at a 44 deg crossing), so core less flanks read a crossing groove as a
+    peak beside a dip: at a deep groove's stretch that ended where a groove of the other
+    family crossed it, a step 0.5-1.1 px wide of 0.9-1.1 of the darkness inside, sharper
+    than the frame's blur allows an edge (wide clean frames 1097042, 1097051 at a 22 deg
+    hatch: 1.14 and 0.84 mm "scratches"). That family's darkness is read along its own
+    lines beside the mark (beyond the core, up to ``_CROSSING_READ_PX`` along them) and
+    taken from every sample first, each sample by the line through it; ``unread`` (bool,
+    the frame's shape, offset as ``img``): where those lines are not read (the holes'
+    zone: a hole 20 px along them would read as the family's darkness)."""
+    lx, ly = (np.asarray(v, float) for v in m["line"])
+    if lx.size < 2:
+        return []
+    px, py = lx + x0, ly + y0
+    length = float(np.hypot(px[-1] - px[0], py[-1] - py[0]))
+    if length < 4.0:
+        return []
+    blur = float(np.clip(m["blur"], 0.7, 2.8))
+    core = max(m["width"] / 2.0 + blur, 1.5)
+    off = np.arange(-(core + 6.0), core + 6.0 + 0.25, 0.5)
+    in_core, in_flank = np.abs(off) <= core, np.abs(off) >= core + 2.0
+    inner = min(30.0, length / 2.0)
+    t = np.arange(-inner, 30.0 + 0.25, 0.5)  # along the line, outwards from the end
+    darkness = None  # the crossing family's lines' reader, made once when needed
+    hh, ww = img.shape
+    steps = []  # (width, share of the darkness) of each end read
+    # along the chord: the centre line's last few px bend as its polynomial likes, and a
+    # groove's piece read on past its end along them left the groove within 30 px (a
+    # "square end": the twin's frames, 9 false scratches in 50 with this test's first form)
+    cux, cuy = (px[-1] - px[0]) / length, (py[-1] - py[0]) / length
+    for k, ux, uy in ((0, -cux, -cuy), (-1, cux, cuy)):
+        if k not in ends:
+            continue
+        mx = px[k] + t[None, :] * ux - off[:, None] * uy
+        my = py[k] + t[None, :] * uy + off[:, None] * ux
+        bx0, by0 = int(max(np.floor(mx.min()) - 1, 0)), int(max(np.floor(my.min()) - 1, 0))
+        bx1, by1 = int(min(np.ceil(mx.max()) + 2, ww)), int(min(np.ceil(my.max()) + 2, hh))
+        if bx1 - bx0 < 2 or by1 - by0 < 2:
+            continue
+        dark = (1.0 - img[by0:by1, bx0:bx1].astype(np.float32)
+                / np.maximum(level[by0:by1, bx0:bx1], 1.0)).astype(np.float32)
+        st = cv2.remap(dark, (mx - bx0).astype(np.float32), (my - by0).astype(np.float32), cv2.INTER_LINEAR,
+                       borderMode=cv2.BORDER_CONSTANT, borderValue=float("nan"))
+        s_b = np.zeros(0)
+        if other_deg is not None:
+            b = np.array([np.cos(np.deg2rad(other_deg)), np.sin(np.deg2rad(other_deg))])
+            bn = float(b[0] * -uy + b[1] * ux)  # across the mark per px along the other family
+            slope = float(b[0] * ux + b[1] * uy) / bn  # along the mark per px across it
+            s_b = np.arange(-_CROSSING_READ_PX, _CROSSING_READ_PX + 0.5, 1.0)
+            s_b = s_b[np.abs(s_b * bn) >= core + 2.0]  # beside the mark, off its core
+        if s_b.size:
+            t_b = np.arange(t[0] - (core + 7.0) * abs(slope), t[-1] + (core + 7.0) * abs(slope) + 0.5, 0.5)
+            if darkness is None:
+                darkness = _darkness_reader(img, level, np.zeros(img.shape, bool) if unread is None else unread)
+            sb = darkness(np.stack([px[k] + t_b[None, :] * ux + s_b[:, None] * b[0],
+                                    py[k] + t_b[None, :] * uy + s_b[:, None] * b[1]], axis=-1))
+            have = np.isfinite(sb).sum(axis=0)
+            if (have >= 4).sum() >= 8:
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore", RuntimeWarning)  # a line with nothing read
+                    prof = np.where(have >= 4, np.nanmedian(sb, axis=0), np.nan)
+                ok_b = np.isfinite(prof)
+                # each sample less the other family's darkness on its line, where the line
+                # meets the mark's centre line (the constant the lines pick up beside the
+                # mark cancels in core less flanks)
+                st = st - np.interp(t[None, :] - off[:, None] * slope, t_b[ok_b], prof[ok_b],
+                                    left=np.nan, right=np.nan)
+        ok = np.isfinite(st).all(axis=0)
+        if ok.sum() < 20 or t[ok].max() < 12.0:
+            continue  # the frame cuts this end
+        a = st[in_core][:, ok].mean(axis=0) - st[in_flank][:, ok].mean(axis=0)
+        tt = t[ok]
+        inside, beyond = tt < -3.0 * blur, tt > 3.0 * blur
+        if inside.sum() < 4:
+            continue
+        h_in = float(np.median(a[inside]))
+        if h_in <= 0.0:
+            steps.append((np.inf, 0.0))  # no darker inside than beyond: no end of a dark mark
+            continue
+        h_out = float(np.median(a[beyond])) if beyond.sum() >= 4 else 0.0
+        # the step fitted over its last ``_END_FIT_INSIDE_PX`` inside (the darkness inside,
+        # the share's reference, over all 30): a scratch's darkness varies along it (it
+        # tapers, or bends off the chord), and over 30 px a plain step read a tapering
+        # scratch's cut end as well as a step as wide as the taper, at the same cost to
+        # 0.2 % (a station frame's 1.46 mm scratch 0.3 deg off the hatch, 542006: 0.7 or
+        # 12 px as the data moved by a few thousandths)
+        near = tt >= -_END_FIT_INSIDE_PX
+        tn = tt[near]
+        fit = _gauss_newton(lambda q: q[0] * ndtr(-(tn - q[1]) / q[2]) + q[3],
+                            np.array([max(h_in - h_out, 0.01), 0.0, 2.0, h_out]), a[near],
+                            np.array([-1.0, -12.0, 0.4, -1.0]), np.array([2.0, 12.0, 30.0, 1.0]), iterations=25)
+        steps.append((float(fit.x[2]), float(fit.x[0]) / h_in))
+    return steps
+
+
+#: how far along the crossing family's lines their darkness is read either side of a
+#: mark's centre line (px; ``_end_steps``)
+_CROSSING_READ_PX = 24.0
+#: how far inside a mark's end its step is fitted (px; ``_end_steps``)
+_END_FIT_INSIDE_PX = 15.0
+
+
+def _crossing_family(line: tuple, angles_deg, cfg: DefectConfig) -> float | None:
+    """The groove family that crosses a mark lying along the other (``line``: its centre
+    line's x and y), at ``cfg.crossing_min_deg`` or more; None for a mark along neither
+    family (both cross it) or where the families are too near to part."""
+    lx, ly = (np.asarray(v, float) for v in line)
+    if lx.size < 2 or len(angles_deg) < 2:
+        return None
+    mark = float(np.rad2deg(np.arctan2(ly[-1] - ly[0], lx[-1] - lx[0])) % 180.0)
+    if _near_hatch(mark, angles_deg, cfg) is None:
+        return None
+    far = max(angles_deg, key=lambda g: _circ_diff_deg(mark, g))
+    return float(far) if _circ_diff_deg(mark, far) >= cfg.crossing_min_deg else None
+
+
+def _square_end(img: np.ndarray, level: np.ndarray, x0: int, y0: int, m: dict,
+                cfg: DefectConfig, angles_deg=(), unread: np.ndarray | None = None) -> tuple[bool, bool]:
+    """Whether a scratch measured along a groove direction (``m``, patch offset ``x0``,
+    ``y0``) ends in a cut at both ends, as a furrow does, rather than fading as a groove
+    does, each end read on the raw darkness (the grooves kept: the wall model's grooves
+    along such a line may have taken the mark in) by ``_end_steps``. Returns (square,
+    runs on): whether both ends are read, both step by at least
+    ``cfg.square_end_min_height`` of the darkness inside, one of them square (no wider
+    than ``cfg.square_end_max_width_px``, or 2.5 of the mark's blur) and the other no
+    wider than ``cfg.square_end_other_max_width_px``; and whether one end is square while
+    another runs on at more than ``cfg.square_end_max_run_on`` of the darkness (a piece
+    of a longer mark). ``angles_deg``: the hatch's directions (the family crossing the
+    mark is taken out of its ends' read, ``unread`` not read: ``_end_steps``)."""
+    steps = _end_steps(img, level, x0, y0, m, other_deg=_crossing_family(m["line"], angles_deg, cfg),
+                       unread=unread)
+    max_width = max(cfg.square_end_max_width_px, 2.5 * float(np.clip(m["blur"], 0.7, 2.8)))
+    square = [w <= max_width and h >= cfg.square_end_min_height for w, h in steps]
+    ends = [w <= max(cfg.square_end_other_max_width_px, max_width) and h >= cfg.square_end_min_height
+            for w, h in steps]
+    runs_on = [h < 1.0 - cfg.square_end_max_run_on for _, h in steps]
+    # both ends: one the frame cuts leaves a groove's piece at the border as square as a
+    # scratch's (a fresh twin frame, 2080043); the scan's overlap sees such a scratch whole
+    return len(steps) == 2 and any(square) and all(ends), any(square) and any(runs_on)
+
+
+def _along_share(rs: np.ndarray, region: np.ndarray, angle_deg: float, angles_deg, sigma_px: float = 2.0,
+                 grow_px: int = 3) -> float:
+    """The share of the oriented gradient energy over ``region`` (grown by ``grow_px``, to
+    take in the mark's flanks) whose local line direction is that of the scratch
+    (``angle_deg``): nearer it than any groove direction (``angles_deg``) and within 10
+    deg.  The local direction is the structure tensor's (the residual's gradient products
+    over a Gaussian of ``sigma_px``), its weight the tensor's anisotropy (the flanks of a
+    line carry it; flat noise little).  One straight furrow: ~0.9; deep grooves that
+    cross, whose residue is a V or an X along the hatch: ~0.1-0.25."""
+    gx = cv2.Sobel(rs, cv2.CV_32F, 1, 0, ksize=3)
+    gy = cv2.Sobel(rs, cv2.CV_32F, 0, 1, ksize=3)
+    jxx = cv2.GaussianBlur(gx * gx, (0, 0), sigma_px)
+    jyy = cv2.GaussianBlur(gy * gy, (0, 0), sigma_px)
+    jxy = cv2.GaussianBlur(gx * gy, (0, 0), sigma_px)
+    area = cv2.dilate(region.astype(np.uint8), np.ones((2 * grow_px + 1,) * 2, np.uint8)).astype(bool)
+    dxy, dd = 2.0 * jxy[area], (jxx - jyy)[area]
+    weight = np.sqrt(dd * dd + dxy * dxy)
+    total = float(weight.sum())
+    if total <= 0.0:
+        return 0.0
+    line = (0.5 * np.degrees(np.arctan2(dxy, dd)) + 90.0) % 180.0  # the gradient's normal
+
+    to_groove = (np.min([_circ_diff_deg(line, float(g)) for g in angles_deg], axis=0) if len(angles_deg)
+                 else np.full(line.shape, 180.0))
+    along = _circ_diff_deg(line, float(angle_deg)) < np.minimum(to_groove, 10.0)
+    return float(weight[along].sum()) / total
+
+
+def _accept(m: dict | None, kind: str, box, at_border: bool, angles_deg, cfg: DefectConfig,
+            max_width_px: float) -> Defect | None:
+    """The tests a measured mark must pass to be a defect, and the defect."""
+    if m is None:
+        return None
+    # a mark cut by the frame's border has half the wall model round it (the grooves'
+    # means and the level end there): twice the significance (dev and bench frames:
+    # small "pores" in the frame's corners at 8.8-10.5)
+    if m["significance"] < cfg.min_significance * (2.0 if at_border else 1.0):
+        return None
+    if m["mean_darkness"] < cfg.min_mean_darkness:
+        return None
+    if kind == "pore" and m["length"] >= cfg.broad_pore_px and m["mean_darkness"] < cfg.min_broad_pore_darkness:
+        return None  # broad and faint: the cross-hatch's residue, not a cavity
+    if kind == "pore" and m["mean_darkness"] > cfg.max_pore_darkness_over_floor * m["contrast"]:
+        return None  # darker on the whole than its own fitted floor: no cavity's blurred step
+    if kind == "scratch" and (m["contrast"] < cfg.min_scratch_contrast or m["blur"] > cfg.max_edge_blur_px
+                              or m["width"] > max_width_px or m["length"] < cfg.scratch_elongation * m["width"]
+                              or (m.get("along_hatch", False)
+                                  and (not m.get("square_end", False)
+                                       or m["contrast"] < cfg.aligned_min_scratch_contrast))
+                              or m.get("along_share", 1.0) < cfg.min_scratch_along_share
+                              or m["contrast"] * np.sqrt(max(m.get("along_share", 1.0), 0.0))
+                              < cfg.min_scratch_line_contrast):
+        return None  # the cross-hatch residue: broad, faint, soft, short, along a groove, not one line or faint, ragged
+    conf = _confidence(m["significance"], cfg.min_significance)
+    return Defect(kind, m["x"] + box[0], m["y"] + box[1], m["length"], m["width"], conf, m["angle"], m["u_length"],
+                  m["u_width"], m["significance"], at_border)
