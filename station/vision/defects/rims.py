@@ -316,7 +316,6 @@ def _rim_defects(img: np.ndarray, hole, index: int, zone_others: np.ndarray, wal
     # smoothed over ~1 px of arc: the rays are 0.5 px apart and the blur correlates them
     dev_s = gaussian_filter1d(dev, 1.0 / step_arc, mode="wrap" if whole else "nearest")
     noise = _rim_noise(dev_s[valid], cfg.rim_k)
-    thr = max(cfg.rim_k * noise, cfg.rim_min_height_px)
     # the rays' edges on the share averaged along the rim, where a defect is looked for
     dev_f = np.where(valid, prof.edge_find - _robust_harmonics(theta, prof.edge_find, valid, 1), 0.0)
     dev_f = gaussian_filter1d(dev_f, 1.0 / step_arc, mode="wrap" if whole else "nearest")
