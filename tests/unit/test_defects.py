@@ -21,7 +21,7 @@ from sim.camera.render import FrameParams, HoleSpec, random_frame, render_frame,
 from station.bench.defects import above_limit, match
 from station.cli import app
 from station.vision.defects import detect_defects
-from station.vision.defects.wall import _groove_profiles
+from station.vision.defects.wall import groove_profiles
 from station.vision.grooves import honing_directions
 
 MM_PER_PX = 0.010
@@ -423,20 +423,20 @@ def test_a_bent_scratch_with_a_grooves_spur_at_its_end_is_examined_along_its_own
     (0.85 needed), so it was not taken for one furrow, its unconfined region was no
     defect, and nothing was reported. The axis of the points within reach of it holds
     enough of the seed, and the scratch is examined along it."""
-    from station.vision.defects.wall import _one_furrow
+    from station.vision.defects.wall import one_furrow
 
     seed = np.zeros((220, 140), bool)
     rr = np.arange(40, 210)
     cols = (40 + 0.25 * (rr - 40) + 4e-4 * (rr - 40) ** 2).astype(int)  # a bent furrow 170 px long
     for r, c in zip(rr, cols):
         seed[r, c - 2:c + 3] = True
-    ref = _one_furrow(seed)  # one furrow without the spur
+    ref = one_furrow(seed)  # one furrow without the spur
     assert ref is not None
     spur = seed.copy()
     for k in range(50):  # a groove's stretch 7 px wide at 30 deg from its top end
         r, c = int(42 - 0.5 * k), int(40 + 0.87 * k)
         spur[r - 3:r + 4, c:c + 2] = True
-    line = _one_furrow(spur)
+    line = one_furrow(spur)
     assert line is not None
     # the furrow's own direction, not one the spur tilts
     assert abs((np.degrees(line[2] - ref[2]) + 90.0) % 180.0 - 90.0) < 4.0, (line, ref)
@@ -456,18 +456,18 @@ def test_a_group_that_is_no_defect_has_its_dominant_member_judged_alone():
     import station.vision.defects.frame as D
 
     calls = []
-    real = D._group_collinear
+    real = D.group_collinear
 
     def spy(candidates, *a, **k):
         groups = real(candidates, *a, **k)
         calls.append(groups)
         return groups
 
-    D._group_collinear = spy
+    D.group_collinear = spy
     try:
         t, d = _the_twin_scratch_found(2180009)
     finally:
-        D._group_collinear = real
+        D.group_collinear = real
     assert any(len(g) > 1 for g in calls[0])  # the frame still groups the scratch with the stretch
     assert _within(d.width_mm, t.width_mm), (d.width_mm, t.width_mm)
 
@@ -524,7 +524,7 @@ def test_a_pore_a_grooves_stretch_grew_over_is_reported_once():
     contrast on a deep groove. Its own seed measured it; the seed of the groove's stretch
     beside it grew a region over it and measured it again, as a 0.47 mm pore 7 px off.
     A pore whose region covers half of one already measured is that pore again
-    (``_measured_again``): one pore, where the first measurement put it."""
+    (``measured_again``): one pore, where the first measurement put it."""
     f = random_defect_frame(89055, None, mm_per_px=MM_PER_PX, envelope="wide", hatch_deg=40.0)
     (t,) = [t for t in f.defects if t.kind == "pore" and abs(t.image_x_px - 121.3) < 3.0]
     found = detect_defects(f.image, MM_PER_PX)
@@ -567,19 +567,19 @@ def test_a_scratch_across_the_frame_keeps_its_ends_where_the_lens_bends_it():
 
 
 def test_a_mark_runs_along_the_hatch_when_it_crosses_few_of_its_lines_and_the_hatch_is_a_mirrored_pair():
-    """``_along_hatch``: within 7.5 deg of a family and crossing at most 8 px of its lines
+    """``is_along_hatch``: within 7.5 deg of a family and crossing at most 8 px of its lines
     over its length; when the two families read are no mirrored pair (a scratch drew one
     reading to itself), every mark within 7.5 deg is along it, as before."""
     from station.vision.defects import DefectConfig
-    from station.vision.defects.common import _along_hatch
+    from station.vision.defects.common import is_along_hatch
 
     cfg = DefectConfig()
     hatch = (30.0, 150.0)
-    assert _along_hatch(25.0, 50.0, hatch, cfg)  # 4.4 px across
-    assert not _along_hatch(25.0, 200.0, hatch, cfg)  # 17 px across
-    assert _along_hatch(29.0, 200.0, hatch, cfg) and _along_hatch(151.5, 200.0, hatch, cfg)
-    assert not _along_hatch(40.0, 20.0, hatch, cfg)  # off the hatch
-    assert _along_hatch(30.0, 200.0, (24.3, 150.0), cfg)  # no mirrored pair: the angle alone
+    assert is_along_hatch(25.0, 50.0, hatch, cfg)  # 4.4 px across
+    assert not is_along_hatch(25.0, 200.0, hatch, cfg)  # 17 px across
+    assert is_along_hatch(29.0, 200.0, hatch, cfg) and is_along_hatch(151.5, 200.0, hatch, cfg)
+    assert not is_along_hatch(40.0, 20.0, hatch, cfg)  # off the hatch
+    assert is_along_hatch(30.0, 200.0, (24.3, 150.0), cfg)  # no mirrored pair: the angle alone
 
 
 def test_a_groove_that_fades_is_no_scratch_and_a_cut_furrow_is():
@@ -604,21 +604,21 @@ def test_a_groove_that_fades_is_no_scratch_and_a_cut_furrow_is():
 
 
 def test_a_piece_of_a_longer_scratch_is_not_reported_beside_it_but_a_crossing_scratch_is():
-    """``_drop_scratch_pieces``: a scratch whose cover lies mostly in a longer one's is a
+    """``drop_scratch_pieces``: a scratch whose cover lies mostly in a longer one's is a
     piece of it, measured from its own candidate first; a scratch crossing it is not."""
     from station.vision.defects import Defect
-    from station.vision.defects.tracking import _drop_scratch_pieces
-    from station.vision.defects.examine import _Examined
+    from station.vision.defects.tracking import drop_scratch_pieces
+    from station.vision.defects.examine import ExaminedCandidate
 
     def scratch(x0, y0, x1, y1, length):
         cover = np.zeros((200, 300), np.uint8)
         cv2.line(cover, (x0, y0), (x1, y1), 1, 9)
         d = Defect("scratch", (x0 + x1) / 2, (y0 + y1) / 2, length, 3.0, 0.9, 30.0, 1.0, 0.5, 20.0, False)
-        return _Examined(d, cover.astype(bool), (0, 0, 300, 200), cover.astype(bool))
+        return ExaminedCandidate(d, cover.astype(bool), (0, 0, 300, 200), cover.astype(bool))
 
     whole, piece = scratch(20, 20, 260, 160, 278.0), scratch(80, 55, 160, 102, 93.0)
     crossing = scratch(60, 180, 200, 20, 212.0)
-    kept = _drop_scratch_pieces([piece, whole, crossing])
+    kept = drop_scratch_pieces([piece, whole, crossing])
     assert [ex.defect.length_px for ex in kept] == [278.0, 212.0]
 
 
@@ -628,7 +628,7 @@ def test_a_piece_of_a_longer_scratch_is_not_reported_beside_it_but_a_crossing_sc
 def test_two_scratches_crossing_are_both_found_and_measured(angles, lengths):
     """Two scratches that cross are one candidate (an X); measured as one it read their
     bisector and neither, or one of them (13 of 36 found over these four crossings on
-    three walls each before ``_furrows``): each is now found, its length in tolerance."""
+    three walls each before ``split_furrows``): each is now found, its length in tolerance."""
     p = FrameParams(groove_depth=0.06, grain=0.02, blotch=0.03, blur_sigma_px=1.3, gain_e_per_dn=20.0)
     for seed in range(3):
         rng = np.random.default_rng(int(angles[1]) * 10 + seed)
@@ -671,24 +671,24 @@ def test_a_scratch_bent_along_the_hatch_in_its_middle_is_one_scratch_of_its_leng
 
 
 def test_a_pore_or_one_bent_scratch_is_one_mark_and_an_x_is_two_furrows():
-    """``_furrows`` splits only what crossing furrows leave: a disc of any size (a band
+    """``split_furrows`` splits only what crossing furrows leave: a disc of any size (a band
     through a blob always holds pixels; the first version split 0.4-0.47 mm pores in two,
     29 false pores per 100 frames of the bench) and one bent scratch stay one mark."""
-    from station.vision.defects.wall import _furrows
+    from station.vision.defects.wall import split_furrows
 
     for diameter in (40, 50, 60, 80, 100):
         m = np.zeros((160, 160), np.uint8)
         cv2.circle(m, (80, 80), diameter // 2, 1, -1)
-        assert _furrows(m.astype(bool)) == [], diameter
+        assert split_furrows(m.astype(bool)) == [], diameter
     t = np.linspace(0.0, 1.0, 400)
     bent = np.zeros((200, 1100), np.uint8)
     pts = np.column_stack([50 + 1000 * t, 100 + 25 * np.sin(np.pi * t)]).astype(np.int32)
     cv2.polylines(bent, [pts], False, 1, 6)
-    assert _furrows(bent.astype(bool)) == []
+    assert split_furrows(bent.astype(bool)) == []
     x = np.zeros((300, 400), np.uint8)
     cv2.line(x, (50, 150), (350, 150), 1, 6)
     cv2.line(x, (120, 40), (260, 260), 1, 6)
-    found = [float(np.rad2deg(a)) for _x, _y, a, _b in _furrows(x.astype(bool))]
+    found = [float(np.rad2deg(a)) for _x, _y, a, _b in split_furrows(x.astype(bool))]
 
     def off(a: float, b: float) -> float:
         return abs((a - b + 90.0) % 180.0 - 90.0)
@@ -990,8 +990,8 @@ def test_a_groove_that_fades_along_its_length_is_read_on_each_side_of_the_hole()
     use = np.hypot(xx - 80.0, yy - 60.0) > 25.0  # the ring; the hole's disc left out
     on_groove = np.abs(np.mod(u, 14.0) - 7.0) < 0.25
     near = (np.hypot(xx - 80.0, yy - 60.0) < 25.0) & on_groove
-    sides = _groove_profiles(d, xx, yy, use, (30.0,), sides_about=(80.0, 60.0))
-    both = _groove_profiles(d, xx, yy, use, (30.0,))
+    sides = groove_profiles(d, xx, yy, use, (30.0,), sides_about=(80.0, 60.0))
+    both = groove_profiles(d, xx, yy, use, (30.0,))
     assert np.max(np.abs(sides[near] - depth[near])) < 0.005
     assert np.median(both[near]) == pytest.approx(0.08, rel=0.1)
     assert np.max(np.abs(both[near] - depth[near])) > 0.015
@@ -1066,7 +1066,7 @@ def _chips_without_false_ones(cases) -> int:
 
 
 def test_a_rim_defects_end_is_read_on_its_own_side():
-    """``_fit_end`` reads the crossing of the local half height that steps the way the
+    """``fit_end`` reads the crossing of the local half height that steps the way the
     end does: up at a defect's start, down at its end. A ragged chip's area-true profile
     (wide bench seed 78008, hatch 22 deg: a 0.086 x 0.072 mm chip with a shoulder on one
     side) was read at its far end on the rising side, 2.8 px before its start, and the
@@ -1078,19 +1078,19 @@ def test_a_rim_defects_end_is_read_on_its_own_side():
     its shoulder (2-3 px deep over its last 3 px of arc) lies under the half height the
     end is read at, so the chip reads 0.059 mm (0.082 before; a ragged chip's shallow
     end, docs/surface.md's known limits). It is found, and its length is its notch's."""
-    from station.vision.defects.common import _fit_end
+    from station.vision.defects.common import fit_end
 
     s = 210.68 + 0.4985 * np.arange(34)
     data = np.array([-0.02, -0.02, -0.028, -0.034, -0.021, 0.021, 0.094, 0.197, 0.328, 0.503, 0.754, 1.127,
                      1.666, 2.397, 3.301, 4.291, 5.215, 5.909, 6.253, 6.194, 5.754, 5.051, 4.272, 3.601, 3.127,
                      2.828, 2.614, 2.386, 2.074, 1.663, 1.187, 0.721, 0.34, 0.084])
-    start, _ = _fit_end(s, data, 217.36, 1.057, rising=True)
-    end, _ = _fit_end(s, data, 220.30, 1.057, rising=False)
+    start, _ = fit_end(s, data, 217.36, 1.057, rising=True)
+    end, _ = fit_end(s, data, 220.30, 1.057, rising=False)
     assert 216.5 < start < 218.0
     assert 224.0 < end < 226.5  # past the shoulder, where the profile falls to its local half
     # the same profile mirrored: the same ends, mirrored
-    m_start, _ = _fit_end(-s[::-1], data[::-1], -220.30, 1.057, rising=True)
-    m_end, _ = _fit_end(-s[::-1], data[::-1], -217.36, 1.057, rising=False)
+    m_start, _ = fit_end(-s[::-1], data[::-1], -220.30, 1.057, rising=True)
+    m_end, _ = fit_end(-s[::-1], data[::-1], -217.36, 1.057, rising=False)
     assert m_start == pytest.approx(-end, abs=1e-6) and m_end == pytest.approx(-start, abs=1e-6)
     # and the chip is found, its length within tolerance
     f = random_defect_frame(78008, None, mm_per_px=MM_PER_PX, envelope="wide", hatch_deg=22.0)
@@ -1479,7 +1479,7 @@ def _mark_ending_mid_frame(deg: float, h: int = 200, w: int = 480) -> tuple[np.n
 
 
 def test_a_groove_crossed_where_it_fades_has_no_cut_end_and_a_furrow_cut_there_has():
-    """``_end_steps`` with the crossing family (``other_deg``). A deep groove of the hatch
+    """``end_steps`` with the crossing family (``other_deg``). A deep groove of the hatch
     that fades where a groove of the other family crosses it read, as core less flanks
     across the mark alone, as a step 1.1-1.8 px wide whatever the fade's length: the
     crossing groove meets the core and the flanks at places 5-10 px apart along the
@@ -1488,7 +1488,7 @@ def test_a_groove_crossed_where_it_fades_has_no_cut_end_and_a_furrow_cut_there_h
     over the blur alone (1.4 px). Wide clean frames 1097042 and 1097051 (22 deg hatch) are
     below: such stretches were 1.14 and 0.84 mm "scratches"."""
     from station.vision.defects import DefectConfig
-    from station.vision.defects.examine import _end_steps
+    from station.vision.defects.examine import end_steps
 
     cfg = DefectConfig()
     blur = 1.4
@@ -1503,14 +1503,14 @@ def test_a_groove_crossed_where_it_fades_has_no_cut_end_and_a_furrow_cut_there_h
         for fade in (4.0, 6.0, 10.0):
             groove = (0.05 + 0.3 * (1.0 - np.tanh(v_a / fade)) / 2.0) * np.exp(-0.5 * (u_a / 3.0) ** 2)
             m = dict(line=line, blur=blur, width=6.0)
-            (width, _), = _end_steps(image(groove + b), level, 0, 0, m, ends=(-1,), other_deg=158.0)
+            (width, _), = end_steps(image(groove + b), level, 0, 0, m, ends=(-1,), other_deg=158.0)
             assert width > 0.75 * fade, (crossing, fade, width)
             if fade >= 6.0:
                 assert width > cfg.square_end_max_width_px, (crossing, fade, width)
         for furrow_w in (3.0, 6.0):
             furrow = 0.25 * ((np.abs(u_a) <= furrow_w / 2.0) & (v_a <= 0.0))
             m = dict(line=line, blur=blur, width=furrow_w)
-            (width, height), = _end_steps(image(furrow + b), level, 0, 0, m, ends=(-1,), other_deg=158.0)
+            (width, height), = end_steps(image(furrow + b), level, 0, 0, m, ends=(-1,), other_deg=158.0)
             assert abs(width - blur) < 0.2 and abs(height - 1.0) < 0.05, (crossing, furrow_w, width, height)
     for seed in (1097042, 1097051):
         f = random_defect_frame(seed, {}, mm_per_px=MM_PER_PX, envelope="wide", hatch_deg=22.0)
@@ -1518,13 +1518,13 @@ def test_a_groove_crossed_where_it_fades_has_no_cut_end_and_a_furrow_cut_there_h
 
 
 def test_a_tapering_furrows_cut_end_reads_square():
-    """``_end_steps`` fits the step over the end's last 15 px inside: a furrow whose
+    """``end_steps`` fits the step over the end's last 15 px inside: a furrow whose
     darkness grows 1.8x over the 30 px inside its cut end (a scratch that tapers, or
     bends off its chord) read over all 30 px, in grain, was a step as wide as the taper
     about half the time (10 of 20 renders square; 0.7 or 12 px on bench frame 542006 as
     the data moved by a few thousandths), and an untapered furrow's end reads as before."""
     from station.vision.defects import DefectConfig
-    from station.vision.defects.examine import _end_steps
+    from station.vision.defects.examine import end_steps
 
     cfg = DefectConfig()
     h, w, blur = 200, 480, 1.4
@@ -1536,7 +1536,7 @@ def test_a_tapering_furrows_cut_end_reads_square():
             grain = cv2.GaussianBlur(np.random.default_rng(k).standard_normal((h, w)).astype(np.float32), (0, 0), 0.7)
             dark = 0.1 * (1.0 + taper * np.clip(-v, 0.0, 30.0) / 30.0) * (np.abs(u) <= 1.5) * (v <= 0.0)
             img = level * (1.0 - cv2.GaussianBlur(dark.astype(np.float32), (0, 0), blur) - 0.01 * grain / grain.std())
-            (width, height), = _end_steps(img, level, 0, 0, m, ends=(-1,))
+            (width, height), = end_steps(img, level, 0, 0, m, ends=(-1,))
             square += width <= cfg.square_end_max_width_px and height >= cfg.square_end_min_height
         assert square >= least, (taper, square)
 
@@ -1682,7 +1682,7 @@ def test_a_run_on_that_turns_onto_a_groove_is_the_groove():
 def test_an_end_read_where_a_grooves_stretch_begins_is_not_followed_on():
     """A scratch's end that the measurement read where a groove's stretch begins
     (``_groove_beyond_end``, ``_shelf_beyond``) is not followed on the raw darkness
-    (``_track_scratches``): beyond it that darkness is the groove's. The twin's frame
+    (``track_scratches``): beyond it that darkness is the groove's. The twin's frame
     2088002: a 1.58 mm scratch ends on a deep groove at a shallow angle; the scaling's
     shelf carried its end 12 px on (its place 0.067 mm off, over the 0.05 mm a defect's
     place is allowed), and with its end read right the run on went 21 px straight on
@@ -1883,15 +1883,15 @@ def test_a_scratch_end_read_at_half_its_local_height_does_not_walk_out_over_a_sh
     walk fell onto that shelf and on along it. An end that went 10 px or more past the
     raw read's over a shelf (``_shelf_beyond``) is read at half the scratch's own level:
     the twin's 2133057, a 1.22 mm scratch read 1.37 mm and 0.07 mm off, now within 10 %
-    and 0.05 mm. ``_fit_end`` with a known height crosses at its half."""
+    and 0.05 mm. ``fit_end`` with a known height crosses at its half."""
     from scipy.ndimage import gaussian_filter1d
 
-    from station.vision.defects.common import _fit_end
+    from station.vision.defects.common import fit_end
 
     s = np.arange(-30.0, 30.0, 0.5)
     # a scratch ending at 0, a shelf fading to 16 (blurred), the end's first guess 3 px out
     step = gaussian_filter1d(np.where(s < 0.0, 1.0, np.where(s < 16.0, 0.45 - 0.025 * s, 0.0)), 2.0)
-    walked, _ = _fit_end(s, step, 3.0, 1.0, rising=False)
-    held, _ = _fit_end(s, step, 3.0, 1.0, rising=False, height=1.0)
+    walked, _ = fit_end(s, step, 3.0, 1.0, rising=False)
+    held, _ = fit_end(s, step, 3.0, 1.0, rising=False, height=1.0)
     assert walked > 10.0 and abs(held) <= 1.0, (walked, held)
     _the_twin_scratch_found(2133057)

@@ -15,7 +15,7 @@ from scipy.special import ndtr
 from station.vision.defects.config import DefectConfig
 
 
-def _mad_sigma(v: np.ndarray) -> float:
+def mad_sigma(v: np.ndarray) -> float:
     """Robust standard deviation (MAD x 1.4826, exact for Gaussian data)."""
     v = v[np.isfinite(v)]
     if v.size == 0:
@@ -26,45 +26,45 @@ def _mad_sigma(v: np.ndarray) -> float:
     return float(1.4826 * np.median(np.abs(v - m)))
 
 
-def _confidence(significance: float, threshold: float) -> float:
+def confidence_of(significance: float, threshold: float) -> float:
     """0..1 from a significance: 0.5 at the acceptance threshold, ~0.95 at 1.6x it."""
     return float(1.0 / (1.0 + np.exp(-(significance - threshold) / (0.2 * threshold))))
 
 
-def _circ_diff_deg(a: float, b: float, period: float = 180.0) -> float:
+def circ_diff_deg(a: float, b: float, period: float = 180.0) -> float:
     return abs((a - b + period / 2) % period - period / 2)
 
 
-def _near_hatch(angle_deg: float, angles_deg, cfg: "DefectConfig") -> float | None:
+def near_hatch(angle_deg: float, angles_deg, cfg: "DefectConfig") -> float | None:
     """The groove family (of ``angles_deg``) within ``cfg.groove_alignment_deg`` of
     ``angle_deg`` nearest it, or None."""
-    near = [g for g in angles_deg if _circ_diff_deg(angle_deg, g) < cfg.groove_alignment_deg]
-    return min(near, key=lambda g: _circ_diff_deg(angle_deg, g)) if near else None
+    near = [g for g in angles_deg if circ_diff_deg(angle_deg, g) < cfg.groove_alignment_deg]
+    return min(near, key=lambda g: circ_diff_deg(angle_deg, g)) if near else None
 
 
-def _along_hatch(angle_deg: float, length_px: float, angles_deg, cfg: "DefectConfig") -> bool:
+def is_along_hatch(angle_deg: float, length_px: float, angles_deg, cfg: "DefectConfig") -> bool:
     """Whether a mark of direction ``angle_deg`` and length ``length_px`` runs along a
     groove family (``angles_deg``, the frame's two): within ``cfg.groove_alignment_deg``
     of one and, when the two are mirrored about the bore's axis as a hatch is (within
     ``cfg.hatch_mirror_deg``), crossing no more than ``cfg.hatch_cross_px`` of its lines
     over its length."""
-    g = _near_hatch(angle_deg, angles_deg, cfg)
+    g = near_hatch(angle_deg, angles_deg, cfg)
     if g is None:
         return False
-    if len(angles_deg) != 2 or _circ_diff_deg(float(angles_deg[0]), -float(angles_deg[1])) > cfg.hatch_mirror_deg:
+    if len(angles_deg) != 2 or circ_diff_deg(float(angles_deg[0]), -float(angles_deg[1])) > cfg.hatch_mirror_deg:
         return True  # the families read are not a mirrored pair: no line to cross is known
-    return bool(length_px * np.sin(np.deg2rad(_circ_diff_deg(angle_deg, g))) <= cfg.hatch_cross_px)
+    return bool(length_px * np.sin(np.deg2rad(circ_diff_deg(angle_deg, g))) <= cfg.hatch_cross_px)
 
 
 @dataclass
-class _Fit:
+class FitResult:
     x: np.ndarray  # parameters
     cov: np.ndarray  # their covariance from the residual's robust scale
     fun: np.ndarray  # residuals at the solution
 
 
-def _gauss_newton(model, p0: np.ndarray, data: np.ndarray, lo: np.ndarray, hi: np.ndarray, iterations: int = 12,
-                  huber_k: float = 2.0) -> _Fit:
+def gauss_newton(model, p0: np.ndarray, data: np.ndarray, lo: np.ndarray, hi: np.ndarray, iterations: int = 12,
+                 huber_k: float = 2.0) -> FitResult:
     """A small bounded least-squares fit with Huber weights (IRLS): forward-difference
     Jacobian, normal equations with Levenberg damping, steps clipped to the bounds.
     scipy's trust-region solver spent 9 ms per step in an SVD of the Jacobian (several
@@ -73,7 +73,7 @@ def _gauss_newton(model, p0: np.ndarray, data: np.ndarray, lo: np.ndarray, hi: n
     n = p.size
     lam = 1e-3
     f = model(p) - data
-    scale = max(_mad_sigma(f), 1e-6)
+    scale = max(mad_sigma(f), 1e-6)
 
     def cost(res, sc):
         a = np.abs(res) / (huber_k * sc)
@@ -105,7 +105,7 @@ def _gauss_newton(model, p0: np.ndarray, data: np.ndarray, lo: np.ndarray, hi: n
             lam *= 10
         if not improved or np.all(np.abs(step) < 1e-6 * np.maximum(np.abs(p), 1.0)):
             break
-        scale = max(_mad_sigma(f), 1e-6)
+        scale = max(mad_sigma(f), 1e-6)
     a = np.abs(f) / (huber_k * scale)
     w = np.where(a < 1, 1.0, 1.0 / np.maximum(a, 1e-12))
     hmat = (jac * w[:, None]).T @ jac
@@ -113,7 +113,7 @@ def _gauss_newton(model, p0: np.ndarray, data: np.ndarray, lo: np.ndarray, hi: n
         cov = np.linalg.pinv(hmat) * float(np.sum(w * f * f)) / max(float(w.sum()) - n, 1.0)
     except np.linalg.LinAlgError:
         cov = np.full((n, n), np.inf)
-    return _Fit(p, cov, f)
+    return FitResult(p, cov, f)
 
 
 def feret(x: np.ndarray, y: np.ndarray, step_deg: float = 0.5) -> tuple[float, float, float]:
@@ -127,7 +127,7 @@ def feret(x: np.ndarray, y: np.ndarray, step_deg: float = 0.5) -> tuple[float, f
     return float(ext[i]), float(np.rad2deg(a[i])), float(across.max() - across.min())
 
 
-def _weighted_pca(xx: np.ndarray, yy: np.ndarray, wts: np.ndarray) -> tuple[float, float, float, np.ndarray]:
+def weighted_pca(xx: np.ndarray, yy: np.ndarray, wts: np.ndarray) -> tuple[float, float, float, np.ndarray]:
     """Centroid, direction of the major axis (rad) and the 2x2 covariance of a weighted point set."""
     sw = wts.sum()
     cx, cy = (wts * xx).sum() / sw, (wts * yy).sum() / sw
@@ -138,7 +138,7 @@ def _weighted_pca(xx: np.ndarray, yy: np.ndarray, wts: np.ndarray) -> tuple[floa
     return float(cx), float(cy), float(np.arctan2(evecs[1, 1], evecs[0, 1])), cov
 
 
-def _runs(mask: np.ndarray, wrap: bool) -> list[tuple[int, int]]:
+def true_runs(mask: np.ndarray, wrap: bool) -> list[tuple[int, int]]:
     """(start, stop) index ranges of the True runs of a 1-D mask; with ``wrap`` a run
     may cross the end (stop > len)."""
     n = mask.size
@@ -155,8 +155,8 @@ def _runs(mask: np.ndarray, wrap: bool) -> list[tuple[int, int]]:
     return runs
 
 
-def _fit_end(s: np.ndarray, data: np.ndarray, guess: float, blur: float, rising: bool,
-             step_blur: float | None = None, height: float | None = None) -> tuple[float, float]:
+def fit_end(s: np.ndarray, data: np.ndarray, guess: float, blur: float, rising: bool,
+            step_blur: float | None = None, height: float | None = None) -> tuple[float, float]:
     """Where a profile steps up (``rising``) or down near ``guess``: the crossing of half
     its *local* height, the height read 1.2 blur to 1.2 blur + 1 px inside the end
     (where a blurred step has reached 88-97 %), iterated from ``guess``. A ragged defect
@@ -209,6 +209,6 @@ def _fit_end(s: np.ndarray, data: np.ndarray, guess: float, blur: float, rising:
         end = new
     # the crossing moves by noise / slope; a blurred step of height 2 half has slope
     # 2 half / (sqrt(2 pi) blur) at its middle
-    resid = _mad_sigma(np.diff(data)) / np.sqrt(2.0)
+    resid = mad_sigma(np.diff(data)) / np.sqrt(2.0)
     slope = 2.0 * half / (np.sqrt(2 * np.pi) * blur)
     return end, float(resid / slope)

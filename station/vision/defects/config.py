@@ -34,7 +34,7 @@ RIM_FLOOR_CROSSING = 0.2
 #: at 0.86-1 beyond it, was that ray's "edge": 0.03-0.07 mm "burrs" 3-12 px high on
 #: clean frames 1097086, 1099092 and 1100029 (session 56)
 RIM_HOLD_PX = 2.0
-#: a group of candidates (``_group_collinear``) that is no defect has its strongest member
+#: a group of candidates (``group_collinear``) that is no defect has its strongest member
 #: examined alone when its peak is at least this many times every other member's
 GROUP_DOMINANT_SHARE = 2.0
 
@@ -108,7 +108,7 @@ class DefectConfig:
     line_length_quarter_px: int = 10
     line_seed_k: float = 6.0
     line_grow_k: float = 3.0
-    #: a furrow of a candidate that holds several (two scratches crossing: ``_furrows``)
+    #: a furrow of a candidate that holds several (two scratches crossing: ``split_furrows``)
     #: is examined within this many px of its line: half the widest scratch (0.06 mm)
     #: and the blur's reach beyond its edge
     furrow_half_band_px: float = 8.0
@@ -195,7 +195,7 @@ class DefectConfig:
     square_end_other_max_width_px: float = 8.0
     #: an end where the mark runs on at more than this share of its darkness, while the
     #: other end is square, makes it a piece of a longer mark: measured again with its line
-    #: left out of the wall model's grooves (``_examine``)
+    #: left out of the wall model's grooves (``examine_candidate``)
     square_end_max_run_on: float = 0.2
     #: ... and such a mark must be at least this dark (the fitted cross profile's
     #: contrast): the twin's deep grooves (10 % on average, up to 30 %) leave pieces of
@@ -203,7 +203,7 @@ class DefectConfig:
     aligned_min_scratch_contrast: float = 0.14
     #: the least angle (deg) at which a groove family crosses a mark along the other for
     #: its grooves to be read along their own lines and taken out of the mark's ends'
-    #: read (``_end_steps``); nearer, the lines beside the mark run along it
+    #: read (``end_steps``); nearer, the lines beside the mark run along it
     crossing_min_deg: float = 20.0
     #: a furrow no wider than this (mm): the bench's scratches are 0.015-0.06 mm wide;
     #: a broad dark band is wear or the cross-hatch's residue (dev frames: 14-28 px "scratches")

@@ -16,16 +16,16 @@ from scipy.special import ndtr
 
 from station.vision.defects.config import Defect, DefectConfig, NOISE_FLOOR
 from station.vision.defects.common import (
-    _along_hatch, _circ_diff_deg, _confidence, _gauss_newton, _mad_sigma, _near_hatch, _weighted_pca,
+    is_along_hatch, circ_diff_deg, confidence_of, gauss_newton, mad_sigma, near_hatch, weighted_pca,
 )
-from station.vision.defects.wall import _band, _local_patch, _Patch
-from station.vision.defects.rims import _darkness_reader
-from station.vision.defects.scratches import BLUR_PRIOR_PX, _measure_scratch
-from station.vision.defects.pores import _measure_pore
+from station.vision.defects.wall import line_band, local_patch, Patch
+from station.vision.defects.rims import darkness_reader
+from station.vision.defects.scratches import BLUR_PRIOR_PX, measure_scratch
+from station.vision.defects.pores import measure_pore
 
 
 @dataclass
-class _Examined:
+class ExaminedCandidate:
     """One candidate examined at full resolution: the defect it is, if any, and the
     region it covers (claimed, so that another candidate's seed in it is not measured
     twice)."""
@@ -41,13 +41,14 @@ class _Examined:
     blur: float | None = None
     #: which of a scratch's line's ends (its first point, its last) the measurement read
     #: where a groove's stretch begins (``_groove_beyond_end``, ``_shelf_beyond``): not
-    #: followed on (``_track_scratches``)
+    #: followed on (``track_scratches``)
     groove_ends: tuple[bool, bool] = (False, False)
 
 
-def _examine(img: np.ndarray, box, seed: np.ndarray, zone: np.ndarray, angles_deg, wall_level: np.ndarray,
-             cfg: DefectConfig, blur_hint: float | None, max_width_px: float, excl: np.ndarray | None = None,
-             confine: tuple[float, float, float, float] | None = None, others: np.ndarray | None = None) -> _Examined:
+def examine_candidate(img: np.ndarray, box, seed: np.ndarray, zone: np.ndarray, angles_deg, wall_level: np.ndarray,
+                      cfg: DefectConfig, blur_hint: float | None, max_width_px: float, excl: np.ndarray | None = None,
+                      confine: tuple[float, float, float, float] | None = None,
+                      others: np.ndarray | None = None) -> ExaminedCandidate:
     """One candidate at full resolution: the local wall model, its region, its kind,
     its measurement and the tests it must pass.
 
@@ -63,7 +64,7 @@ def _examine(img: np.ndarray, box, seed: np.ndarray, zone: np.ndarray, angles_de
     measured again.
 
     ``excl``: what the first wall model leaves out besides the seed (a crossing furrow);
-    ``confine``: a line the region keeps to (one furrow of several, ``_furrows``);
+    ``confine``: a line the region keeps to (one furrow of several, ``split_furrows``);
     ``others``: what the defects measured so far cover over the frame, which the wall
     model leaves out in every patch."""
     hh, ww = img.shape
@@ -112,24 +113,24 @@ def _examine(img: np.ndarray, box, seed: np.ndarray, zone: np.ndarray, angles_de
 def _examine_once(img: np.ndarray, box, seed: np.ndarray, excl: np.ndarray, zone: np.ndarray, angles_deg,
                   wall_level: np.ndarray, cfg: DefectConfig, blur_hint: float | None, max_width_px: float,
                   confine: tuple[float, float, float, float] | None = None, line_out: bool = False):
-    """``_examine`` in one patch: (the examined candidate, its measurement, its kind).
+    """``examine_candidate`` in one patch: (the examined candidate, its measurement, its kind).
     ``excl``: what the local wall model leaves out (the seed, or more); ``confine``: the
-    line the region keeps to (``_examine``); ``line_out``: ``excl`` holds the mark's line
+    line the region keeps to (``examine_candidate``); ``line_out``: ``excl`` holds the mark's line
     (an examination again along it)."""
-    patch = _local_patch(img, box, excl, zone, angles_deg, wall_level)
+    patch = local_patch(img, box, excl, zone, angles_deg, wall_level)
     x0, y0, x1, y1 = box
     empty = np.zeros((y1 - y0, x1 - x0), bool)
     if patch is None:
-        return _Examined(None, empty, tuple(box)), None, None
+        return ExaminedCandidate(None, empty, tuple(box)), None, None
     rs = cv2.GaussianBlur(patch.residual, (0, 0), 1.0)
     use = ~patch.excluded
-    noise_s = max(_mad_sigma(rs[use]), NOISE_FLOOR)
+    noise_s = max(mad_sigma(rs[use]), NOISE_FLOOR)
     peak = float(rs[seed].max()) if seed.any() else 0.0
     # grown down to the noise, or to a share of the peak for a dark mark: a pore must not
     # run out along a groove's faint residue that touches it
     grow = (rs > max(cfg.grow_k * noise_s, cfg.grow_share * peak)) & ~zone[y0:y1, x0:x1]
     if confine is not None:
-        grow &= _band(grow.shape, (x0, y0), confine, cfg.furrow_half_band_px)
+        grow &= line_band(grow.shape, (x0, y0), confine, cfg.furrow_half_band_px)
     n_lab, labels = cv2.connectedComponents(grow.astype(np.uint8), connectivity=8)
     hit = np.unique(labels[seed & grow])
     hit = hit[hit > 0]
@@ -140,7 +141,7 @@ def _examine_once(img: np.ndarray, box, seed: np.ndarray, excl: np.ndarray, zone
         # threshold at full resolution: the seed's darker half is its region
         region = seed & (rs > 0) & ~zone[y0:y1, x0:x1]
         if region.sum() < 8:
-            return _Examined(None, empty, tuple(box)), None, None
+            return ExaminedCandidate(None, empty, tuple(box)), None, None
     def at_border_of(reg: np.ndarray) -> bool:
         touches = reg[0, :].any() or reg[-1, :].any() or reg[:, 0].any() or reg[:, -1].any()
         return bool(touches and (x0 == 0 or y0 == 0 or x1 == img.shape[1] or y1 == img.shape[0]))
@@ -150,7 +151,7 @@ def _examine_once(img: np.ndarray, box, seed: np.ndarray, excl: np.ndarray, zone
     mx_, my_, ang, ext_l, ext_w = _extents(xx, yy, wts)
     ca, sa = np.cos(ang), np.sin(ang)
     elongated = ext_l >= cfg.scratch_elongation * ext_w and ext_l >= 12.0
-    if elongated and _along_hatch(float(np.rad2deg(ang) % 180.0), ext_l, angles_deg, cfg):
+    if elongated and is_along_hatch(float(np.rad2deg(ang) % 180.0), ext_l, angles_deg, cfg):
         # along the hatch: most such marks are the grooves' residue, and measuring each as a
         # scratch cost the twin's frames 1.26x their time; the ends' test on the region's
         # own axis first (loosely: a piece that runs on may be a longer scratch's)
@@ -168,19 +169,19 @@ def _examine_once(img: np.ndarray, box, seed: np.ndarray, excl: np.ndarray, zone
         # passes as a pore alone (``_peak_part``); else the whole region, as it stood
         part, beside = _peak_part(reg, rs, seed)
         if beside is not None:
-            mp = _measure_pore(patch, part, cfg, blur_hint=blur_hint, beside=beside)
+            mp = measure_pore(patch, part, cfg, blur_hint=blur_hint, beside=beside)
             if mp is not None and not mp.get("scratch") and \
                     _accept(mp, "pore", box, at_border_of(part), angles_deg, cfg, max_width_px) is not None:
                 return part, mp
-        return reg, _measure_pore(patch, reg, cfg, allow_scratch=allow_scratch, blur_hint=blur_hint)
+        return reg, measure_pore(patch, reg, cfg, allow_scratch=allow_scratch, blur_hint=blur_hint)
 
     if elongated:
-        m = _measure_scratch(patch, region, blur_hint, angles_deg, cfg.groove_alignment_deg)
+        m = measure_scratch(patch, region, blur_hint, angles_deg, cfg.groove_alignment_deg)
     else:
         region, m = as_pore(region)
     if m is not None and m.get("scratch"):
         elongated = True
-        m = _measure_scratch(patch, region, blur_hint, angles_deg, cfg.groove_alignment_deg)
+        m = measure_scratch(patch, region, blur_hint, angles_deg, cfg.groove_alignment_deg)
     kind = "scratch" if elongated else "pore"
     if kind == "scratch" and m is not None and m["length"] < cfg.scratch_elongation * m["width"]:
         region, m = as_pore(region, allow_scratch=False)  # short, broad
@@ -188,15 +189,15 @@ def _examine_once(img: np.ndarray, box, seed: np.ndarray, excl: np.ndarray, zone
     at_border = at_border_of(region)
     if kind == "scratch" and m is not None:
         m["along_share"] = _along_share(rs, region, m["angle"], angles_deg)
-        m["along_hatch"] = _along_hatch(m["angle"], m["length"], angles_deg, cfg)
-        if _near_hatch(m["angle"], angles_deg, cfg) is not None:
+        m["along_hatch"] = is_along_hatch(m["angle"], m["length"], angles_deg, cfg)
+        if near_hatch(m["angle"], angles_deg, cfg) is not None:
             # near the hatch: along it, a scratch if it ends in cuts (``_accept``); one cut end
             # and the other running on is a piece of a longer scratch (the wall model's
-            # grooves along its line took the rest in), measured again along it (``_examine``),
-            # as is a piece of one that crosses the lines (``_along_hatch``)
+            # grooves along its line took the rest in), measured again along it (``examine_candidate``),
+            # as is a piece of one that crosses the lines (``is_along_hatch``)
             m["square_end"], m["runs_on"] = _square_end(img, wall_level, x0, y0, m, cfg, angles_deg, zone)
             if line_out and not m["square_end"]:
-                # measured again with its line left out of the grooves (``_examine``): its ends
+                # measured again with its line left out of the grooves (``examine_candidate``): its ends
                 # read on the residual too, where a groove it ran into is modelled from beside
                 # its line rather than read as the mark running on (dev frames within 7.5 deg
                 # of the hatch: 2 more of 114 scratches; none of the clean frames' pieces)
@@ -221,9 +222,9 @@ def _examine_once(img: np.ndarray, box, seed: np.ndarray, excl: np.ndarray, zone
         cv2.polylines(lines, [pts], False, 1, int(2 * m["half_band"] + 1))
         cover = lines.astype(bool)
         line = np.column_stack(m["line"]) + np.array([x0, y0], float)
-        return _Examined(defect, region, tuple(box), cover, line, float(m["blur"]),
-                         m.get("groove_ends", (False, False))), m, kind
-    return _Examined(defect, region, tuple(box), cover), m, kind
+        return ExaminedCandidate(defect, region, tuple(box), cover, line, float(m["blur"]),
+                                 m.get("groove_ends", (False, False))), m, kind
+    return ExaminedCandidate(defect, region, tuple(box), cover), m, kind
 
 
 def _round_peak(mask: np.ndarray, rs: np.ndarray, seed: np.ndarray) -> tuple[np.ndarray, int]:
@@ -237,7 +238,7 @@ def _round_peak(mask: np.ndarray, rs: np.ndarray, seed: np.ndarray) -> tuple[np.
 def _extents(xx: np.ndarray, yy: np.ndarray, wts: np.ndarray) -> tuple[float, float, float, float, float]:
     """Pixels' weighted centre, principal direction (rad) and their extents along it and
     across it (px, end pixels included): (mx, my, angle, along, across)."""
-    mx, my, ang, _ = _weighted_pca(xx.astype(float), yy.astype(float), wts)
+    mx, my, ang, _ = weighted_pca(xx.astype(float), yy.astype(float), wts)
     ca, sa = np.cos(ang), np.sin(ang)
     return mx, my, ang, float(np.ptp(xx * ca + yy * sa)) + 1.0, float(np.ptp(-xx * sa + yy * ca)) + 1.0
 
@@ -245,7 +246,7 @@ def _extents(xx: np.ndarray, yy: np.ndarray, wts: np.ndarray) -> tuple[float, fl
 def _peak_part(region: np.ndarray, rs: np.ndarray, seed: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
     """Of a region in several parts, the part round the seed's darkest pixel, and the
     rest (None: one part): a pore is one cavity. A deep groove's stretch in line with a
-    pore is a candidate grouped with it (``_group_collinear``, which joins a faint
+    pore is a candidate grouped with it (``group_collinear``, which joins a faint
     scratch's pieces), and the pore was measured with the stretch beside it (a 30 px pore
     20 px from a stretch's end read 42 px, its place 8 px off; the surface bench's seed
     24203 lost a 0.31 mm pore so, read with the stretch as one broad faint mark)."""
@@ -257,7 +258,7 @@ def _peak_part(region: np.ndarray, rs: np.ndarray, seed: np.ndarray) -> tuple[np
     return part, region & ~part
 
 
-def _core_pore(patch: _Patch, rs: np.ndarray, seed: np.ndarray, region: np.ndarray, zone: np.ndarray,
+def _core_pore(patch: Patch, rs: np.ndarray, seed: np.ndarray, region: np.ndarray, zone: np.ndarray,
                peak: float, box, at_border: bool, angles_deg, cfg: DefectConfig, max_width_px: float,
                blur_hint: float | None):
     """A candidate whose region was no defect (``_examine_once``), looked at again for a
@@ -270,7 +271,7 @@ def _core_pore(patch: _Patch, rs: np.ndarray, seed: np.ndarray, region: np.ndarr
     as a pore and passing a pore's tests, stands, and only a dark one away from the
     frame's border (``cfg.core_min_peak``); else the candidate is nothing, as before.
     Returns what ``_examine_once`` does."""
-    none = _Examined(None, region, tuple(box)), None, None
+    none = ExaminedCandidate(None, region, tuple(box)), None, None
     if peak < cfg.core_min_peak or at_border or not seed.any():
         return none
     dark = (rs > cfg.core_share * peak) & region & ~zone
@@ -284,16 +285,16 @@ def _core_pore(patch: _Patch, rs: np.ndarray, seed: np.ndarray, region: np.ndarr
     *_, ext_l, ext_w = _extents(xx, yy, np.clip(rs[core], 1e-6, None))
     if ext_l >= cfg.scratch_elongation * ext_w:
         return none  # a line: the furrows' and the scratches' business, not a pore's
-    m = _measure_pore(patch, core, cfg, allow_scratch=False, blur_hint=blur_hint)
+    m = measure_pore(patch, core, cfg, allow_scratch=False, blur_hint=blur_hint)
     defect = _accept(m, "pore", box, at_border, angles_deg, cfg, max_width_px)
     if defect is None:
         return none
-    return _Examined(defect, core, tuple(box)), m, "pore"
+    return ExaminedCandidate(defect, core, tuple(box)), m, "pore"
 
 
-def _end_steps(img: np.ndarray, level: np.ndarray, x0: int, y0: int, m: dict,
-               ends: tuple[int, ...] = (0, -1), other_deg: float | None = None,
-               unread: np.ndarray | None = None) -> list[tuple[float, float]]:
+def end_steps(img: np.ndarray, level: np.ndarray, x0: int, y0: int, m: dict,
+              ends: tuple[int, ...] = (0, -1), other_deg: float | None = None,
+              unread: np.ndarray | None = None) -> list[tuple[float, float]]:
     """How a mark measured as a line (``m``: its centre line, width and blur; patch offset
     ``x0``, ``y0``) steps down at each of its ``ends`` read (0: the first, -1: the last):
     (the step's width, px; its height as a share of the darkness inside). The raw
@@ -361,7 +362,7 @@ def _end_steps(img: np.ndarray, level: np.ndarray, x0: int, y0: int, m: dict,
         if s_b.size:
             t_b = np.arange(t[0] - (core + 7.0) * abs(slope), t[-1] + (core + 7.0) * abs(slope) + 0.5, 0.5)
             if darkness is None:
-                darkness = _darkness_reader(img, level, np.zeros(img.shape, bool) if unread is None else unread)
+                darkness = darkness_reader(img, level, np.zeros(img.shape, bool) if unread is None else unread)
             sb = darkness(np.stack([px[k] + t_b[None, :] * ux + s_b[:, None] * b[0],
                                     py[k] + t_b[None, :] * uy + s_b[:, None] * b[1]], axis=-1))
             have = np.isfinite(sb).sum(axis=0)
@@ -396,17 +397,17 @@ def _end_steps(img: np.ndarray, level: np.ndarray, x0: int, y0: int, m: dict,
         # 12 px as the data moved by a few thousandths)
         near = tt >= -_END_FIT_INSIDE_PX
         tn = tt[near]
-        fit = _gauss_newton(lambda q: q[0] * ndtr(-(tn - q[1]) / q[2]) + q[3],
-                            np.array([max(h_in - h_out, 0.01), 0.0, 2.0, h_out]), a[near],
-                            np.array([-1.0, -12.0, 0.4, -1.0]), np.array([2.0, 12.0, 30.0, 1.0]), iterations=25)
+        fit = gauss_newton(lambda q: q[0] * ndtr(-(tn - q[1]) / q[2]) + q[3],
+                           np.array([max(h_in - h_out, 0.01), 0.0, 2.0, h_out]), a[near],
+                           np.array([-1.0, -12.0, 0.4, -1.0]), np.array([2.0, 12.0, 30.0, 1.0]), iterations=25)
         steps.append((float(fit.x[2]), float(fit.x[0]) / h_in))
     return steps
 
 
 #: how far along the crossing family's lines their darkness is read either side of a
-#: mark's centre line (px; ``_end_steps``)
+#: mark's centre line (px; ``end_steps``)
 _CROSSING_READ_PX = 24.0
-#: how far inside a mark's end its step is fitted (px; ``_end_steps``)
+#: how far inside a mark's end its step is fitted (px; ``end_steps``)
 _END_FIT_INSIDE_PX = 15.0
 
 
@@ -418,10 +419,10 @@ def _crossing_family(line: tuple, angles_deg, cfg: DefectConfig) -> float | None
     if lx.size < 2 or len(angles_deg) < 2:
         return None
     mark = float(np.rad2deg(np.arctan2(ly[-1] - ly[0], lx[-1] - lx[0])) % 180.0)
-    if _near_hatch(mark, angles_deg, cfg) is None:
+    if near_hatch(mark, angles_deg, cfg) is None:
         return None
-    far = max(angles_deg, key=lambda g: _circ_diff_deg(mark, g))
-    return float(far) if _circ_diff_deg(mark, far) >= cfg.crossing_min_deg else None
+    far = max(angles_deg, key=lambda g: circ_diff_deg(mark, g))
+    return float(far) if circ_diff_deg(mark, far) >= cfg.crossing_min_deg else None
 
 
 def _square_end(img: np.ndarray, level: np.ndarray, x0: int, y0: int, m: dict,
@@ -429,16 +430,16 @@ def _square_end(img: np.ndarray, level: np.ndarray, x0: int, y0: int, m: dict,
     """Whether a scratch measured along a groove direction (``m``, patch offset ``x0``,
     ``y0``) ends in a cut at both ends, as a furrow does, rather than fading as a groove
     does, each end read on the raw darkness (the grooves kept: the wall model's grooves
-    along such a line may have taken the mark in) by ``_end_steps``. Returns (square,
+    along such a line may have taken the mark in) by ``end_steps``. Returns (square,
     runs on): whether both ends are read, both step by at least
     ``cfg.square_end_min_height`` of the darkness inside, one of them square (no wider
     than ``cfg.square_end_max_width_px``, or 2.5 of the mark's blur) and the other no
     wider than ``cfg.square_end_other_max_width_px``; and whether one end is square while
     another runs on at more than ``cfg.square_end_max_run_on`` of the darkness (a piece
     of a longer mark). ``angles_deg``: the hatch's directions (the family crossing the
-    mark is taken out of its ends' read, ``unread`` not read: ``_end_steps``)."""
-    steps = _end_steps(img, level, x0, y0, m, other_deg=_crossing_family(m["line"], angles_deg, cfg),
-                       unread=unread)
+    mark is taken out of its ends' read, ``unread`` not read: ``end_steps``)."""
+    steps = end_steps(img, level, x0, y0, m, other_deg=_crossing_family(m["line"], angles_deg, cfg),
+                      unread=unread)
     max_width = max(cfg.square_end_max_width_px, 2.5 * float(np.clip(m["blur"], 0.7, 2.8)))
     square = [w <= max_width and h >= cfg.square_end_min_height for w, h in steps]
     ends = [w <= max(cfg.square_end_other_max_width_px, max_width) and h >= cfg.square_end_min_height
@@ -471,9 +472,9 @@ def _along_share(rs: np.ndarray, region: np.ndarray, angle_deg: float, angles_de
         return 0.0
     line = (0.5 * np.degrees(np.arctan2(dxy, dd)) + 90.0) % 180.0  # the gradient's normal
 
-    to_groove = (np.min([_circ_diff_deg(line, float(g)) for g in angles_deg], axis=0) if len(angles_deg)
+    to_groove = (np.min([circ_diff_deg(line, float(g)) for g in angles_deg], axis=0) if len(angles_deg)
                  else np.full(line.shape, 180.0))
-    along = _circ_diff_deg(line, float(angle_deg)) < np.minimum(to_groove, 10.0)
+    along = circ_diff_deg(line, float(angle_deg)) < np.minimum(to_groove, 10.0)
     return float(weight[along].sum()) / total
 
 
@@ -502,6 +503,6 @@ def _accept(m: dict | None, kind: str, box, at_border: bool, angles_deg, cfg: De
                               or m["contrast"] * np.sqrt(max(m.get("along_share", 1.0), 0.0))
                               < cfg.min_scratch_line_contrast):
         return None  # the cross-hatch residue: broad, faint, soft, short, along a groove, not one line or faint, ragged
-    conf = _confidence(m["significance"], cfg.min_significance)
+    conf = confidence_of(m["significance"], cfg.min_significance)
     return Defect(kind, m["x"] + box[0], m["y"] + box[1], m["length"], m["width"], conf, m["angle"], m["u_length"],
                   m["u_width"], m["significance"], at_border)

@@ -15,13 +15,13 @@ import numpy as np
 from station.vision.imageio import to_8bit, to_grey
 from station.vision.defects.config import Defect, DefectConfig, GROUP_DOMINANT_SHARE
 from station.vision.defects.wall import (
-    _band, _candidates, _furrows, _group_collinear, _hole_zone, model_wall, _one_furrow, _seed_in_box,
+    line_band, find_candidates, split_furrows, group_collinear, hole_zone, model_wall, one_furrow, seed_in_box,
 )
-from station.vision.defects.rims import _hole_blur, _marks_mask, _rim_defects
+from station.vision.defects.rims import hole_blur, marks_mask, rim_defects
 from station.vision.defects.scratches import BLUR_PRIOR_PX
-from station.vision.defects.examine import _examine, _Examined
+from station.vision.defects.examine import examine_candidate, ExaminedCandidate
 from station.vision.defects.tracking import (
-    _drop_scratch_pieces, _join_scratch_pieces, _line_points, _measured_again, _track_scratches,
+    drop_scratch_pieces, join_scratch_pieces, line_points, measured_again, track_scratches,
 )
 
 
@@ -70,7 +70,7 @@ def detect_defects(image: np.ndarray, mm_per_px: float, *, holes=None, blur_px: 
     ``station bench surface``). (A pore's fitted edge blur was tried as a third
     source and dropped: its ragged outline reads as extra blur, up to 3 px on dev frames.)
     Given, it stands for the blur everywhere but at the rims, which each read their own
-    hole's (``_rim_defects``).
+    hole's (``rim_defects``).
     Sorted by y then x.
     """
     if not (mm_per_px and mm_per_px > 0):
@@ -82,18 +82,18 @@ def detect_defects(image: np.ndarray, mm_per_px: float, *, holes=None, blur_px: 
     # the wall model leaves out each hole and the band its rim defects may occupy
     reach_px = cfg.rim_reach_mm / mm_per_px + 6.0
     wall = model_wall(img, holes, reach_px, cfg, largest_mark_px=cfg.min_hole_diameter_mm / mm_per_px)
-    zone = _hole_zone(img.shape, holes, reach_px)
+    zone = hole_zone(img.shape, holes, reach_px)
     hh, ww = img.shape
     level_full = cv2.resize(wall.level, (ww // 2 * 2, hh // 2 * 2), interpolation=cv2.INTER_LINEAR)
     if level_full.shape != img.shape:  # an odd size: the last row or column repeats
         level_full = cv2.copyMakeBorder(level_full, 0, hh - level_full.shape[0], 0, ww - level_full.shape[1],
                                         cv2.BORDER_REPLICATE)
     blur_hint = blur_px
-    hole_blurs = [_hole_blur(h) for h in holes if getattr(h, "edge_sigma_px", None)]
+    hole_blurs = [hole_blur(h) for h in holes if getattr(h, "edge_sigma_px", None)]
     if blur_hint is None and hole_blurs:
         blur_hint = float(np.median(hole_blurs))
     max_width_px = cfg.max_scratch_width_mm / mm_per_px
-    examined: list[_Examined] = []
+    examined: list[ExaminedCandidate] = []
     # what the defects measured so far cover (their regions, a scratch's line): each
     # patch's wall model leaves it out as well as its own candidate (a 0.43 mm pore 14 px
     # below a patch pulled its grooves' fit, and the wall above it stood as a false 0.31 mm
@@ -106,9 +106,9 @@ def detect_defects(image: np.ndarray, mm_per_px: float, *, holes=None, blur_px: 
     claimed_regions = np.zeros(img.shape, bool)
     pore_regions = np.zeros(img.shape, np.int32)  # the pores' regions alone, each its own label
     pore_sizes = [0]  # each label's px (label 0: none)
-    candidates = _candidates(wall, cfg)
+    candidates = find_candidates(wall, cfg)
     # (a group; None, or for a member examined on its own what its group's defects claimed)
-    queue = [(group, None) for group in _group_collinear(candidates)]
+    queue = [(group, None) for group in group_collinear(candidates)]
     while queue:
         group, own_group = queue.pop(0)
         bx0 = min(candidates[i][2][0] for i in group)
@@ -120,7 +120,7 @@ def detect_defects(image: np.ndarray, mm_per_px: float, *, holes=None, blur_px: 
         box = (max(2 * bx0 - margin, 0), max(2 * by0 - margin, 0), min(2 * bx1 + margin, ww), min(2 * by1 + margin, hh))
         seed = np.zeros((box[3] - box[1], box[2] - box[0]), bool)
         for i in group:
-            seed |= _seed_in_box(candidates[i][0], candidates[i][1], box)
+            seed |= seed_in_box(candidates[i][0], candidates[i][1], box)
         taken = claimed[box[1]:box[3], box[0]:box[2]]
         if own_group is not None:  # its own group's claim grew over it, not a measurement of it
             taken = taken & ~own_group[box[1]:box[3], box[0]:box[2]]
@@ -133,19 +133,19 @@ def detect_defects(image: np.ndarray, mm_per_px: float, *, holes=None, blur_px: 
         # residue attached holds bands too, and its pieces were read as pores; such a
         # seed is examined whole
         results = []
-        furrows = [(fx + box[0], fy + box[1], fa, bend) for fx, fy, fa, bend in _furrows(seed)]
+        furrows = [(fx + box[0], fy + box[1], fa, bend) for fx, fy, fa, bend in split_furrows(seed)]
         if furrows:
-            results = [_examine(img, box, seed & _band(seed.shape, box[:2], line, cfg.furrow_half_band_px), zone,
-                                wall.angles_deg, level_full, cfg, blur_hint, max_width_px, excl=seed, confine=line,
-                                others=claimed)
+            results = [examine_candidate(img, box, seed & line_band(seed.shape, box[:2], line, cfg.furrow_half_band_px),
+                                         zone, wall.angles_deg, level_full, cfg, blur_hint, max_width_px, excl=seed,
+                                         confine=line, others=claimed)
                        for line in furrows]
             if not any(ex.defect is not None for ex in results) or \
                     any(ex.defect is not None and ex.defect.kind != "scratch" for ex in results):
                 results = []
         if not results:
-            results = [_examine(img, box, seed, zone, wall.angles_deg, level_full, cfg, blur_hint, max_width_px,
-                                others=claimed)]
-            line = _one_furrow(seed) if results[0].defect is None else None
+            results = [examine_candidate(img, box, seed, zone, wall.angles_deg, level_full, cfg, blur_hint,
+                                         max_width_px, others=claimed)]
+            line = one_furrow(seed) if results[0].defect is None else None
             if line is not None:
                 # one furrow whose region, grown unconfined, was no defect: a deep groove's
                 # residue that crosses a scratch joins its region, which is then no line and
@@ -153,9 +153,9 @@ def detect_defects(image: np.ndarray, mm_per_px: float, *, holes=None, blur_px: 
                 # plain to see, not reported, seed 2086604). Examined again confined to the
                 # seed's own line, kept only as a scratch
                 line = (line[0] + box[0], line[1] + box[1], line[2], line[3])
-                again = _examine(img, box, seed & _band(seed.shape, box[:2], line, cfg.furrow_half_band_px), zone,
-                                 wall.angles_deg, level_full, cfg, blur_hint, max_width_px, excl=seed,
-                                 confine=line, others=claimed)
+                own_line = seed & line_band(seed.shape, box[:2], line, cfg.furrow_half_band_px)
+                again = examine_candidate(img, box, own_line, zone, wall.angles_deg, level_full, cfg, blur_hint,
+                                          max_width_px, excl=seed, confine=line, others=claimed)
                 if again.defect is not None and again.defect.kind == "scratch":
                     results = [again]
         for ex in results:
@@ -164,8 +164,8 @@ def detect_defects(image: np.ndarray, mm_per_px: float, *, holes=None, blur_px: 
             rb = ex.box or box
             if ex.cover is not None and claimed[rb[1]:rb[3], rb[0]:rb[2]][ex.cover].mean() > 0.5:
                 continue  # grown along its line into a scratch already measured (groove residue beside it)
-            if ex.defect.kind == "pore" and _measured_again(pore_regions[rb[1]:rb[3], rb[0]:rb[2]], ex.region,
-                                                            pore_sizes):
+            if ex.defect.kind == "pore" and measured_again(pore_regions[rb[1]:rb[3], rb[0]:rb[2]], ex.region,
+                                                           pore_sizes):
                 # a pore measured again: a groove's stretch beside it seeded a region that grew
                 # over it (wide bench, 40 deg hatch, seed 89055: a 0.30 mm pore on a deep
                 # groove reported a second time as a 0.47 mm one, its centre 7 px off)
@@ -208,17 +208,17 @@ def detect_defects(image: np.ndarray, mm_per_px: float, *, holes=None, blur_px: 
                     group_claim[rb[1]:rb[3], rb[0]:rb[2]] |= ex.region if ex.cover is None else ex.region | ex.cover
             inside = covered[box[1]:box[3], box[0]:box[2]]
             for i in group:
-                own = _seed_in_box(candidates[i][0], candidates[i][1], box)
+                own = seed_in_box(candidates[i][0], candidates[i][1], box)
                 if own.any() and inside[own].mean() < 0.05:
                     queue.append(([i], group_claim))
-    examined = _drop_scratch_pieces(examined)
-    examined = _track_scratches(img, level_full, examined, cfg, wall.angles_deg, wall.residual)
-    examined = _join_scratch_pieces(img, level_full, examined, cfg)
-    found: list[Defect] = [ex.defect if ex.line is None else replace(ex.defect, line_px=_line_points(ex.line))
+    examined = drop_scratch_pieces(examined)
+    examined = track_scratches(img, level_full, examined, cfg, wall.angles_deg, wall.residual)
+    examined = join_scratch_pieces(img, level_full, examined, cfg)
+    found: list[Defect] = [ex.defect if ex.line is None else replace(ex.defect, line_px=line_points(ex.line))
                            for ex in examined if ex.defect is not None]
-    others = [_hole_zone(img.shape, [h for j, h in enumerate(holes) if j != i], reach_px) for i in range(len(holes))]
+    others = [hole_zone(img.shape, [h for j, h in enumerate(holes) if j != i], reach_px) for i in range(len(holes))]
     blur_rim = blur_hint if blur_hint is not None else BLUR_PRIOR_PX[0]
-    marks = _marks_mask(img.shape, found, blur_rim) if holes else None
+    marks = marks_mask(img.shape, found, blur_rim) if holes else None
     grown, labels = None, None
     if holes and claimed_regions.any():
         # a mark that reaches a rim's band, with its blurred skirt (2.5 blur + 1 px): a
@@ -231,15 +231,15 @@ def detect_defects(image: np.ndarray, mm_per_px: float, *, holes=None, blur_px: 
                            cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * skirt + 1, 2 * skirt + 1)))
         labels = cv2.connectedComponents(grown)[1]
     for i, hole in enumerate(holes):
-        own = _hole_zone(img.shape, [hole], reach_px)
+        own = hole_zone(img.shape, [hole], reach_px)
         marks_i = claimed_regions
         if labels is not None:
             near = np.unique(labels[own & (grown > 0)])
             near = near[near > 0]
             if near.size:
                 marks_i = claimed_regions | np.isin(labels, near)
-        found += _rim_defects(img, hole, i, others[i] | (marks_i & ~own),
-                              level_full, wall.angles_deg, cfg, mm_per_px, marks=marks)
+        found += rim_defects(img, hole, i, others[i] | (marks_i & ~own),
+                             level_full, wall.angles_deg, cfg, mm_per_px, marks=marks)
     out = []
     model = {k: (a, b) for k, a, b in cfg.model_u_px}
     for d in found:

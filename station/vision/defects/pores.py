@@ -13,8 +13,8 @@ import numpy as np
 from scipy.special import ive, ndtr
 
 from station.vision.defects.config import DefectConfig
-from station.vision.defects.common import feret, _gauss_newton, _weighted_pca
-from station.vision.defects.wall import _Patch
+from station.vision.defects.common import feret, gauss_newton, weighted_pca
+from station.vision.defects.wall import Patch
 from station.vision.defects.scratches import BLUR_PRIOR_PX
 
 
@@ -54,7 +54,7 @@ def _fit_contrast(r, xx, yy, use, cx, cy, cov, mass,
         k = int(np.ceil(v.size / 2500))
         x, y, v = x[::k], y[::k], v[::k]
     p0 = np.clip(p0, lo, hi)
-    fit = _gauss_newton(lambda p: _ellipse_model(p, x, y), p0, v, lo, hi)
+    fit = gauss_newton(lambda p: _ellipse_model(p, x, y), p0, v, lo, hi)
     c, s = float(fit.x[5]), float(fit.x[6])
     c_sd = float(np.sqrt(max(fit.cov[5, 5], 0.0))) if np.isfinite(fit.cov[5, 5]) else c
     aspect = float(max(fit.x[2], fit.x[3]) / max(min(fit.x[2], fit.x[3]), 0.25))
@@ -157,8 +157,8 @@ def _outline_roughness(th: np.ndarray, rr: np.ndarray) -> float:
     return float(np.sqrt(np.mean((rr - fitted) ** 2)))
 
 
-def _measure_pore(patch: _Patch, region: np.ndarray, cfg: DefectConfig, allow_scratch: bool = True,
-                  blur_hint: float | None = None, beside: np.ndarray | None = None):
+def measure_pore(patch: Patch, region: np.ndarray, cfg: DefectConfig, allow_scratch: bool = True,
+                 blur_hint: float | None = None, beside: np.ndarray | None = None):
     """A pore: centroid, outline from the darkening in 32 sectors, greatest Feret
     diameter and the extent across it, with standard uncertainties (px, before the
     config's factor), the significance and the floor's contrast.
@@ -192,7 +192,7 @@ def _measure_pore(patch: _Patch, region: np.ndarray, cfg: DefectConfig, allow_sc
     if significance < cfg.min_significance or mean_darkness < cfg.min_mean_darkness:
         return None  # before the fit, which costs most of a candidate's time
     pos = np.clip(wts, 0.0, None)
-    cx, cy, _, cov = _weighted_pca(xx, yy, pos)
+    cx, cy, _, cov = weighted_pca(xx, yy, pos)
     fit_area = cv2.dilate(omega.astype(np.uint8), np.ones((9, 9), np.uint8)).astype(bool) & ~off
     c, blur, c_sd, aspect = _fit_contrast(r, xx, yy, fit_area, cx, cy, cov, mass)
     if allow_scratch and aspect >= cfg.scratch_elongation:

@@ -17,8 +17,8 @@ from scipy.special import ndtr
 
 from station.vision.edges import SMOOTH_SIGMA_PX
 from station.vision.defects.config import Defect, DefectConfig, RIM_FLOOR_CROSSING, RIM_HOLD_PX
-from station.vision.defects.common import _confidence, _fit_end, _mad_sigma, _runs
-from station.vision.defects.wall import _groove_profiles, _plane
+from station.vision.defects.common import confidence_of, fit_end, mad_sigma, true_runs
+from station.vision.defects.wall import groove_profiles, fit_plane
 
 
 @dataclass
@@ -68,8 +68,8 @@ def _rim_profile(img: np.ndarray, hole, zone_others: np.ndarray, reach_px: float
     fit_ring = (rho > rad + reach_px + 1.0) & (rho < rad + out_px + 12.0) & (others == 0)
     if fit_ring.sum() > 100:
         d = 1.0 - p / np.maximum(level, 1.0)
-        d -= _plane(d, xx - x0, yy - y0, fit_ring)
-        grooves = _groove_profiles(d, xx, yy, fit_ring, angles_deg, sides_about=(cx, cy) if groove_sides else None)
+        d -= fit_plane(d, xx - x0, yy - y0, fit_ring)
+        grooves = groove_profiles(d, xx, yy, fit_ring, angles_deg, sides_about=(cx, cy) if groove_sides else None)
         p = p + level * grooves * ndtr((rho - rad) / max(blur_px, 0.5)).astype(np.float32)
     step = 0.5
     n_th = int(np.ceil(2 * np.pi * rad / step))
@@ -163,7 +163,7 @@ def _lift_wall(share: np.ndarray, rb: np.ndarray, valid: np.ndarray, beyond: flo
         return share
     e = np.median(share[outer], axis=0)  # every column finite: unread rays are 0
     e_s = smooth(e, 4.0)
-    spread = _mad_sigma(e_s[valid])
+    spread = mad_sigma(e_s[valid])
     lift = np.minimum(e_s + 2.0 * spread, 0.0)
     lift[~valid] = 0.0
     if not (lift < 0).any():
@@ -211,7 +211,7 @@ def _robust_harmonics(theta: np.ndarray, edge: np.ndarray, valid: np.ndarray, or
     y = np.nan_to_num(edge)
     lag = max(int(round(4.0 / (2 * np.pi * max(float(np.nanmean(edge)), 1.0) / theta.size))), 1)
     both = valid & np.roll(valid, -lag)
-    local = _mad_sigma((np.roll(y, -lag) - y)[both]) / np.sqrt(2.0)
+    local = mad_sigma((np.roll(y, -lag) - y)[both]) / np.sqrt(2.0)
     # a clean rim wanders by ~0.1-0.3 px where grooves cross it; a measured centre may be
     # off by 1-2 px (a first harmonic of that size; two large burrs pull the hole's fit):
     # the weights' reach shrinks from 3.7 px to the noise's over the first passes, so
@@ -246,13 +246,13 @@ def camera_blur_from_edge(edge_sigma_px: float) -> float:
     return float(np.sqrt(max(edge_sigma_px**2 - SMOOTH_SIGMA_PX**2 - 1.0 / 6.0, 0.25)))
 
 
-def _hole_blur(hole) -> float:
+def hole_blur(hole) -> float:
     """The camera's blur at a hole's rim (px): :func:`camera_blur_from_edge` of its
     ``edge_sigma_px``."""
     return camera_blur_from_edge(hole.edge_sigma_px)
 
 
-def _marks_mask(shape: tuple[int, int], found, blur: float) -> np.ndarray:
+def marks_mask(shape: tuple[int, int], found, blur: float) -> np.ndarray:
     """The frame's pores and scratches found, each as its measured ellipse (length by
     width along its direction) grown by its blurred skirt (3 blur + 2 px): whole, where
     their claimed regions stop at a hole's zone (``_groove_run_on`` must not read a pore
@@ -275,24 +275,24 @@ def _rim_noise(dev: np.ndarray, k: float, rounds: int = 4) -> float:
     (clean rims there: 0.05-0.17), and the chips, 2.5 and 3.5 px high, stayed under the
     5-noise bar (station bench seed 93005); without the burrs it reads 0.17 px. On a
     rim without defects nothing stands out at k noise, and the first reading stands."""
-    noise = max(_mad_sigma(dev), 0.02)
+    noise = max(mad_sigma(dev), 0.02)
     for _ in range(rounds):
         inside = np.abs(dev) < k * noise
         if inside.sum() < 10 or inside.all():
             break
-        new = max(_mad_sigma(dev[inside]), 0.02)
+        new = max(mad_sigma(dev[inside]), 0.02)
         if abs(new - noise) <= 1e-3 * noise:
             break
         noise = new
     return noise
 
 
-def _rim_defects(img: np.ndarray, hole, index: int, zone_others: np.ndarray, wall_level: np.ndarray, angles_deg,
-                 cfg: DefectConfig, mm_per_px: float, marks: np.ndarray | None = None) -> list[Defect]:
+def rim_defects(img: np.ndarray, hole, index: int, zone_others: np.ndarray, wall_level: np.ndarray, angles_deg,
+                cfg: DefectConfig, mm_per_px: float, marks: np.ndarray | None = None) -> list[Defect]:
     """Burrs and chips on one hole's rim: where the rim's edge stands out of its own
     low harmonics, inwards (burr) or outwards (chip). ``marks``: the frame's pores and
-    scratches found (``_marks_mask``), which a chip's run-on test does not read."""
-    blur = _hole_blur(hole) if getattr(hole, "edge_sigma_px", None) else 1.3
+    scratches found (``marks_mask``), which a chip's run-on test does not read."""
+    blur = hole_blur(hole) if getattr(hole, "edge_sigma_px", None) else 1.3
     reach = cfg.rim_reach_mm / mm_per_px + 2.5 * blur + 2.0
     prof = _rim_profile(img, hole, zone_others, reach, wall_level, angles_deg, blur, cfg.rim_crossing,
                         cfg.rim_find_smooth_px, cfg.rim_groove_sides)
@@ -364,7 +364,7 @@ def _rim_defects(img: np.ndarray, hole, index: int, zone_others: np.ndarray, wal
         sf = sign * dev_f
         # teeth of one ragged defect join over dips that stay above a third of the
         # threshold: a clean rim between two defects comes back to within the noise
-        for a, b in _merge_runs(_runs((sf > thr_f) & valid, whole), sf, whole, 0.35 * thr_f):
+        for a, b in _merge_runs(true_runs((sf > thr_f) & valid, whole), sf, whole, 0.35 * thr_f):
             idx = np.arange(a, b) % n
             h_ref = float(np.median(sd[idx]))
             # walk out to half the run's height, sub-sample by linear interpolation
@@ -387,8 +387,8 @@ def _rim_defects(img: np.ndarray, hole, index: int, zone_others: np.ndarray, wal
             # the ends on the area-true profile: the edge's crossing sits off the middle of
             # the blurred step (``rim_crossing``), which shortens chips and lengthens burrs
             # by ~1.3 blur
-            s1, u1 = _fit_end(s_arc, sign * dev_int_s[win[ok] % n], start * step_arc, blur, rising=True)
-            s2, u2 = _fit_end(s_arc, sign * dev_int_s[win[ok] % n], stop * step_arc, blur, rising=False)
+            s1, u1 = fit_end(s_arc, sign * dev_int_s[win[ok] % n], start * step_arc, blur, rising=True)
+            s2, u2 = fit_end(s_arc, sign * dev_int_s[win[ok] % n], stop * step_arc, blur, rising=False)
             length = s2 - s1
             if not length >= cfg.rim_min_length_px:
                 continue
@@ -447,7 +447,7 @@ def _rim_defects(img: np.ndarray, hole, index: int, zone_others: np.ndarray, wal
             level = 0.15 * blur if kind == "burr" else 0.1 * height
             u_h = float(np.hypot(noise * np.sqrt(2.5 * blur / max(length, 1.0)), level))
             out.append(Defect(kind, float(hole.x_px + rc * np.cos(th)), float(hole.y_px + rc * np.sin(th)),
-                              float(length), float(height), _confidence(significance, cfg.min_significance),
+                              float(length), float(height), confidence_of(significance, cfg.min_significance),
                               float(np.rad2deg(th) % 360.0), u_len, u_h, float(significance), partial, index))
     return out
 
@@ -473,7 +473,7 @@ def _flank_level(values: np.ndarray, valid: np.ndarray, whole: bool, s1: float, 
     return max(min(levels), 0.0)
 
 
-def _darkness_reader(img: np.ndarray, wall_level: np.ndarray, others: np.ndarray):
+def darkness_reader(img: np.ndarray, wall_level: np.ndarray, others: np.ndarray):
     """A function of points (..., 2) giving the wall's darkness 1 - I / W there (W the
     frame's level ``wall_level``, bilinear), NaN off the frame and in ``others``."""
     hh, ww = img.shape
@@ -532,7 +532,7 @@ def _groove_along_rim(img: np.ndarray, wall_level: np.ndarray, others: np.ndarra
     rad = hole.diameter_px / 2.0
     mid = 0.5 * (theta1 + theta2)
     half = 0.5 * (theta2 - theta1)
-    darkness = _darkness_reader(img, wall_level, others)
+    darkness = darkness_reader(img, wall_level, others)
     hole_dark = _hole_darkness(darkness, centre, rad, mid)
     if hole_dark is None:
         return 0.0
@@ -591,7 +591,7 @@ def _groove_run_on(img: np.ndarray, wall_level: np.ndarray, others: np.ndarray, 
     tang = np.array([-radial[1], radial[0]])
     centre = np.array([hole.x_px, hole.y_px])
     rad = hole.diameter_px / 2.0
-    darkness = _darkness_reader(img, wall_level, others)
+    darkness = darkness_reader(img, wall_level, others)
     hole_dark = _hole_darkness(darkness, centre, rad, theta)
     if hole_dark is None:
         return 0.0
@@ -642,7 +642,7 @@ def _chip_floor(prof: _RimProfile, rays: np.ndarray, s_arc: np.ndarray, s1: floa
     of 40 % contrast is a share of -0.4 to 0.25, but a burr is ragged (its height varies
     by 30 % over 1.5 px along the rim), its rays' share falls off across any window
     inside its rim, and the same reading over-corrected deep burrs by 30-40 % (dev
-    frames). A burr's height is read from its rays' edges instead (``_rim_defects``)."""
+    frames). A burr's height is read from its rays' edges instead (``rim_defects``)."""
     along = float(np.sqrt(blur**2 + 1.0 / 6.0))  # the camera's blur and the rays' sampling
     cover = ndtr((s_arc - s1) / along) - ndtr((s_arc - s2) / along)
     vals = []

@@ -13,9 +13,9 @@ from scipy.ndimage import gaussian_filter1d
 from scipy.special import ndtr
 
 from station.vision.defects.common import (
-    _circ_diff_deg, _Fit, _fit_end, _gauss_newton, _mad_sigma, _runs, _weighted_pca,
+    circ_diff_deg, FitResult, fit_end, gauss_newton, mad_sigma, true_runs, weighted_pca,
 )
-from station.vision.defects.wall import _Patch
+from station.vision.defects.wall import Patch
 
 
 def _strip(r: np.ndarray, cx: float, cy: float, ang: float, s: np.ndarray, n: np.ndarray,
@@ -54,7 +54,7 @@ def _scratch_extent(m: np.ndarray, step: float, gap_px: float = 0.0,
 
     ``held``: another read of the same strip (its profile, sampled as ``m``, and its
     extent there) whose gaps alone may split ``m`` inside that extent: the grooves'
-    scaling of a profile (``_measure_scratch``) is a correction, and where a groove runs
+    scaling of a profile (``measure_scratch``) is a correction, and where a groove runs
     beside a scratch rather than across it, it drives the residual there below zero and
     lifts a junction of grooves on the scratch 2-3x, so it made a gap the raw read does
     not have, and the lesser half of a 1.6 mm scratch was lost (the twin's 2170043)."""
@@ -100,7 +100,7 @@ def _profile_gaps(coarse: np.ndarray, gap_px: float) -> list[tuple[int, int]] | 
     if plateau <= 0:
         return None
     seg = np.convolve(coarse, np.ones(3) / 3.0, mode="same")
-    return [(ga, gb) for ga, gb in _runs(seg < 0.25 * plateau, False) if gb - ga >= gap_px]
+    return [(ga, gb) for ga, gb in true_runs(seg < 0.25 * plateau, False) if gb - ga >= gap_px]
 
 
 def _largest_piece(coarse: np.ndarray, a: int, b: int, gap_px: float,
@@ -196,8 +196,8 @@ def _ends_blur(s: np.ndarray, a: np.ndarray, s1: float, s2: float) -> tuple[floa
         # scratch, and the darkening outside its ends reads a few per cent negative
         lo = np.array([0.0, end - 2.0, 0.4, -0.5 * h0])
         hi = np.array([4.0 * h0, end + 2.0, 4.0, 0.5 * h0])
-        fit = _gauss_newton(lambda q: q[0] * ndtr(sign * (x - q[1]) / q[2]) + q[3], np.array([h0, end, 1.5, 0.0]), v,
-                            lo, hi, iterations=15)
+        fit = gauss_newton(lambda q: q[0] * ndtr(sign * (x - q[1]) / q[2]) + q[3], np.array([h0, end, 1.5, 0.0]), v,
+                           lo, hi, iterations=15)
         # samples 0.5 px apart of a bilinear interpolation are correlated (twice the
         # variance), and the scratch's width varies along it on the scale of the fit's
         # window (its plateau is no step's): dev frames' errors were twice the spread
@@ -231,7 +231,7 @@ def _bend_function(coef: np.ndarray, lo: float, hi: float):
     return at, slope
 
 
-def _scratch_cross_fit(nv: np.ndarray, pv: np.ndarray, b: float, half_w: float, p0=None) -> _Fit:
+def _scratch_cross_fit(nv: np.ndarray, pv: np.ndarray, b: float, half_w: float, p0=None) -> FitResult:
     """The mean cross profile as a blurred box of blur ``b`` (px, the strip's sampling
     included): contrast, centre, width, offset. The contrast is at most 1: a relative
     darkness beyond it is no light at all (a thin scratch fitted without that bound
@@ -241,8 +241,8 @@ def _scratch_cross_fit(nv: np.ndarray, pv: np.ndarray, b: float, half_w: float, 
     lo = np.array([0.0, -3.0, 0.2, -0.1])
     hi = np.array([1.0, 3.0, 2 * half_w, 0.1])
     start = np.array([c0, 0.0, w0, 0.0]) if p0 is None else np.asarray(p0, float)
-    return _gauss_newton(lambda p: p[0] * _blurred_box(nv, p[1], p[2], b) + p[3], np.clip(start, lo, hi), pv,
-                         lo, hi, iterations=20, huber_k=10.0)
+    return gauss_newton(lambda p: p[0] * _blurred_box(nv, p[1], p[2], b) + p[3], np.clip(start, lo, hi), pv,
+                        lo, hi, iterations=20, huber_k=10.0)
 
 
 def _scratch_blur(nv: np.ndarray, pv: np.ndarray, half_w: float):
@@ -250,7 +250,7 @@ def _scratch_blur(nv: np.ndarray, pv: np.ndarray, half_w: float):
     calibration): what its mean cross profile says (a blurred box with a free blur: its
     shoulders fix the blur when the scratch is wide, its kurtosis when thin, to ~0.1 px
     on a scratch 100 px long) and the prior (``BLUR_PRIOR_PX``), combined by their
-    variances; ``_measure_scratch`` adds what its two ends say (``_ends_blur``: blurred
+    variances; ``measure_scratch`` adds what its two ends say (``_ends_blur``: blurred
     steps, 0.2-0.4 px each). Returns (blur, its variance). The ends alone (the first
     version) read the twin's 1.2 px blur anywhere from 0.5 to 2 px, and its thin
     scratches' widths 50-70 % off."""
@@ -259,8 +259,8 @@ def _scratch_blur(nv: np.ndarray, pv: np.ndarray, half_w: float):
     w0 = max(float(np.trapezoid(np.clip(pv, 0, None), nv)) / c0, 0.5)
     lo = np.array([0.0, -3.0, 0.2, 0.45, -0.1])
     hi = np.array([1.0, 3.0, 2 * half_w, 4.0, 0.1])
-    free = _gauss_newton(lambda p: p[0] * _blurred_box(nv, p[1], p[2], p[3]) + p[4],
-                         np.clip(np.array([c0, 0.0, w0, 1.5, 0.0]), lo, hi), pv, lo, hi, iterations=20, huber_k=10.0)
+    free = gauss_newton(lambda p: p[0] * _blurred_box(nv, p[1], p[2], p[3]) + p[4],
+                        np.clip(np.array([c0, 0.0, w0, 1.5, 0.0]), lo, hi), pv, lo, hi, iterations=20, huber_k=10.0)
     bx, var = float(free.x[3]), float(free.cov[3, 3])
     if np.isfinite(var) and var > 0 and lo[3] + 0.05 < bx < hi[3] - 0.05:
         b = float(np.sqrt(max(bx * bx - 1.0 / 6.0, 0.25)))
@@ -374,8 +374,8 @@ def _hatch_tail(s: np.ndarray, c: np.ndarray, w: np.ndarray, ang: float, angles_
     span = (b - ss[0], ss[-1] - b)
     for side in (0, 1):  # 0: the tail at the low end of s, 1: at the high end
         if span[side] >= HATCH_TAIL_MIN_PX and span[1 - side] >= HATCH_TAIL_MIN_BODY_PX and \
-                any(_circ_diff_deg(deg[side], g) <= HATCH_TAIL_DEG for g in angles_deg) and \
-                all(_circ_diff_deg(deg[1 - side], g) >= alignment_deg for g in angles_deg):
+                any(circ_diff_deg(deg[side], g) <= HATCH_TAIL_DEG for g in angles_deg) and \
+                all(circ_diff_deg(deg[1 - side], g) >= alignment_deg for g in angles_deg):
             break
     else:
         return None
@@ -404,10 +404,10 @@ def _hatch_tail(s: np.ndarray, c: np.ndarray, w: np.ndarray, ang: float, angles_
     return out, float(b), side
 
 
-def _measure_scratch(patch: _Patch, region: np.ndarray, blur_hint: float | None = None, angles_deg=(),
-                     alignment_deg: float = 7.5):
+def measure_scratch(patch: Patch, region: np.ndarray, blur_hint: float | None = None, angles_deg=(),
+                    alignment_deg: float = 7.5):
     """A scratch: its centre line (a polynomial bend), its extent (``_scratch_extent``)
-    and each end at half its local height (``_fit_end``) on its amplitude along it (the
+    and each end at half its local height (``fit_end``) on its amplitude along it (the
     strip matched-filtered across by its own mean cross profile), its mean width (that
     profile fitted as a blurred box), with standard uncertainties (px). ``angles_deg``:
     the frame's groove families, and ``alignment_deg`` how near one a direction is along
@@ -420,7 +420,7 @@ def _measure_scratch(patch: _Patch, region: np.ndarray, blur_hint: float | None 
     if wts.sum() <= 0:
         return None
     xr, yr, wr = xx[region], yy[region], wts[region]
-    cx, cy, ang, _ = _weighted_pca(xr, yr, wr)
+    cx, cy, ang, _ = weighted_pca(xr, yr, wr)
     # the main line: a deep groove's residue the scratch ends on joins its region as a
     # branch, and a 40 px branch at 60 deg dragged the strip's width, its centre line
     # and its end along it (the twin's frames: a 127 px scratch read 191 px). What lies
@@ -434,7 +434,7 @@ def _measure_scratch(patch: _Patch, region: np.ndarray, blur_hint: float | None 
         if keep.sum() < 8 or wr[keep].sum() <= 0:
             break
         main = keep
-        cx, cy, ang, _ = _weighted_pca(xr[main], yr[main], wr[main])
+        cx, cy, ang, _ = weighted_pca(xr[main], yr[main], wr[main])
     ca, sa = np.cos(ang), np.sin(ang)
     along = (xr[main] - cx) * ca + (yr[main] - cy) * sa
     across = -(xr[main] - cx) * sa + (yr[main] - cy) * ca
@@ -482,7 +482,7 @@ def _measure_scratch(patch: _Patch, region: np.ndarray, blur_hint: float | None 
     for _ in range(5):
         line = np.polyfit(sg, cg, 1, w=wts)
         res = cg - np.polyval(line, sg)
-        u = res / (4.685 * max(_mad_sigma(res), 0.5))
+        u = res / (4.685 * max(mad_sigma(res), 0.5))
         wts = np.sqrt(col_mass[good]) * np.where(np.abs(u) < 1, (1 - u * u) ** 2, 0.0)
         if (wts > 0).sum() <= 3:
             break
@@ -503,7 +503,7 @@ def _measure_scratch(patch: _Patch, region: np.ndarray, blur_hint: float | None 
     for _ in range(4):
         coef = np.polyfit(s[good], centre_n[good], deg, w=wts)
         res = centre_n[good] - np.polyval(coef, s[good])
-        u = res / (4.685 * max(_mad_sigma(res), 0.3))
+        u = res / (4.685 * max(mad_sigma(res), 0.3))
         wts = np.sqrt(col_mass[good]) * np.where(np.abs(u) < 1, (1 - u * u) ** 2, 0.0)
         if (wts > 0).sum() <= deg + 2:
             break
@@ -647,8 +647,8 @@ def _measure_scratch(patch: _Patch, region: np.ndarray, blur_hint: float | None 
     # a square end's step in ms: the camera's blur and the strip's sampling (blur_x), and
     # the 1 px smoothing
     step_blur = float(np.hypot(blur_x, 1.0))
-    s1, u_s1 = _fit_end(sv, ms, s1, blur, rising=True, step_blur=step_blur)
-    s2, u_s2 = _fit_end(sv, ms, s2, blur, rising=False, step_blur=step_blur)
+    s1, u_s1 = fit_end(sv, ms, s1, blur, rising=True, step_blur=step_blur)
+    s2, u_s2 = fit_end(sv, ms, s2, blur, rising=False, step_blur=step_blur)
     # ... each end read at half its local height, which walks out along a shelf past a
     # square end: where the scratch ends on a deep groove crossing it, the model's misfit
     # of the groove beyond holds a third of the scratch's level, and read on it the half
@@ -661,10 +661,10 @@ def _measure_scratch(patch: _Patch, region: np.ndarray, blur_hint: float | None 
         lo_raw, hi_raw = float(sv[ext_raw[0]]), float(sv[ext_raw[1] - 1])
         k1 = int(np.searchsorted(sv, s1))
         if own > 0 and _shelf_beyond(av, groove_av, k1, ext_raw[0], ext_raw, step):
-            s1, u_s1 = _fit_end(sv, ms, lo_raw, blur, rising=True, height=own)
+            s1, u_s1 = fit_end(sv, ms, lo_raw, blur, rising=True, height=own)
         k2 = int(np.searchsorted(sv, s2, side="right"))
         if own > 0 and _shelf_beyond(av, groove_av, ext_raw[1], k2, ext_raw, step):
-            s2, u_s2 = _fit_end(sv, ms, hi_raw, blur, rising=False, height=own)
+            s2, u_s2 = fit_end(sv, ms, hi_raw, blur, rising=False, height=own)
     if s2 - s1 < 3.0:
         return None
     ss = np.linspace(s1, s2, 200)

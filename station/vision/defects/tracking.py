@@ -15,12 +15,12 @@ import numpy as np
 from scipy.ndimage import gaussian_filter1d, map_coordinates
 
 from station.vision.defects.config import Defect, DefectConfig
-from station.vision.defects.common import _circ_diff_deg, _confidence, _near_hatch, _weighted_pca
+from station.vision.defects.common import circ_diff_deg, confidence_of, near_hatch, weighted_pca
 from station.vision.defects.scratches import BLUR_PRIOR_PX
-from station.vision.defects.examine import _end_steps, _Examined
+from station.vision.defects.examine import end_steps, ExaminedCandidate
 
 
-def _measured_again(labels: np.ndarray, region: np.ndarray, sizes: list[int]) -> bool:
+def measured_again(labels: np.ndarray, region: np.ndarray, sizes: list[int]) -> bool:
     """Whether a pore's ``region`` is a pore already measured (``labels``: the measured
     pores' regions, each its own label, 0 elsewhere, over the region's box; ``sizes``:
     each label's whole region, px, by label): it covers at least half of one of them."""
@@ -28,7 +28,7 @@ def _measured_again(labels: np.ndarray, region: np.ndarray, sizes: list[int]) ->
     return any(np.count_nonzero(under == lab) >= 0.5 * sizes[lab] for lab in np.unique(under[under > 0]))
 
 
-def _cover_share(a: "_Examined", b: "_Examined") -> float:
+def _cover_share(a: "ExaminedCandidate", b: "ExaminedCandidate") -> float:
     """The share of ``a``'s cover that lies in ``b``'s (frame px)."""
     (ax0, ay0, ax1, ay1), (bx0, by0, bx1, by1) = a.box, b.box
     x0, y0, x1, y1 = max(ax0, bx0), max(ay0, by0), min(ax1, bx1), min(ay1, by1)
@@ -39,7 +39,7 @@ def _cover_share(a: "_Examined", b: "_Examined") -> float:
     return float(inter.sum()) / total
 
 
-def _drop_scratch_pieces(examined: list["_Examined"]) -> list["_Examined"]:
+def drop_scratch_pieces(examined: list["ExaminedCandidate"]) -> list["ExaminedCandidate"]:
     """Scratches of which most of the cover (over half) lies in a longer scratch's: a
     piece of it, measured from its own candidate before the whole one was (claiming
     stops only the pieces that come after). Along the hatch the wall model's grooves
@@ -106,7 +106,7 @@ def _gap_path(pa: np.ndarray, ta: np.ndarray, pb: np.ndarray, tb: np.ndarray, st
     return pts, d
 
 
-def _scratch_gap(img: np.ndarray, level: np.ndarray, a: "_Examined", b: "_Examined",
+def _scratch_gap(img: np.ndarray, level: np.ndarray, a: "ExaminedCandidate", b: "ExaminedCandidate",
                  cfg: DefectConfig) -> tuple[float, int, int, np.ndarray] | None:
     """Whether two scratches of one frame are one furrow with a stretch between them that
     was not measured, and how well: (the gap, a's end, b's end, the gap's path), or None.
@@ -292,7 +292,7 @@ def _run_on_fades(img: np.ndarray, level: np.ndarray, on: np.ndarray, width: flo
     groove it meets rather than the scratch: its far end, read inside the frame over the
     path's last 60 px, does not step down as a scratch's end does (no wider than
     ``cfg.square_end_other_max_width_px`` and by ``cfg.square_end_min_height`` of the
-    darkness inside it: ``_end_steps``) but fades, as a groove does along its length or
+    darkness inside it: ``end_steps``) but fades, as a groove does along its length or
     as a straight path leaves a groove that diverges from it.
 
     - A scratch's end that meets a deep groove running on 10 deg from it was followed
@@ -314,7 +314,7 @@ def _run_on_fades(img: np.ndarray, level: np.ndarray, on: np.ndarray, width: flo
         return False
     if _at_frame_border(on[-1], img.shape):
         return False
-    steps = _end_steps(img, level, 0, 0, dict(line=(far[:, 0], far[:, 1]), width=width, blur=blur), ends=(-1,))
+    steps = end_steps(img, level, 0, 0, dict(line=(far[:, 0], far[:, 1]), width=width, blur=blur), ends=(-1,))
     if not steps:
         return False
     w, h = steps[0]
@@ -354,13 +354,13 @@ def _turns_onto_hatch(line: np.ndarray, k: int, on: np.ndarray, angles_deg, cfg:
     if body.shape[0] < 3 or to_end[0] - RUN_ON_SETTLE_PX < RUN_ON_BODY_PX:
         return False
     # the body's axis, and its RMS distance from it (the covariance's lesser eigenvalue)
-    _, _, axis, cov = _weighted_pca(body[:, 0], body[:, 1], np.ones(body.shape[0]))
+    _, _, axis, cov = weighted_pca(body[:, 0], body[:, 1], np.ones(body.shape[0]))
     if float(np.sqrt(max(np.linalg.eigvalsh(cov)[0], 0.0))) > RUN_ON_STRAIGHT_PX:
         return False
     body_deg = float(np.rad2deg(axis) % 180.0)
     end_deg = float(np.rad2deg(np.arctan2(t[1], t[0])) % 180.0)
-    return any(_circ_diff_deg(body_deg, g) <= RUN_ON_HATCH_DEG
-               and _circ_diff_deg(end_deg, g) >= cfg.groove_alignment_deg for g in angles_deg)
+    return any(circ_diff_deg(body_deg, g) <= RUN_ON_HATCH_DEG
+               and circ_diff_deg(end_deg, g) >= cfg.groove_alignment_deg for g in angles_deg)
 
 
 def _run_on_grooves_only(residual: np.ndarray, line: np.ndarray, on: np.ndarray, angles_deg,
@@ -378,7 +378,7 @@ def _run_on_grooves_only(residual: np.ndarray, line: np.ndarray, on: np.ndarray,
     if float(np.hypot(*chord)) < 4.0 or not len(angles_deg):
         return False
     deg = float(np.rad2deg(np.arctan2(chord[1], chord[0])) % 180.0)
-    if _near_hatch(deg, angles_deg, cfg) is not None:
+    if near_hatch(deg, angles_deg, cfg) is not None:
         return False
 
     def along(pts: np.ndarray) -> np.ndarray:
@@ -393,8 +393,8 @@ def _run_on_grooves_only(residual: np.ndarray, line: np.ndarray, on: np.ndarray,
     return bool(own > 0.0 and float(np.median(run)) < cfg.track_residual_share * own)
 
 
-def _track_scratches(img: np.ndarray, level: np.ndarray, examined: list["_Examined"],
-                     cfg: DefectConfig, angles_deg=(), residual: np.ndarray | None = None) -> list["_Examined"]:
+def track_scratches(img: np.ndarray, level: np.ndarray, examined: list["ExaminedCandidate"],
+                    cfg: DefectConfig, angles_deg=(), residual: np.ndarray | None = None) -> list["ExaminedCandidate"]:
     """Each scratch's ends followed where the furrow runs on (``_track_on``): its centre
     line, length, place and direction take the stretch in, and it is ``partial`` when
     the stretch reaches the frame's border. A stretch that fades at its far end is a
@@ -427,7 +427,7 @@ def _track_scratches(img: np.ndarray, level: np.ndarray, examined: list["_Examin
         grown = False
         for k in (0, -1):
             if ex.groove_ends[0 if k == 0 else 1]:
-                continue  # beyond it the raw darkness is the groove's (``_measure_scratch``)
+                continue  # beyond it the raw darkness is the groove's (``measure_scratch``)
             on = _track_on(img, level, line, k, d.width_px, blur, cfg)
             if on is None or _run_on_fades(img, level, on, d.width_px, blur, cfg) \
                     or _turns_onto_hatch(line, k, on, angles_deg, cfg) \
@@ -444,7 +444,7 @@ def _track_scratches(img: np.ndarray, level: np.ndarray, examined: list["_Examin
         length = d.length_px + along - _line_place(ex.line)[0]
         nd = Defect(**{**asdict(d), "x_px": x, "y_px": y, "length_px": length, "angle_deg": angle,
                        "partial": bool(partial)})
-        out.append(_Examined(nd, ex.region, ex.box, ex.cover, line, ex.blur, ex.groove_ends))
+        out.append(ExaminedCandidate(nd, ex.region, ex.box, ex.cover, line, ex.blur, ex.groove_ends))
     # a piece whose centre line the other's followed stretch now runs along is the same
     # furrow twice: the shorter goes
     items = [ex for ex in out if ex.defect is not None and ex.defect.kind == "scratch" and ex.line is not None]
@@ -480,7 +480,7 @@ def _to_end(pts: np.ndarray) -> np.ndarray:
     return np.concatenate([[0.0], np.cumsum(seg[::-1])])[::-1]
 
 
-def _line_points(line: np.ndarray, step: float = 10.0) -> tuple[tuple[float, float], ...]:
+def line_points(line: np.ndarray, step: float = 10.0) -> tuple[tuple[float, float], ...]:
     """A centre line as points every ~``step`` px, its two ends kept."""
     pts = _dense(line, step) if len(line) > 1 else line
     return tuple((round(float(x), 2), round(float(y), 2)) for x, y in pts)
@@ -499,8 +499,8 @@ def _dense(line: np.ndarray, step: float = 2.0) -> np.ndarray:
     return np.column_stack([np.interp(at, acc, line[:, 0]), np.interp(at, acc, line[:, 1])])
 
 
-def _join_scratch_pieces(img: np.ndarray, level: np.ndarray, examined: list["_Examined"],
-                         cfg: DefectConfig) -> list["_Examined"]:
+def join_scratch_pieces(img: np.ndarray, level: np.ndarray, examined: list["ExaminedCandidate"],
+                        cfg: DefectConfig) -> list["ExaminedCandidate"]:
     """Scratches of one frame that are pieces of one furrow (``_scratch_gap``) as one:
     its centre line the pieces' and the gap's path, its length theirs along it, its
     place that line's middle, its width the pieces' length-weighted mean."""
@@ -531,7 +531,7 @@ def _join_scratch_pieces(img: np.ndarray, level: np.ndarray, examined: list["_Ex
         width = (da.width_px * wa + db.width_px * wb) / (wa + wb)
         width_u = (da.width_u_px * wa + db.width_u_px * wb) / (wa + wb)
         sig = float(np.hypot(da.significance, db.significance))
-        d = Defect("scratch", x, y, length, width, _confidence(sig, cfg.min_significance), angle,
+        d = Defect("scratch", x, y, length, width, confidence_of(sig, cfg.min_significance), angle,
                    float(np.hypot(da.length_u_px, db.length_u_px) / np.sqrt(2.0)), width_u, sig,
                    bool(da.partial or db.partial))
         x0, y0 = min(a.box[0], b.box[0]), min(a.box[1], b.box[1])
@@ -543,5 +543,5 @@ def _join_scratch_pieces(img: np.ndarray, level: np.ndarray, examined: list["_Ex
             region[by0 - y0:by1 - y0, bx0 - x0:bx1 - x0] |= ex.region
             if ex.cover is not None:
                 cover[by0 - y0:by1 - y0, bx0 - x0:bx1 - x0] |= ex.cover
-        joined = _Examined(d, region, (x0, y0, x1, y1), cover, line, float(np.mean([a.blur or 0, b.blur or 0])))
+        joined = ExaminedCandidate(d, region, (x0, y0, x1, y1), cover, line, float(np.mean([a.blur or 0, b.blur or 0])))
         examined = [ex for ex in examined if ex is not a and ex is not b] + [joined]

@@ -15,7 +15,7 @@ import numpy as np
 
 from station.vision.grooves import honing_directions
 from station.vision.defects.config import DefectConfig, NOISE_FLOOR
-from station.vision.defects.common import _mad_sigma, _near_hatch
+from station.vision.defects.common import mad_sigma, near_hatch
 
 
 def _family_mean(values: np.ndarray, weights: np.ndarray, angle_deg: float, window: int) -> np.ndarray:
@@ -71,7 +71,7 @@ def _half(image: np.ndarray) -> np.ndarray:
                       interpolation=cv2.INTER_AREA)
 
 
-def _hole_zone(shape: tuple[int, int], holes, reach_px: float, scale: float = 1.0, offset: float = 0.0) -> np.ndarray:
+def hole_zone(shape: tuple[int, int], holes, reach_px: float, scale: float = 1.0, offset: float = 0.0) -> np.ndarray:
     """Mask of the holes' discs plus ``reach_px`` beyond their rims (full-res px), on a
     grid of ``scale`` (0.5: half resolution, whose pixel j is centred on full px 2j+0.5)."""
     zone = np.zeros(shape, np.uint8)
@@ -100,7 +100,7 @@ def model_wall(image: np.ndarray, holes, reach_px: float, cfg: DefectConfig,
     """
     small = _half(image)
     h, w = small.shape
-    zone = _hole_zone((h, w), holes, reach_px, 0.5, 0.5)
+    zone = hole_zone((h, w), holes, reach_px, 0.5, 0.5)
     valid = ~zone
     # the coarse level, at 1/8 scale
     g = 4
@@ -135,7 +135,7 @@ def model_wall(image: np.ndarray, holes, reach_px: float, cfg: DefectConfig,
     if largest_mark_px:
         win4 = max(win4, int(np.ceil(1.5 * largest_mark_px / 4.0)) | 1)
     res4 = cv2.GaussianBlur(_remove_grooves(dark4, valid4.astype(np.float32), angles, win4, valid4), (0, 0), 0.7)
-    noise4 = _mad_sigma(res4[valid4])
+    noise4 = mad_sigma(res4[valid4])
     dark = (res4 > max(cfg.dark_floor, cfg.seed_k * noise4)).astype(np.uint8)
     dark = cv2.resize(cv2.dilate(dark, np.ones((3, 3), np.uint8)), (w, h), interpolation=cv2.INTER_NEAREST)
     if dark.shape != (h, w):
@@ -153,7 +153,7 @@ def model_wall(image: np.ndarray, holes, reach_px: float, cfg: DefectConfig,
     for a in angles:
         valid &= _line_support((h, w), round(float(a), 1), cfg.groove_window_half_px) >= 1.0 / 3.0
     residual = _remove_grooves(darkness, weights, angles, cfg.groove_window_half_px, valid)
-    noise = max(_mad_sigma(cv2.GaussianBlur(residual, (0, 0), 1.0)[valid]), NOISE_FLOOR)
+    noise = max(mad_sigma(cv2.GaussianBlur(residual, (0, 0), 1.0)[valid]), NOISE_FLOOR)
     return _Wall(residual, valid, float(noise), angles, level)
 
 
@@ -181,11 +181,11 @@ def _line_response(wall: _Wall, cfg: DefectConfig) -> np.ndarray:
     v = cv2.resize(wall.valid.astype(np.float32)[: h4 * 2, : w4 * 2], (w4, h4), interpolation=cv2.INTER_AREA)
     best = np.zeros((h4, w4), np.float32)
     for a in np.arange(0.0, 180.0, 15.0):
-        if _near_hatch(float(a), wall.angles_deg, cfg) is not None:
+        if near_hatch(float(a), wall.angles_deg, cfg) is not None:
             continue
         mean = _family_mean(q, (v > 0.99).astype(np.float32), float(a), cfg.line_length_quarter_px)
         inside = v > 0.99
-        z = mean / max(_mad_sigma(mean[inside]), NOISE_FLOOR / 5.0)  # a mean over ~25 half-res px
+        z = mean / max(mad_sigma(mean[inside]), NOISE_FLOOR / 5.0)  # a mean over ~25 half-res px
         np.maximum(best, np.where(inside, z, 0.0), out=best)
     up = cv2.resize(best, (w4 * 2, h4 * 2), interpolation=cv2.INTER_LINEAR)
     if up.shape != (h, w):
@@ -193,7 +193,7 @@ def _line_response(wall: _Wall, cfg: DefectConfig) -> np.ndarray:
     return up
 
 
-def _candidates(wall: _Wall, cfg: DefectConfig) -> list[tuple[np.ndarray, int, tuple[int, int, int, int], float]]:
+def find_candidates(wall: _Wall, cfg: DefectConfig) -> list[tuple[np.ndarray, int, tuple[int, int, int, int], float]]:
     """Candidates (half res), most significant first, as (label image, label, box x0,
     y0, x1, y1, peak in sigmas): hysteresis components of the 1 px-smoothed residual,
     then those of the line response that touch none of them (a faint scratch). The two
@@ -230,7 +230,7 @@ def _candidates(wall: _Wall, cfg: DefectConfig) -> list[tuple[np.ndarray, int, t
     return out[: cfg.max_candidates]
 
 
-def _seed_in_box(labels: np.ndarray, label: int, box: tuple[int, int, int, int]) -> np.ndarray:
+def seed_in_box(labels: np.ndarray, label: int, box: tuple[int, int, int, int]) -> np.ndarray:
     """The half-resolution component ``label`` as a full-resolution mask over ``box``
     (half-res pixel j covers full pixels 2j and 2j + 1)."""
     x0, y0, x1, y1 = box
@@ -244,8 +244,8 @@ def _seed_in_box(labels: np.ndarray, label: int, box: tuple[int, int, int, int])
     return out
 
 
-def _furrows(seed: np.ndarray, band_px: float = 3.0, min_len_px: float = 40.0, min_turn_deg: float = 15.0,
-             max_lines: int = 3, max_solidity: float = 0.6) -> list[tuple[float, float, float, float]]:
+def split_furrows(seed: np.ndarray, band_px: float = 3.0, min_len_px: float = 40.0, min_turn_deg: float = 15.0,
+                  max_lines: int = 3, max_solidity: float = 0.6) -> list[tuple[float, float, float, float]]:
     """The straight furrows a candidate's seed holds when it holds more than one (two
     scratches crossing, an X or a V of them: one connected candidate), as lines (a point
     x, y, a direction in rad, and how far a bend of 2.5 % of its length may carry the
@@ -325,13 +325,13 @@ def _principal_line(pts: np.ndarray, band_px: float) -> tuple[np.ndarray, np.nda
     return centre, v[:, 1], bend, float(np.mean(np.abs(c @ v[:, 0]) <= band_px + bend))
 
 
-def _one_furrow(seed: np.ndarray, band_px: float = 3.0, min_len_px: float = 40.0, min_share: float = 0.75
-                ) -> tuple[float, float, float, float] | None:
-    """The line of a candidate's seed that is one furrow (``_furrows``'s test for one
+def one_furrow(seed: np.ndarray, band_px: float = 3.0, min_len_px: float = 40.0, min_share: float = 0.75
+               ) -> tuple[float, float, float, float] | None:
+    """The line of a candidate's seed that is one furrow (``split_furrows``'s test for one
     mark: its principal axis holds 85 % of its half-res pixels within ``band_px``, bent
     by 2.5 % of its length; or, where a spur tilts that axis, the axis of the points
     within reach of it holds ``min_share`` of them), at least ``min_len_px`` long (full
-    px), as ``_furrows``'s lines (box px); None for any other seed."""
+    px), as ``split_furrows``'s lines (box px); None for any other seed."""
     yy, xx = np.nonzero(seed[::2, ::2])
     if yy.size < min_len_px / 2.0:
         return None
@@ -354,17 +354,17 @@ def _one_furrow(seed: np.ndarray, band_px: float = 3.0, min_len_px: float = 40.0
     return 2.0 * centre[0] + 0.5, 2.0 * centre[1] + 0.5, float(np.arctan2(t_[1], t_[0])), 2.0 * bend
 
 
-def _band(shape: tuple[int, int], offset: tuple[int, int], line: tuple[float, float, float, float],
-          half_px: float) -> np.ndarray:
+def line_band(shape: tuple[int, int], offset: tuple[int, int], line: tuple[float, float, float, float],
+              half_px: float) -> np.ndarray:
     """The pixels of a box (``shape``, its corner at ``offset`` in the frame) within
-    ``half_px`` of a line (``_furrows``'s, frame px), widened by the line's allowance for
+    ``half_px`` of a line (``split_furrows``'s, frame px), widened by the line's allowance for
     a bend."""
     x, y, a, bend = line
     yy, xx = np.mgrid[0:shape[0], 0:shape[1]]
     return np.abs((xx + offset[0] - x) * -np.sin(a) + (yy + offset[1] - y) * np.cos(a)) <= half_px + bend
 
 
-def _group_collinear(candidates, max_gap_half_px: float = 20.0) -> list[list[int]]:
+def group_collinear(candidates, max_gap_half_px: float = 20.0) -> list[list[int]]:
     """Candidates (indices) that are pieces of one scratch: a faint or fading scratch
     breaks into several components where its darkening dips under the growth
     threshold. Two join when one is elongated (3:1, 6 half-res px) and the other's
@@ -415,22 +415,22 @@ def _group_collinear(candidates, max_gap_half_px: float = 20.0) -> list[list[int
     return sorted(groups.values(), key=lambda g: min(g))
 
 
-def _plane(values: np.ndarray, xx: np.ndarray, yy: np.ndarray, use: np.ndarray) -> np.ndarray:
+def fit_plane(values: np.ndarray, xx: np.ndarray, yy: np.ndarray, use: np.ndarray) -> np.ndarray:
     """A robust plane through ``values`` where ``use`` (two least-squares passes, the
     second without points beyond 3 robust sigma)."""
     a = np.column_stack([np.ones(use.sum()), xx[use], yy[use]])
     v = values[use]
     coef = np.linalg.lstsq(a, v, rcond=None)[0]
     res = v - a @ coef
-    keep = np.abs(res) < 3.0 * max(_mad_sigma(res), 1e-6)
+    keep = np.abs(res) < 3.0 * max(mad_sigma(res), 1e-6)
     if keep.sum() > 10:
         coef = np.linalg.lstsq(a[keep], v[keep], rcond=None)[0]
     return coef[0] + coef[1] * xx + coef[2] * yy
 
 
-def _groove_profiles(d: np.ndarray, xx: np.ndarray, yy: np.ndarray, use: np.ndarray, angles_deg,
-                     rounds: int = 3, bin_px: float = 0.5, sides_about: tuple[float, float] | None = None
-                     ) -> np.ndarray:
+def groove_profiles(d: np.ndarray, xx: np.ndarray, yy: np.ndarray, use: np.ndarray, angles_deg,
+                    rounds: int = 3, bin_px: float = 0.5, sides_about: tuple[float, float] | None = None
+                    ) -> np.ndarray:
     """The two groove families over a patch as 1-D profiles across their lines (means in
     ``bin_px`` bins of the across-line coordinate, fitted where ``use``), backfitted in
     turn; returns their sum at every pixel of the patch.
@@ -503,7 +503,7 @@ def _groove_profiles(d: np.ndarray, xx: np.ndarray, yy: np.ndarray, use: np.ndar
 
 
 @dataclass
-class _Patch:
+class Patch:
     x0: int
     y0: int
     residual: np.ndarray  # relative darkness less level and grooves (full res)
@@ -515,8 +515,8 @@ class _Patch:
     noise_box5: float  # robust std of the residual's 5x5 box mean (correlated noise)
 
 
-def _local_patch(img: np.ndarray, box: tuple[int, int, int, int], seed_mask: np.ndarray, zone: np.ndarray,
-                 angles_deg, wall_level: np.ndarray) -> _Patch | None:
+def local_patch(img: np.ndarray, box: tuple[int, int, int, int], seed_mask: np.ndarray, zone: np.ndarray,
+                angles_deg, wall_level: np.ndarray) -> Patch | None:
     """The wall model of a patch at full resolution: the frame's level (``wall_level``,
     full res) and a robust plane for what it leaves, and the grooves as local profiles,
     all fitted outside the candidate (``seed_mask``, bool over the box, dilated here)
@@ -533,13 +533,13 @@ def _local_patch(img: np.ndarray, box: tuple[int, int, int, int], seed_mask: np.
         return None
     level = wall_level[y0:y1, x0:x1]
     d = 1.0 - p / np.maximum(level, 1.0)
-    d -= _plane(d, xx - x0, yy - y0, use)
-    grooves = _groove_profiles(d, xx, yy, use, angles_deg)
+    d -= fit_plane(d, xx - x0, yy - y0, use)
+    grooves = groove_profiles(d, xx, yy, use, angles_deg)
     r = (d - grooves).astype(np.float32)
     r[zone[y0:y1, x0:x1]] = 0.0
-    noise = max(_mad_sigma(r[use]), NOISE_FLOOR)
+    noise = max(mad_sigma(r[use]), NOISE_FLOOR)
     box5 = cv2.blur(r, (5, 5))
     inner = cv2.erode(use.astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
-    noise5 = max(_mad_sigma(box5[inner]) if inner.sum() > 30 else noise / 2.0, NOISE_FLOOR / 5.0)
-    return _Patch(x0, y0, r, level, excluded, zone[y0:y1, x0:x1], grooves.astype(np.float32), float(noise),
-                  float(noise5))
+    noise5 = max(mad_sigma(box5[inner]) if inner.sum() > 30 else noise / 2.0, NOISE_FLOOR / 5.0)
+    return Patch(x0, y0, r, level, excluded, zone[y0:y1, x0:x1], grooves.astype(np.float32), float(noise),
+                 float(noise5))
