@@ -2,8 +2,13 @@
 
 What fails a master cylinder in a plant is mostly its surface: a burr at a compensating
 hole's edge cuts the seal cup, porosity of the casting and scratches of the honed bore
-leak. This module finds each defect in one frame and measures it: kind, position (px),
-length and width (px and mm) with standard uncertainties, and a confidence.
+leak. This package finds each defect in one frame and measures it: kind, position (px),
+length and width (px and mm) with standard uncertainties, and a confidence. Its modules
+follow the stages below, each importing only those before it: ``config`` (settings,
+the result), ``common`` (robust noise, the hatch, the bounded fit, shapes), ``wall``
+(1-4), ``pores`` and ``scratches`` (5), ``rims`` (6), ``examine`` (4-5 for one
+candidate), ``tracking`` (a scratch across the frame) and ``frame``
+(:func:`detect_defects`).
 
 Why it is built this way. The honed wall is itself full of dark lines (the cross-hatch
 at +/-30 deg, 3-8 % deep, up to three times that for single grooves), fine grain and
