@@ -260,6 +260,9 @@ def _spectrum_geometry(hs: int, ws: int) -> tuple[np.ndarray, np.ndarray, np.nda
 
 #: the cross-hatch's half-angles (deg from the circumferential x axis) searched for
 HATCH_HALF_ANGLE_DEG = (6.0, 84.0)
+#: the weaker of a hatch's two families stands at least this many times above the
+#: median direction's power, or at a quarter of the stronger (``honing_directions``)
+MIRROR_FAMILY_MIN = 4.0
 
 
 def honing_directions(darkness: np.ndarray, valid: np.ndarray, default_deg: float = 30.0) -> tuple[float, float]:
@@ -308,10 +311,14 @@ def honing_directions(darkness: np.ndarray, valid: np.ndarray, default_deg: floa
     # axis are searched: conventional and plateau honing make 20-35 deg, helical slide
     # honing 60-75 (a search of 18-42 deg read a 15 deg or 45 deg hatch as +/-30, and its
     # grooves became scratches); nearer the axes the two families are one. The mirror
-    # family must carry a quarter of the first's power, or stand 10x above the median:
-    # the two families of a real hatch may differ by more than 4x (a 22 deg hatch whose
-    # families stood 283x and 59x above the median fell back to +/-30 deg, and its
-    # grooves became seven "scratches")
+    # family must carry a quarter of the first's power, or stand ``MIRROR_FAMILY_MIN``
+    # (4x) above the median: the two families of a real hatch may differ by more than 4x
+    # (a 22 deg hatch whose families stood 283x and 59x above the median fell back to
+    # +/-30 deg under the quarter alone, and its grooves became seven "scratches"; wide
+    # bench, 45 deg at 0.008 mm/px: families at 25x and 4.5x fell back under a 10x bar,
+    # and five grooves of the 45 deg family became "scratches" of 1.3-6.4 mm). The grain
+    # alone stays within ~1.5x of the median, so a mirrored peak at 4x is no chance of it;
+    # a lone scratch has no mirrored peak at all
     lines = (np.arange(hist.size) + 0.5) / bins
     half_angle = np.minimum(lines, 180.0 - lines)
     honing = (half_angle >= HATCH_HALF_ANGLE_DEG[0]) & (half_angle <= HATCH_HALF_ANGLE_DEG[1])
@@ -335,7 +342,7 @@ def honing_directions(darkness: np.ndarray, valid: np.ndarray, default_deg: floa
         return fallback
     _, i, j = best
     strong, weak = max(smooth[i], smooth[j]), min(smooth[i], smooth[j])
-    if weak < max(3.0 * base, min(0.25 * strong, 10.0 * base)):
+    if weak < max(3.0 * base, min(0.25 * strong, MIRROR_FAMILY_MIN * base)):
         return fallback
     return tuple(sorted((centroid(i), centroid(j))))
 

@@ -765,6 +765,23 @@ def test_a_hatch_outside_plateau_honings_angles_is_read_and_its_grooves_are_no_s
     assert detect_defects(f.image, MM_PER_PX) == []
 
 
+def test_a_hatch_whose_weaker_family_is_faint_is_read_and_its_grooves_are_no_scratches():
+    """A 45 deg hatch at 0.008 mm/px under the wide envelope (bench seed 440009) whose
+    families stand 25x and 4.5x above the median direction's power (the weaker 18 % of
+    the stronger): it fell back to +/-30 deg, and five of the 45 deg family's grooves
+    were reported as scratches of 1.3-6.4 mm beside the frame's seven true defects."""
+    from station.vision.grooves import frame_hatch
+
+    mm = 0.008
+    f = random_defect_frame(440009, None, mm_per_px=mm, envelope="wide", hatch_deg=45.0, texture_scale=0.010 / mm)
+    a1, a2 = frame_hatch(f.image, [(h.x_px, h.y_px, h.diameter_px / 2.0) for h in f.holes])
+    assert a1 == pytest.approx(45.0, abs=0.3) and a2 == pytest.approx(-45.0, abs=0.3)
+    found = detect_defects(f.image, mm)
+    pairs, false = match(f.defects, found, mm)
+    assert [found[i] for i in false] == []
+    assert len(f.defects) == 7 and all(d is not None and d.kind == t.kind for t, d in pairs)
+
+
 def test_one_long_scratch_on_a_bare_wall_is_no_hatch():
     """One strong direction is a scratch, not a hatch: without its mirror family the
     directions fall back to the default."""
