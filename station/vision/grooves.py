@@ -261,8 +261,13 @@ def _spectrum_geometry(hs: int, ws: int) -> tuple[np.ndarray, np.ndarray, np.nda
 #: the cross-hatch's half-angles (deg from the circumferential x axis) searched for
 HATCH_HALF_ANGLE_DEG = (6.0, 84.0)
 #: the weaker of a hatch's two families stands at least this many times above the
-#: median direction's power, or at a quarter of the stronger (``honing_directions``)
-MIRROR_FAMILY_MIN = 4.0
+#: median direction's power, or at a quarter of the stronger (``honing_directions``) ...
+MIRROR_FAMILY_MIN = 10.0
+#: ... or this many, when both families' peaks are peaks of their own: each at least
+#: ``PEAK_PROMINENCE`` times the power ``PEAK_FLANK_DEG`` to either side of it
+MIRROR_FAMILY_MIN_PROMINENT = 4.0
+PEAK_PROMINENCE = 2.0
+PEAK_FLANK_DEG = 4.0
 
 
 def honing_directions(darkness: np.ndarray, valid: np.ndarray, default_deg: float = 30.0) -> tuple[float, float]:
@@ -312,13 +317,16 @@ def honing_directions(darkness: np.ndarray, valid: np.ndarray, default_deg: floa
     # honing 60-75 (a search of 18-42 deg read a 15 deg or 45 deg hatch as +/-30, and its
     # grooves became scratches); nearer the axes the two families are one. The mirror
     # family must carry a quarter of the first's power, or stand ``MIRROR_FAMILY_MIN``
-    # (4x) above the median: the two families of a real hatch may differ by more than 4x
+    # (10x) above the median: the two families of a real hatch may differ by more than 4x
     # (a 22 deg hatch whose families stood 283x and 59x above the median fell back to
-    # +/-30 deg under the quarter alone, and its grooves became seven "scratches"; wide
-    # bench, 45 deg at 0.008 mm/px: families at 25x and 4.5x fell back under a 10x bar,
-    # and five grooves of the 45 deg family became "scratches" of 1.3-6.4 mm). The grain
-    # alone stays within ~1.5x of the median, so a mirrored peak at 4x is no chance of it;
-    # a lone scratch has no mirrored peak at all
+    # +/-30 deg under the quarter alone, and its grooves became seven "scratches"). When
+    # both peaks stand clear of their flanks (a family's lines are one direction), 4x will
+    # do: on a wide-envelope frame at 45 deg and 0.008 mm/px the families stood 25x and
+    # 4.5x (flanks 4 deg off: 1/16 and 1/6 of the peaks), fell back to +/-30 deg, and five
+    # grooves became "scratches" of 1.3-6.4 mm. Not without the flanks' test: a lone
+    # scratch's broad peak paired its flank at 165 deg with the frame's near-horizontal
+    # artefact at 8 deg (73x and 4.2x, each below its own flank), and the scratch was
+    # taken for a groove and lost
     lines = (np.arange(hist.size) + 0.5) / bins
     half_angle = np.minimum(lines, 180.0 - lines)
     honing = (half_angle >= HATCH_HALF_ANGLE_DEG[0]) & (half_angle <= HATCH_HALF_ANGLE_DEG[1])
@@ -342,7 +350,13 @@ def honing_directions(darkness: np.ndarray, valid: np.ndarray, default_deg: floa
         return fallback
     _, i, j = best
     strong, weak = max(smooth[i], smooth[j]), min(smooth[i], smooth[j])
-    if weak < max(3.0 * base, min(0.25 * strong, MIRROR_FAMILY_MIN * base)):
+    side = int(round(PEAK_FLANK_DEG * bins))
+
+    def prominent(k: int) -> bool:
+        return bool(smooth[k] >= PEAK_PROMINENCE * max(smooth[(k - side) % hist.size], smooth[(k + side) % hist.size]))
+
+    least = MIRROR_FAMILY_MIN_PROMINENT if prominent(i) and prominent(j) else MIRROR_FAMILY_MIN
+    if weak < max(3.0 * base, min(0.25 * strong, least * base)):
         return fallback
     return tuple(sorted((centroid(i), centroid(j))))
 
