@@ -782,6 +782,66 @@ def test_a_hatch_whose_weaker_family_is_faint_is_read_and_its_grooves_are_no_scr
     assert len(f.defects) == 7 and all(d is not None and d.kind == t.kind for t, d in pairs)
 
 
+def test_a_faint_scratch_beside_a_strong_one_on_a_frame_without_a_hole_is_read_under_their_shared_blur():
+    """No hole and no blur given: each scratch read its own blur, and a faint 0.43 x 0.023
+    mm one (bench seed 260088, 1.66 px of blur) read under 1.2 px of it came out too faint
+    to be a scratch, beside a 0.74 mm one that reads the frame's blur to 0.07 px. The
+    frame is examined again under the scratches' reads combined."""
+    f = random_defect_frame(260088, None, mm_per_px=MM_PER_PX)
+    assert f.holes == []
+    found = detect_defects(f.image, MM_PER_PX)
+    pairs, false = match(f.defects, found, MM_PER_PX)
+    assert false == []
+    faint = [(t, d) for t, d in pairs if t.kind == "scratch" and t.length_mm < 0.5]
+    assert len(faint) == 1
+    t, d = faint[0]
+    assert d is not None and d.kind == "scratch"
+    assert abs(d.length_mm - t.length_mm) <= 0.02 and abs(d.width_mm - t.width_mm) <= 0.02
+    assert abs(d.width_mm - t.width_mm) <= 2.0 * d.width_u_mm
+    assert all(d is not None and d.kind == t.kind for t, d in pairs)
+
+
+def test_a_blur_known_to_within_a_variance_widens_a_thin_scratchs_width_uncertainty():
+    """A blur given exactly leaves a thin scratch's width as certain as its profile; one
+    shared by the frame's scratches (``KnownBlur``) carries its variance into the width
+    (a thin scratch's width and contrast trade off against the blur)."""
+    from station.vision.defects.examine import KnownBlur
+
+    f = random_defect_frame(260088, None, mm_per_px=MM_PER_PX)
+    b = f.params.blur_sigma_px
+
+    def thin(blur):
+        return [d for d in detect_defects(f.image, MM_PER_PX, blur_px=blur)
+                if d.kind == "scratch" and d.length_mm < 0.5]
+
+    exact, vague = thin(b), thin(KnownBlur(b, 0.15**2))
+    assert len(exact) == len(vague) == 1
+    assert vague[0].width_mm == pytest.approx(exact[0].width_mm, abs=1e-9)
+    assert vague[0].width_u_mm > 1.3 * exact[0].width_u_mm
+
+
+def test_the_scratches_shared_blur_counts_the_prior_once():
+    """Each scratch's own read holds the prior (``BLUR_PRIOR_PX``); combined, the prior
+    is counted once: the result is the prior and every read's own evidence together."""
+    from station.vision.defects.examine import ExaminedCandidate, shared_blur
+    from station.vision.defects.scratches import BLUR_PRIOR_PX
+
+    pb, pv = BLUR_PRIOR_PX[0], BLUR_PRIOR_PX[1] ** 2
+    data = [(1.9, 0.04), (1.7, 0.09), (2.1, 0.25)]  # each scratch's own evidence (blur, variance)
+
+    def read(b, v):  # what a scratch reports: its evidence and the prior combined
+        w = 1.0 / v + 1.0 / pv
+        return (b / v + pb / pv) / w, 1.0 / w
+
+    empty = np.zeros((1, 1), bool)
+    exs = [ExaminedCandidate(None, empty, blur_read=read(b, v)) for b, v in data]
+    w = 1.0 / pv + sum(1.0 / v for _, v in data)
+    expected = ((pb / pv + sum(b / v for b, v in data)) / w, 1.0 / w)
+    got = shared_blur(exs + [ExaminedCandidate(None, empty), ExaminedCandidate(None, empty, blur_read=(pb, pv))])
+    assert got == pytest.approx(expected, rel=1e-9)
+    assert shared_blur([ExaminedCandidate(None, empty)]) is None
+
+
 def test_one_long_scratch_on_a_bare_wall_is_no_hatch():
     """One strong direction is a scratch, not a hatch: without its mirror family the
     directions fall back to the default."""

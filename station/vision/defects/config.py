@@ -112,6 +112,11 @@ class DefectConfig:
     #: is examined within this many px of its line: half the widest scratch (0.06 mm)
     #: and the blur's reach beyond its edge
     furrow_half_band_px: float = 8.0
+    #: a frame without a given blur or a hole's edge is examined again under the blur its
+    #: scratches read themselves, combined (``shared_blur``), when that is known to this
+    #: standard deviation (px; a 1.7 mm scratch reads it to ~0.2 px, a 0.7 mm one of
+    #: higher contrast to ~0.07)
+    frame_blur_max_sd_px: float = 0.25
     #: at most this many candidates per frame are examined (the most significant):
     #: a bound on the time of a pathological frame, far above a real wall's count
     max_candidates: int = 40

@@ -24,6 +24,41 @@ from station.vision.defects.scratches import BLUR_PRIOR_PX, measure_scratch
 from station.vision.defects.pores import measure_pore
 
 
+class KnownBlur(float):
+    """The camera's blur (Gaussian sigma, px) known to within a variance (``var``, px^2):
+    a float wherever a blur is taken as given, its variance read where a scratch's width
+    trades off against it (``measure_scratch``)."""
+
+    var: float
+
+    def __new__(cls, value: float, var: float = 0.0) -> "KnownBlur":
+        obj = super().__new__(cls, value)
+        obj.var = float(var)
+        return obj
+
+
+def shared_blur(examined: list["ExaminedCandidate"]) -> tuple[float, float] | None:
+    """The blur the examined scratches read themselves (``ExaminedCandidate.blur_read``),
+    combined as one frame's (one lens, one focus): their inverse-variance mean with the
+    prior (``BLUR_PRIOR_PX``) counted once, each read's share of it taken out. Returns
+    (blur, its variance), or None when no scratch read one."""
+    prior_b, prior_var = BLUR_PRIOR_PX[0], BLUR_PRIOR_PX[1] ** 2
+    num, den, n = prior_b / prior_var, 1.0 / prior_var, 0
+    for ex in examined:
+        if ex.blur_read is None or not ex.blur_read[1] > 0:
+            continue
+        b, v = ex.blur_read
+        own = 1.0 / v - 1.0 / prior_var  # the read's own precision, the prior's taken out
+        if own <= 1e-9:
+            continue
+        num += b / v - prior_b / prior_var
+        den += own
+        n += 1
+    if n == 0:
+        return None
+    return num / den, 1.0 / den
+
+
 @dataclass
 class ExaminedCandidate:
     """One candidate examined at full resolution: the defect it is, if any, and the
@@ -43,6 +78,9 @@ class ExaminedCandidate:
     #: where a groove's stretch begins (``_groove_beyond_end``, ``_shelf_beyond``): not
     #: followed on (``track_scratches``)
     groove_ends: tuple[bool, bool] = (False, False)
+    #: a scratch's camera blur as it read it itself (px) and that reading's variance
+    #: (px^2), when no blur was given (``measure_scratch``); None otherwise
+    blur_read: tuple[float, float] | None = None
 
 
 def examine_candidate(img: np.ndarray, box, seed: np.ndarray, zone: np.ndarray, angles_deg, wall_level: np.ndarray,
@@ -223,7 +261,7 @@ def _examine_once(img: np.ndarray, box, seed: np.ndarray, excl: np.ndarray, zone
         cover = lines.astype(bool)
         line = np.column_stack(m["line"]) + np.array([x0, y0], float)
         return ExaminedCandidate(defect, region, tuple(box), cover, line, float(m["blur"]),
-                                 m.get("groove_ends", (False, False))), m, kind
+                                 m.get("groove_ends", (False, False)), m.get("blur_read")), m, kind
     return ExaminedCandidate(defect, region, tuple(box), cover), m, kind
 
 

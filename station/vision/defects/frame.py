@@ -19,7 +19,7 @@ from station.vision.defects.wall import (
 )
 from station.vision.defects.rims import hole_blur, marks_mask, rim_defects
 from station.vision.defects.scratches import BLUR_PRIOR_PX
-from station.vision.defects.examine import examine_candidate, ExaminedCandidate
+from station.vision.defects.examine import examine_candidate, ExaminedCandidate, KnownBlur, shared_blur
 from station.vision.defects.tracking import (
     drop_scratch_pieces, join_scratch_pieces, line_points, measured_again, track_scratches,
 )
@@ -92,6 +92,28 @@ def detect_defects(image: np.ndarray, mm_per_px: float, *, holes=None, blur_px: 
     hole_blurs = [hole_blur(h) for h in holes if getattr(h, "edge_sigma_px", None)]
     if blur_hint is None and hole_blurs:
         blur_hint = float(np.median(hole_blurs))
+    found, examined = _find(img, mm_per_px, holes, wall, zone, level_full, reach_px, blur_hint, cfg)
+    if blur_hint is None:
+        # no blur given and no hole's edge to read it from: each scratch read its own (its
+        # cross profile, its ends, a prior), but one lens at one focus blurs the whole
+        # frame alike, and a strong scratch reads it better than a faint one can, whose
+        # width and contrast trade off against it. Their reads combined stand for the
+        # frame's blur, its variance carried into the widths, and the frame is examined
+        # again with it: a faint 0.49 mm scratch (contrast 0.10 read under 1.6 px of its
+        # own blur, under the 0.11 bar) beside a 1.66 mm one on a frame without a hole was
+        # lost (bench seed 350098), as was a 0.43 mm one beside a 0.74 mm one (260088)
+        shared = shared_blur([ex for ex in examined if ex.defect is not None and ex.defect.kind == "scratch"])
+        if shared is not None and shared[1] <= cfg.frame_blur_max_sd_px ** 2:
+            found, _ = _find(img, mm_per_px, holes, wall, zone, level_full, reach_px, KnownBlur(*shared), cfg)
+    return found
+
+
+def _find(img: np.ndarray, mm_per_px: float, holes: list, wall, zone: np.ndarray, level_full: np.ndarray,
+          reach_px: float, blur_hint: float | None, cfg: DefectConfig) -> tuple[list[Defect], list[ExaminedCandidate]]:
+    """``detect_defects`` under one blur (``blur_hint``; None: each mark reads its own):
+    the candidates examined, the scratches' pieces joined and followed, the rims judged.
+    Returns (the defects, sorted by y then x; the examined candidates)."""
+    hh, ww = img.shape
     max_width_px = cfg.max_scratch_width_mm / mm_per_px
     examined: list[ExaminedCandidate] = []
     # what the defects measured so far cover (their regions, a scratch's line): each
@@ -253,4 +275,4 @@ def detect_defects(image: np.ndarray, mm_per_px: float, *, holes=None, blur_px: 
                              "length_mm": d.length_px * mm_per_px, "width_mm": d.width_px * mm_per_px,
                              "size_mm": d.length_px * mm_per_px, "size_u_mm": u_len * mm_per_px,
                              "width_u_mm": u_wid * mm_per_px}))
-    return sorted(out, key=lambda d: (d.y_px, d.x_px))
+    return sorted(out, key=lambda d: (d.y_px, d.x_px)), examined

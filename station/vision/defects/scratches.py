@@ -567,7 +567,9 @@ def measure_scratch(patch: Patch, region: np.ndarray, blur_hint: float | None = 
     # when it has any, else from the scratch itself: its cross profile and the prior here,
     # its ends below (``_scratch_blur``, ``_ends_blur``)
     if blur_hint is not None:
-        blur_cam, var_blur = float(np.clip(blur_hint, 0.5, 3.5)), 0.0
+        # given (the frame's holes, a calibration: exact), or shared by the frame's scratches
+        # (``KnownBlur``: its variance carried into the width below)
+        blur_cam, var_blur = float(np.clip(blur_hint, 0.5, 3.5)), float(getattr(blur_hint, "var", 0.0))
     else:
         blur_cam, var_blur = _scratch_blur(nv, pv, half_w)
 
@@ -693,5 +695,6 @@ def measure_scratch(patch: Patch, region: np.ndarray, blur_hint: float | None = 
     return dict(x=float(x), y=float(y), length=length, width=width, angle=direction,
                 u_length=float(np.hypot(u_s1, u_s2)), u_width=u_width, significance=float(significance),
                 contrast=c, blur=blur_x, mean_darkness=float(np.max(pv)), cut=cut, line=line,
+                blur_read=None if blur_hint is not None else (float(blur_cam), float(var_blur)),
                 groove_ends=(bool(groove_ends[0]), bool(groove_ends[1])),
                 half_band=float(width / 2.0 + 2.5 * blur + 2.0))

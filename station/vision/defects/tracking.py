@@ -17,7 +17,7 @@ from scipy.ndimage import gaussian_filter1d, map_coordinates
 from station.vision.defects.config import Defect, DefectConfig
 from station.vision.defects.common import circ_diff_deg, confidence_of, near_hatch, weighted_pca
 from station.vision.defects.scratches import BLUR_PRIOR_PX
-from station.vision.defects.examine import end_steps, ExaminedCandidate
+from station.vision.defects.examine import end_steps, ExaminedCandidate, shared_blur
 
 
 def measured_again(labels: np.ndarray, region: np.ndarray, sizes: list[int]) -> bool:
@@ -444,7 +444,7 @@ def track_scratches(img: np.ndarray, level: np.ndarray, examined: list["Examined
         length = d.length_px + along - _line_place(ex.line)[0]
         nd = Defect(**{**asdict(d), "x_px": x, "y_px": y, "length_px": length, "angle_deg": angle,
                        "partial": bool(partial)})
-        out.append(ExaminedCandidate(nd, ex.region, ex.box, ex.cover, line, ex.blur, ex.groove_ends))
+        out.append(ExaminedCandidate(nd, ex.region, ex.box, ex.cover, line, ex.blur, ex.groove_ends, ex.blur_read))
     # a piece whose centre line the other's followed stretch now runs along is the same
     # furrow twice: the shorter goes
     items = [ex for ex in out if ex.defect is not None and ex.defect.kind == "scratch" and ex.line is not None]
@@ -543,5 +543,6 @@ def join_scratch_pieces(img: np.ndarray, level: np.ndarray, examined: list["Exam
             region[by0 - y0:by1 - y0, bx0 - x0:bx1 - x0] |= ex.region
             if ex.cover is not None:
                 cover[by0 - y0:by1 - y0, bx0 - x0:bx1 - x0] |= ex.cover
-        joined = ExaminedCandidate(d, region, (x0, y0, x1, y1), cover, line, float(np.mean([a.blur or 0, b.blur or 0])))
+        joined = ExaminedCandidate(d, region, (x0, y0, x1, y1), cover, line, float(np.mean([a.blur or 0, b.blur or 0])),
+                                   blur_read=shared_blur([a, b]))
         examined = [ex for ex in examined if ex is not a and ex is not b] + [joined]
