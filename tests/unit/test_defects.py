@@ -801,6 +801,20 @@ def test_a_faint_scratch_beside_a_strong_one_on_a_frame_without_a_hole_is_read_u
     assert all(d is not None and d.kind == t.kind for t, d in pairs)
 
 
+def test_a_scratch_found_under_its_own_blur_stays_when_the_frames_shared_blur_drops_it():
+    """The frame's shared blur is known only so well: a 0.64 x 0.016 mm scratch (bench
+    seed 490058, 0.0085 mm/px, 1.74 px of blur, no hole) read contrast 0.111 under its own
+    1.56 px and 0.104 under the frame's 1.49, under the 0.11 bar: found under either, it is
+    a scratch."""
+    mm = 0.0085
+    f = random_defect_frame(490058, None, mm_per_px=mm, hatch_deg=35.0, texture_scale=0.010 / mm)
+    assert f.holes == []
+    found = detect_defects(f.image, mm)
+    pairs, false = match(f.defects, found, mm)
+    assert [found[i] for i in false] == []
+    assert len(pairs) == 3 and all(d is not None and d.kind == t.kind for t, d in pairs)
+
+
 def test_a_blur_known_to_within_a_variance_widens_a_thin_scratchs_width_uncertainty():
     """A blur given exactly leaves a thin scratch's width as certain as its profile; one
     shared by the frame's scratches (``KnownBlur``) carries its variance into the width
