@@ -63,7 +63,9 @@ def detect_defects(image: np.ndarray, mm_per_px: float, *, holes=None, blur_px: 
     what the coverage scan read at the holes' edges in the bore scan,
     :func:`camera_blur_from_edge`); otherwise it is read from the frame's holes' edges,
     else from each scratch itself (its mean cross profile, its ends and a prior,
-    ``_scratch_blur``) and each pore's own fit: a thin scratch's width is
+    ``_scratch_blur``) and each pore's own fit, and then from the frame's scratches
+    together (``shared_blur``), under which the frame is examined again (what only the
+    first examination found stays): a thin scratch's width is
     fixed only as well as the blur is known (its cross profile is the blur's, widened by
     w^2/12), and a small pore's size trades off against its blur (a 0.085 x 0.076 mm
     pore read 0.050 mm wide with the blur free, 0.090 x 0.072 mm with 1.2 px given:
@@ -99,9 +101,9 @@ def detect_defects(image: np.ndarray, mm_per_px: float, *, holes=None, blur_px: 
         # frame alike, and a strong scratch reads it better than a faint one can, whose
         # width and contrast trade off against it. Their reads combined stand for the
         # frame's blur, its variance carried into the widths, and the frame is examined
-        # again with it: a faint 0.49 mm scratch (contrast 0.10 read under 1.6 px of its
-        # own blur, under the 0.11 bar) beside a 1.66 mm one on a frame without a hole was
-        # lost (bench seed 350098), as was a 0.43 mm one beside a 0.74 mm one (260088)
+        # again with it: a faint 0.43 x 0.023 mm scratch on a frame without a hole read
+        # 1.18 px of blur for 1.66 and contrast 0.10 under it, under the 0.11 bar, beside a
+        # 0.74 mm one that read 1.75 +/- 0.07 px (bench seed 260088), and was lost
         shared = shared_blur([ex for ex in examined if ex.defect is not None and ex.defect.kind == "scratch"])
         if shared is not None and shared[1] <= cfg.frame_blur_max_sd_px ** 2:
             again, examined_again = _find(img, mm_per_px, holes, wall, zone, level_full, reach_px,
