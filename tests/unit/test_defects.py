@@ -782,6 +782,21 @@ def test_a_hatch_whose_weaker_family_is_faint_is_read_and_its_grooves_are_no_scr
     assert len(f.defects) == 7 and all(d is not None and d.kind == t.kind for t, d in pairs)
 
 
+def test_a_lone_scratchs_flank_and_an_artefact_are_no_hatch():
+    """The weaker family's lower bar (4x the median direction) holds only for peaks that
+    stand clear of their flanks: on a bare wall with a hole, a lone 160 px scratch's
+    broad peak paired its flank (73x) with an artefact near the frame's axis (4.2x), the
+    hatch was read at 8.6 / -15 deg, and the scratch was taken for a groove and lost."""
+    from station.vision.grooves import frame_hatch
+
+    p = FrameParams(wall_level_dn=120.0, hole_level_dn=40.0, groove_depth=0.0, grain=0.005, blotch=0.0,
+                    blur_sigma_px=1.3, gain_e_per_dn=60.0, read_noise_dn=0.5, vignetting=0.0, **SMALL)
+    spec = DefectSpec("scratch", 320.3, 256.2, 160.0, 3.0, 159.0, 0.6, shape_seed=912)
+    f = render_frame(p, [HoleSpec(80.0, 80.0, 70.0)], seed=62, defects=[spec])
+    assert frame_hatch(f.image, [(80.0, 80.0, 35.0)]) == (30.0, -30.0)
+    assert [d.kind for d in detect_defects(f.image, MM_PER_PX)] == ["scratch"]
+
+
 def test_a_faint_scratch_beside_a_strong_one_on_a_frame_without_a_hole_is_read_under_their_shared_blur():
     """No hole and no blur given: each scratch read its own blur, and a faint 0.43 x 0.023
     mm one (bench seed 260088, 1.66 px of blur) read under 1.2 px of it came out too faint
