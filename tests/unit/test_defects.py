@@ -2001,3 +2001,21 @@ def test_a_scratch_end_read_at_half_its_local_height_does_not_walk_out_over_a_sh
     held, _ = fit_end(s, step, 3.0, 1.0, rising=False, height=1.0)
     assert walked > 10.0 and abs(held) <= 1.0, (walked, held)
     _the_twin_scratch_found(2133057)
+
+
+@pytest.mark.parametrize("seed", [530015, 530045])
+def test_a_bent_scratch_along_the_hatch_whose_grown_patch_cuts_it_again_is_followed_on(seed):
+    """A bent scratch 0-5 deg off a groove family (station bench seeds drawn with
+    ``scratch_within_deg=5``: 530015's 1.72 x 0.057 mm, 530045's 1.36 x 0.035 mm): the wall
+    model's grooves along its line take it in by pieces, each with one square end and the
+    other running on. The patch grown along a piece cut it again; with neither patch's
+    verdict a defect, the grown one's piece is followed on, and the scratch is measured
+    whole."""
+    f = random_defect_frame(seed, None, mm_per_px=MM_PER_PX, scratch_within_deg=5.0)
+    found = detect_defects(f.image, MM_PER_PX)
+    pairs, false = match(f.defects, found, MM_PER_PX)
+    assert [found[i] for i in false] == []
+    for t, d in pairs:
+        assert d is not None and d.kind == t.kind, (t.kind, t.x_px, t.y_px)
+        if t.kind == "scratch":
+            assert _within(d.length_mm, t.length_mm), (d.length_mm, t.length_mm)

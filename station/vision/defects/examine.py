@@ -116,12 +116,16 @@ def examine_candidate(img: np.ndarray, box, seed: np.ndarray, zone: np.ndarray, 
     for attempt in range(3):
         again, m, kind = _examine_once(img, box, seed, excl, zone, angles_deg, wall_level, cfg, blur_hint,
                                        max_width_px, confine, line_out=attempt > 0)
-        if ex is not None and again.defect is None and not (box0[0] == 0 or box0[1] == 0 or box0[2] == ww
-                                                             or box0[3] == hh):
+        if ex is not None and ex.defect is not None and again.defect is None and not (
+                box0[0] == 0 or box0[1] == 0 or box0[2] == ww or box0[3] == hh):
             # the grown patch lost it (bench frames: short scratches of 0.14-0.17 mm, taken for
             # a mark there): the cut one stands; but at the frame's border, where the first
             # patch had half a wall model round it, the grown patch's verdict (twin frames:
-            # the hatch's residue at the border, 7 deg off a groove, stood as a 0.32 mm scratch)
+            # the hatch's residue at the border, 7 deg off a groove, stood as a 0.32 mm scratch).
+            # Where neither patch made a defect, the grown one's piece is followed on: a bent
+            # scratch along the hatch whose piece the grown patch cut again, one end square and
+            # the other running on, was lost with the cut one's verdict (station frame 530015:
+            # a 1.72 x 0.057 mm scratch 2 deg off the hatch, read as pieces of 106 and 111 px)
             break
         ex = again
         if kind != "scratch" or m is None or not (m.get("cut") or m.get("runs_on")) or attempt == 2:
