@@ -2019,3 +2019,20 @@ def test_a_bent_scratch_along_the_hatch_whose_grown_patch_cuts_it_again_is_follo
         assert d is not None and d.kind == t.kind, (t.kind, t.x_px, t.y_px)
         if t.kind == "scratch":
             assert _within(d.length_mm, t.length_mm), (d.length_mm, t.length_mm)
+
+
+def test_a_scratch_along_the_hatch_cut_at_both_ends_where_a_groove_crosses_one_is_found():
+    """A 0.80 x 0.055 mm scratch 4 deg off a groove family (station bench seed 580021,
+    drawn with ``scratch_within_deg=7.5``) ends where a groove of the other family crosses:
+    its ends step 1.6 px / 1.01 and 1.5 px / 0.72 of its darkness, under the 0.8 a lone
+    square end needs. Cut sharply at both, it is a scratch; the frame's other defects are
+    found and nothing is false."""
+    f = random_defect_frame(580021, None, mm_per_px=MM_PER_PX, scratch_within_deg=7.5)
+    found = detect_defects(f.image, MM_PER_PX)
+    pairs, false = match(f.defects, found, MM_PER_PX)
+    assert [found[i] for i in false] == []
+    assert len([t for t, _ in pairs if t.kind == "scratch"]) == 2
+    for t, d in pairs:
+        assert d is not None and d.kind == t.kind, (t.kind, t.x_px, t.y_px)
+        if t.kind == "scratch":
+            assert _within(d.length_mm, t.length_mm), (d.length_mm, t.length_mm)

@@ -198,6 +198,14 @@ class DefectConfig:
     #: kept (135 with both ends within 4 px) and still none of the 172 others; a fresh twin
     #: frame's groove piece (2093047) had ends of 0.6 and 11.7 px
     square_end_other_max_width_px: float = 8.0
+    #: ... or, when both ends are square (a cut at each, no wider than the first bar), each
+    #: a step of at least this share: what lies on beyond a cut is another mark, a groove
+    #: along the line or one of the other family crossing at the end (session 66: a 0.80 x
+    #: 0.055 mm scratch 4 deg off the hatch, bench seed 580021, stepped 1.6 px / 1.01 and
+    #: 1.5 px / 0.72 where a groove crossed its end). Over 253 scratches drawn 0-7.5 deg
+    #: off a family, 4 more found; no false defect changed on 540 clean station, wide (20,
+    #: 30, 45, 65 deg) and twin frames
+    square_end_sharp_min_height: float = 0.65
     #: an end where the mark runs on at more than this share of its darkness, while the
     #: other end is square, makes it a piece of a longer mark: measured again with its line
     #: left out of the wall model's grooves (``examine_candidate``)

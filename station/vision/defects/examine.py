@@ -476,7 +476,8 @@ def _square_end(img: np.ndarray, level: np.ndarray, x0: int, y0: int, m: dict,
     runs on): whether both ends are read, both step by at least
     ``cfg.square_end_min_height`` of the darkness inside, one of them square (no wider
     than ``cfg.square_end_max_width_px``, or 2.5 of the mark's blur) and the other no
-    wider than ``cfg.square_end_other_max_width_px``; and whether one end is square while
+    wider than ``cfg.square_end_other_max_width_px``, or both square in width with steps
+    of at least ``cfg.square_end_sharp_min_height``; and whether one end is square while
     another runs on at more than ``cfg.square_end_max_run_on`` of the darkness (a piece
     of a longer mark). ``angles_deg``: the hatch's directions (the family crossing the
     mark is taken out of its ends' read, ``unread`` not read: ``end_steps``)."""
@@ -487,6 +488,11 @@ def _square_end(img: np.ndarray, level: np.ndarray, x0: int, y0: int, m: dict,
     ends = [w <= max(cfg.square_end_other_max_width_px, max_width) and h >= cfg.square_end_min_height
             for w, h in steps]
     runs_on = [h < 1.0 - cfg.square_end_max_run_on for _, h in steps]
+    if len(steps) == 2 and all(w <= max_width for w, _ in steps) \
+            and all(h >= cfg.square_end_sharp_min_height for _, h in steps):
+        # cut at both ends: what lies on beyond one is another mark (a groove along the
+        # line, or one of the other family crossing at the end)
+        return True, any(runs_on)
     # both ends: one the frame cuts leaves a groove's piece at the border as square as a
     # scratch's (a fresh twin frame, 2080043); the scan's overlap sees such a scratch whole
     return len(steps) == 2 and any(square) and all(ends), any(square) and any(runs_on)
