@@ -202,7 +202,7 @@ class DefectConfig:
     #: a step of at least this share: what lies on beyond a cut is another mark, a groove
     #: along the line or one of the other family crossing at the end (session 66: a 0.80 x
     #: 0.055 mm scratch 4 deg off the hatch, bench seed 580021, stepped 1.6 px / 1.01 and
-    #: 1.5 px / 0.72 where a groove crossed its end). Over 253 scratches drawn 0-7.5 deg
+    #: 1.5 px / 0.72 where a groove crossed its end). Over 206 scratches drawn 0-7.5 deg
     #: off a family, 4 more found; no false defect changed on 540 clean station, wide (20,
     #: 30, 45, 65 deg) and twin frames
     square_end_sharp_min_height: float = 0.65
