@@ -1080,6 +1080,25 @@ def test_a_pore_beyond_a_rim_leaves_the_chip_between_them_whole():
     assert abs(near[0].length_mm - truth.length_mm) <= max(0.1 * truth.length_mm, 0.02)
 
 
+def test_a_pore_whose_region_covers_the_ring_beyond_a_chip_leaves_the_chip_whole():
+    """Station envelope, hatch 28 deg, 0.009 mm/px with the texture in mm, bench seed
+    680052: a 0.41 mm pore 24 px beyond a rim, its region itself (no skirt) over the
+    ring that calibrates the wall's level beyond a 0.16 x 0.028 mm chip's middle. The
+    rays through that ring were left out, and the chip read as two (0.045 and 0.058 mm,
+    one of them false); their wall's level now comes from the rays either side."""
+    mm = 0.009
+    f = random_defect_frame(680052, None, mm_per_px=mm, hatch_deg=28.0, texture_scale=0.010 / mm)
+    (truth,) = [t for t in f.defects if t.kind == "chip"]
+    found = detect_defects(f.image, mm)
+    near = [d for d in found if np.hypot(d.x_px - truth.image_x_px, d.y_px - truth.image_y_px) < 20.0]
+    assert [d.kind for d in near] == ["chip"]
+    assert abs(near[0].length_mm - truth.length_mm) <= max(0.1 * truth.length_mm, 0.02)
+    assert abs(near[0].width_mm - truth.width_mm) <= max(0.1 * truth.width_mm, 0.02)
+    pairs, false = match(f.defects, found, mm)
+    assert false == []
+    assert all(d is not None and d.kind == t.kind for t, d in pairs)
+
+
 def test_a_groove_that_fades_along_its_length_is_read_on_each_side_of_the_hole():
     """One groove family at 30 deg whose depth fades along its lines, 8 % at a hole's
     centre and 0.08 % more per px (1-16 % over the patch): the two sides' profiles,

@@ -25,6 +25,10 @@ MIN_HOLE_DIAMETER_MM = 0.55
 #: (a chip's floor, lit up to ~0.3 of the wall-to-hole step, stands well above it; a deep
 #: groove beside a hole reads ~0.25 and the groove model takes most of that away)
 RIM_FLOOR_CROSSING = 0.2
+#: a rim's ray recalibrates the wall's level from its own ring beyond the band only when
+#: at least this many of the ring's samples (0.5 px apart, 8 px in all) are clear of
+#: the other zones' skirts; else from the rays either side (``rims._rim_profile``)
+RIM_RING_MIN_SAMPLES = 4
 #: a ray's share falls below a crossing going out (``_rim_profile``) only where it stays
 #: below it over the next this many px: the rim's blurred step, and the burr's metal or
 #: the wall beyond it, hold for many px, where the noise inside a dim hole dips for a

@@ -16,7 +16,8 @@ from scipy.ndimage import gaussian_filter1d, maximum_filter1d
 from scipy.special import ndtr
 
 from station.vision.edges import SMOOTH_SIGMA_PX
-from station.vision.defects.config import Defect, DefectConfig, RIM_FLOOR_CROSSING, RIM_HOLD_PX
+from station.vision.defects.config import (Defect, DefectConfig, RIM_FLOOR_CROSSING, RIM_HOLD_PX,
+                                          RIM_RING_MIN_SAMPLES)
 from station.vision.defects.common import confidence_of, fit_end, mad_sigma, true_runs
 from station.vision.defects.wall import groove_profiles, fit_plane
 
@@ -81,26 +82,40 @@ def _rim_profile(img: np.ndarray, hole, zone_others: np.ndarray, reach_px: float
     polar = cv2.remap(p, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=nan)
     wall_polar = cv2.remap(level, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=nan)
     other_polar = cv2.remap(others, mx, my, cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT, borderValue=0.0)
+    # the ring calibrates the wall's level per ray; it reads only wall clear of the other
+    # zones and of their blurred skirts (2.5 blur + 1 px)
+    skirt = int(np.ceil(2.5 * max(blur_px, 0.5) + 1.0))
+    others_skirt = cv2.dilate(others, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * skirt + 1, 2 * skirt + 1)))
+    other_ring = cv2.remap(others_skirt, mx, my, cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT, borderValue=0.0)
     inner = rr < rad - reach_px
     band = (rr >= rad - reach_px) & (rr <= rad + reach_px)
     ring = rr > rad + reach_px + 1.0
     with np.errstate(all="ignore"), warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # a column all outside the frame: NaN, dropped below
         hole_lv = np.nanmedian(polar[inner], axis=0)
-        ratio = np.nanmedian(polar[ring] / wall_polar[ring], axis=0)
-    valid = (np.isfinite(polar[band]).all(axis=0) & np.isfinite(hole_lv) & np.isfinite(ratio)
-             & (other_polar[band | ring].max(axis=0) == 0))
-    if valid.sum() < 16:
+        ring_wall = np.where(other_ring[ring] == 0, polar[ring] / wall_polar[ring], nan)
+        ratio = np.nanmedian(ring_wall, axis=0)
+    has_ratio = np.isfinite(ratio) & (np.isfinite(ring_wall).sum(axis=0) >= RIM_RING_MIN_SAMPLES)
+    # a ray is read where its band is whole and clear of the other zones. Its wall's
+    # level comes from its own ring or, where another zone (a pore, a scratch, another
+    # hole) covers that ring, from the rays either side within ``reach_px`` of arc: a
+    # 0.41 mm pore 24 px off a rim covered the ring over a chip's middle, and the rays
+    # left out there cut the chip in two (station envelope, seed 680052)
+    valid = (np.isfinite(polar[band]).all(axis=0) & np.isfinite(hole_lv)
+             & (other_polar[band].max(axis=0) == 0))
+    if valid.sum() < 16 or has_ratio.sum() < 16:
         return None
+    valid &= _arc_distance(has_ratio, step) <= reach_px
 
-    def smooth(v: np.ndarray, px: float) -> np.ndarray:
-        filled = np.interp(np.arange(n_th), np.flatnonzero(valid), v[valid], period=n_th)
+    def smooth(v: np.ndarray, px: float, ok: np.ndarray | None = None) -> np.ndarray:
+        ok = valid if ok is None else ok
+        filled = np.interp(np.arange(n_th), np.flatnonzero(ok), v[ok], period=n_th)
         return gaussian_filter1d(filled, px / step, mode="wrap")
 
     # the hole's far side varies slowly round it (vignetting) and has no texture: its
     # level smoothed over ~10 px of arc; the wall's recalibration over 4 px of arc
     hole_s = smooth(hole_lv, 10.0)
-    wall_b = wall_polar[band] * smooth(ratio, 4.0)[None, :]
+    wall_b = wall_polar[band] * smooth(ratio, 4.0, has_ratio)[None, :]
     share = (wall_b - polar[band]) / np.maximum(wall_b - hole_s[None, :], 1.0)
     share[:, ~valid] = 0.0
     rb = rr[band]
@@ -140,6 +155,20 @@ def _rim_profile(img: np.ndarray, hole, zone_others: np.ndarray, reach_px: float
     edge_out = first_crossing(sh, RIM_FLOOR_CROSSING)
     edge_out[~(sh < RIM_FLOOR_CROSSING).any(axis=0)] = np.nan  # never left it within the band: not read
     return _RimProfile(theta, rb, share, valid, edge, edge_find, edge_out)
+
+
+def _arc_distance(ok: np.ndarray, step: float) -> np.ndarray:
+    """Per ray (``step`` px of arc apart, round the whole rim): the arc to the nearest ray
+    where ``ok`` holds (0 on those)."""
+    n = ok.size
+    idx = np.flatnonzero(ok)
+    if idx.size == 0:
+        return np.full(n, np.inf)
+    k = np.arange(n)
+    pos = np.searchsorted(idx, k)
+    after = idx[pos % idx.size] + np.where(pos == idx.size, n, 0)
+    before = idx[pos - 1] - np.where(pos == 0, n, 0)
+    return np.minimum(after - k, k - before) * step
 
 
 def _lift_wall(share: np.ndarray, rb: np.ndarray, valid: np.ndarray, beyond: float, smooth) -> np.ndarray:
