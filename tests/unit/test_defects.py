@@ -1099,6 +1099,23 @@ def test_a_pore_whose_region_covers_the_ring_beyond_a_chip_leaves_the_chip_whole
     assert all(d is not None and d.kind == t.kind for t, d in pairs)
 
 
+def test_a_scratch_across_a_rims_outer_ring_leaves_the_chip_under_it_found():
+    """Station envelope, bench seed 190003: a found 1 mm scratch 27 px below a 64 px hole
+    crosses the ring beyond the rim's band over 36 deg of arc, and a 0.18 x 0.064 mm chip
+    lies under it. The rays through that ring were not read, and the chip was lost
+    (a known limit since session 61); their wall's level now comes from the rays either
+    side, and nothing false comes with it."""
+    f = random_defect_frame(190003, None, mm_per_px=MM_PER_PX)
+    (truth,) = [t for t in f.defects if t.kind == "chip"]
+    found = detect_defects(f.image, MM_PER_PX)
+    near = [d for d in found if np.hypot(d.x_px - truth.image_x_px, d.y_px - truth.image_y_px) < 20.0]
+    assert [d.kind for d in near] == ["chip"]
+    assert np.hypot(near[0].x_px - truth.image_x_px, near[0].y_px - truth.image_y_px) * MM_PER_PX < 0.05
+    assert abs(near[0].length_mm - truth.length_mm) <= max(0.1 * truth.length_mm, 0.02)
+    pairs, false = match(f.defects, found, MM_PER_PX)
+    assert false == []
+
+
 def test_a_groove_that_fades_along_its_length_is_read_on_each_side_of_the_hole():
     """One groove family at 30 deg whose depth fades along its lines, 8 % at a hole's
     centre and 0.08 % more per px (1-16 % over the patch): the two sides' profiles,

@@ -27,7 +27,7 @@ class _RimProfile:
     theta: np.ndarray  # ray directions (rad, image sense), 0.5 px of arc apart at the rim
     rr: np.ndarray  # radii sampled along each ray (px)
     share: np.ndarray  # (len(rr), len(theta)): the share of "hole", (W - I) / (W - H)
-    valid: np.ndarray  # rays wholly inside the frame and clear of other holes' zones
+    valid: np.ndarray  # rays whose band is inside the frame and clear of the other zones, its wall's level read
     edge: np.ndarray  # per ray: where the share first falls below ``rim_crossing``, going out
     edge_find: np.ndarray  # the same on the share averaged along the rim (finding defects)
     #: per ray: where the share averaged along the rim first falls below ``RIM_FLOOR_CROSSING``,
