@@ -17,7 +17,7 @@ from station.vision.defects.config import Defect, DefectConfig, GROUP_DOMINANT_S
 from station.vision.defects.wall import (
     line_band, find_candidates, split_furrows, group_collinear, hole_zone, model_wall, one_furrow, seed_in_box,
 )
-from station.vision.defects.rims import hole_blur, marks_mask, rim_defects
+from station.vision.defects.rims import grow_by_skirt, hole_blur, marks_mask, rim_defects
 from station.vision.defects.scratches import BLUR_PRIOR_PX
 from station.vision.defects.examine import examine_candidate, ExaminedCandidate, KnownBlur, shared_blur
 from station.vision.defects.tracking import (
@@ -276,9 +276,7 @@ def _find(img: np.ndarray, mm_per_px: float, holes: list, wall, zone: np.ndarray
         # 0.07 mm "chip" next to it (wide bench seed 82083). Only those: a pore 30 px out
         # whose skirt reached the ring that calibrates the wall cut a true chip between it
         # and the rim in two (hatch 22 deg, seed 89000)
-        skirt = int(np.ceil(2.5 * blur_rim + 1.0))
-        grown = cv2.dilate(claimed_regions.astype(np.uint8),
-                           cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * skirt + 1, 2 * skirt + 1)))
+        grown = grow_by_skirt(claimed_regions.astype(np.uint8), blur_rim)
         labels = cv2.connectedComponents(grown)[1]
     for i, hole in enumerate(holes):
         own = hole_zone(img.shape, [hole], reach_px)

@@ -84,8 +84,7 @@ def _rim_profile(img: np.ndarray, hole, zone_others: np.ndarray, reach_px: float
     other_polar = cv2.remap(others, mx, my, cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT, borderValue=0.0)
     # the ring calibrates the wall's level per ray; it reads only wall clear of the other
     # zones and of their blurred skirts (2.5 blur + 1 px)
-    skirt = int(np.ceil(2.5 * max(blur_px, 0.5) + 1.0))
-    others_skirt = cv2.dilate(others, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * skirt + 1, 2 * skirt + 1)))
+    others_skirt = grow_by_skirt(others, max(blur_px, 0.5))
     other_ring = cv2.remap(others_skirt, mx, my, cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT, borderValue=0.0)
     inner = rr < rad - reach_px
     band = (rr >= rad - reach_px) & (rr <= rad + reach_px)
@@ -95,7 +94,7 @@ def _rim_profile(img: np.ndarray, hole, zone_others: np.ndarray, reach_px: float
         hole_lv = np.nanmedian(polar[inner], axis=0)
         ring_wall = np.where(other_ring[ring] == 0, polar[ring] / wall_polar[ring], nan)
         ratio = np.nanmedian(ring_wall, axis=0)
-    has_ratio = np.isfinite(ratio) & (np.isfinite(ring_wall).sum(axis=0) >= RIM_RING_MIN_SAMPLES)
+    has_ratio = np.isfinite(ring_wall).sum(axis=0) >= RIM_RING_MIN_SAMPLES
     # a ray is read where its band is whole and clear of the other zones. Its wall's
     # level comes from its own ring or, where another zone (a pore, a scratch, another
     # hole) covers that ring, from the rays either side within ``reach_px`` of arc: a
@@ -155,6 +154,13 @@ def _rim_profile(img: np.ndarray, hole, zone_others: np.ndarray, reach_px: float
     edge_out = first_crossing(sh, RIM_FLOOR_CROSSING)
     edge_out[~(sh < RIM_FLOOR_CROSSING).any(axis=0)] = np.nan  # never left it within the band: not read
     return _RimProfile(theta, rb, share, valid, edge, edge_find, edge_out)
+
+
+def grow_by_skirt(mask: np.ndarray, blur: float) -> np.ndarray:
+    """``mask`` (an image, non-zero where the marks are) grown by a dark mark's blurred
+    skirt, 2.5 blur + 1 px: how far a mark darkens the wall beyond its region."""
+    skirt = int(np.ceil(2.5 * blur + 1.0))
+    return cv2.dilate(mask, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * skirt + 1, 2 * skirt + 1)))
 
 
 def _arc_distance(ok: np.ndarray, step: float) -> np.ndarray:
