@@ -113,6 +113,11 @@ class FrameParams:
     #: sizes) in px is this times its size at the station's 0.010 mm/px: a camera of
     #: s mm/px sees it 0.010 / s as large (the sensor's noise stays per pixel)
     texture_scale: float = 1.0
+    #: the share of each groove family's length that is missing: a honing whose grooves
+    #: stop short (a coarse grain that bites and leaves, a plateau pass that takes the
+    #: shallow stretches off) leaves groove pieces with cut ends, darkness stepping within
+    #: the camera's blur as a furrow's does. 0: every groove runs on, fading in and out
+    groove_breaks: float = 0.0
 
 
 @dataclass
@@ -151,6 +156,26 @@ def _lowfreq(rng: np.random.Generator, width_px: int, height_px: int, cell_px: i
     return field_ / max(float(field_.std()), 1e-6)
 
 
+#: the cells of the grooves' breaks: across the lines (px, under a groove's spacing, so
+#: that grooves side by side break apart) and along them (a piece's length scale)
+BREAK_CELL_PX = (4.0, 48.0)
+
+
+def _breaks(rng: np.random.Generator, u: np.ndarray, t: np.ndarray, params: FrameParams) -> np.ndarray:
+    """1 where a groove family's lines are cut, 0 where they run (``groove_breaks`` of the
+    area off): a random field on cells across (``u``) and along (``t``) the lines,
+    bilinear between them and thresholded, so a groove stops and starts at a step."""
+    if not 0.0 <= params.groove_breaks < 1.0:
+        raise ValueError(f"groove_breaks must be in [0, 1), not {params.groove_breaks}")
+    du, dt = (c * params.texture_scale for c in BREAK_CELL_PX)
+    u0, t0 = float(u.min()), float(t.min())
+    nu, nt = int((float(u.max()) - u0) / du) + 3, int((float(t.max()) - t0) / dt) + 3
+    cells = rng.standard_normal((nu, nt)).astype(np.float32)
+    field_ = cv2.remap(cells, ((t - t0) / dt).astype(np.float32), ((u - u0) / du).astype(np.float32),
+                       cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    return (field_ >= np.quantile(field_, params.groove_breaks)).astype(np.float32)
+
+
 def wall_radiance(rng: np.random.Generator, xu: np.ndarray, yu: np.ndarray, params: FrameParams,
                   parts: dict | None = None) -> np.ndarray:
     """Honed wall reflectance (DN) at ideal coordinates ``xu``, ``yu``; ``parts``, if
@@ -168,7 +193,10 @@ def wall_radiance(rng: np.random.Generator, xu: np.ndarray, yu: np.ndarray, para
         grid = u0 + 0.25 * np.arange(profile.size)
         grooves = np.interp(u, grid, profile).astype(np.float32)
         # grooves fade in and out along their length (worn stones, plateau honing)
-        rel -= grooves * (0.6 + 0.4 * np.tanh(_lowfreq(rng, w, h, max(2, round(96 * k)))))
+        fade = 0.6 + 0.4 * np.tanh(_lowfreq(rng, w, h, max(2, round(96 * k))))
+        if params.groove_breaks > 0.0:
+            fade *= _breaks(rng, u, (np.cos(phi) * xu + np.sin(phi) * yu).astype(np.float32), params)
+        rel -= grooves * fade
     if parts is not None:
         parts["grooves"] = rel.copy()
     grain = rng.standard_normal((h, w), dtype=np.float32)

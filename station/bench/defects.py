@@ -192,7 +192,8 @@ def _twin_scratches(frames: int, seed: int, mm_per_px: float, tick) -> dict:
 
 def run(frames: int = 100, seed: int = 50000, envelope: str = "station", mm_per_px: float = 0.010,
         progress=None, twin_frames: int = 0, hatch_deg: float | None = None, texture_in_mm: bool = False,
-        scratch_clearance_deg: float | None = None, scratch_within_deg: float | None = None) -> dict:
+        scratch_clearance_deg: float | None = None, scratch_within_deg: float | None = None,
+        groove_breaks: float = 0.0) -> dict:
     """``frames`` frames with defects and ``frames`` clean ones, and ``twin_frames``
     frames of the camera twin with a long scratch (``twin_scratch_frame``, seeds from
     ``seed + 2,000,000``); ``progress()`` after each. ``hatch_deg``: the cross-hatch's
@@ -201,7 +202,9 @@ def run(frames: int = 100, seed: int = 50000, envelope: str = "station", mm_per_
     station's 0.010 mm/px), not in px. ``scratch_clearance_deg``: how far the random
     scratches keep from the hatch's directions (None: the renderer's 10 deg; 0: any
     direction, along the grooves too); ``scratch_within_deg``: instead, every random
-    scratch at most that far from a groove family (scratches along the hatch)."""
+    scratch at most that far from a groove family (scratches along the hatch).
+    ``groove_breaks``: the share of the grooves' length missing (a honing whose grooves
+    stop short, with cut ends; 0: they run on)."""
     import cv2
 
     from sim.camera.defects import HONING_CLEARANCE_DEG, random_defect_frame  # the CLI side may import sim
@@ -216,6 +219,8 @@ def run(frames: int = 100, seed: int = 50000, envelope: str = "station", mm_per_
         wall["hatch_deg"] = float(hatch_deg)
     if texture_in_mm:
         wall["texture_scale"] = STATION_MM_PER_PX / mm_per_px
+    if groove_breaks:
+        wall["groove_breaks"] = float(groove_breaks)
     clearance = HONING_CLEARANCE_DEG if scratch_clearance_deg is None else float(scratch_clearance_deg)
     warm_up()
     per_kind: dict[str, list[tuple]] = defaultdict(list)
@@ -279,6 +284,7 @@ def run(frames: int = 100, seed: int = 50000, envelope: str = "station", mm_per_
         "texture": "mm" if texture_in_mm else "px",
         "scratch_clearance_deg": clearance,
         "scratch_within_deg": scratch_within_deg,
+        "groove_breaks": groove_breaks,
         "holes": n_holes,
         "kinds": kinds,
         "false_per_100_clean_frames": 100.0 * len(false_clean) / frames,
@@ -331,6 +337,9 @@ def register(bench_app: typer.Typer) -> None:
             None, "--scratch-within-deg", min=0.1, max=45.0,
             help="instead, draw every random scratch at most this far from a groove family (scratches along the "
                  "hatch; the detector's groove-alignment angle is 7.5)"),
+        groove_breaks: float = typer.Option(0.0, "--groove-breaks", min=0.0, max=0.9,
+                                            help="the share of the grooves' length missing: a honing whose grooves "
+                                                 "stop short, with cut ends (default 0: they run on, fading)"),
         as_json: bool = typer.Option(False, "--json", help="one JSON object on stdout"),
     ) -> None:
         """Surface defects: recall above the limit per kind, false defects on clean walls, size errors, CPU time."""
@@ -343,7 +352,8 @@ def register(bench_app: typer.Typer) -> None:
             task = bar.add_task("rendering and inspecting frames", total=2 * frames + twin_frames)
             r = run(frames, seed, envelope, mm_per_px=mm_per_px, progress=lambda: bar.advance(task),
                     twin_frames=twin_frames, hatch_deg=hatch_deg, texture_in_mm=texture_in_mm,
-                    scratch_clearance_deg=scratch_clearance_deg, scratch_within_deg=scratch_within_deg)
+                    scratch_clearance_deg=scratch_clearance_deg, scratch_within_deg=scratch_within_deg,
+                    groove_breaks=groove_breaks)
         if as_json:
             print_json(r)
             return
@@ -352,6 +362,7 @@ def register(bench_app: typer.Typer) -> None:
                         f"{r['texture']}, scratches "
                         + (f"<= {r['scratch_within_deg']:g} deg off a groove family" if r["scratch_within_deg"]
                            else f">= {r['scratch_clearance_deg']:g} deg off it")
+                        + (f", {r['groove_breaks']:.0%} of the grooves' length broken out" if r["groove_breaks"] else "")
                         + f", {r['holes']} holes (one core)")
         for c in ("kind", "seeded", "limit mm", "above", "recall", "below: recall", "other kind",
                   "L med mm", "L p90 mm", "L in tol", "W med mm", "W p90 mm", "W in tol", "L in 2u"):

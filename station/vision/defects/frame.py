@@ -14,8 +14,10 @@ import numpy as np
 
 from station.vision.imageio import to_8bit, to_grey
 from station.vision.defects.config import Defect, DefectConfig, GROUP_DOMINANT_SHARE
+from station.vision.defects.common import is_along_hatch, near_hatch
 from station.vision.defects.wall import (
-    line_band, find_candidates, split_furrows, group_collinear, hole_zone, model_wall, one_furrow, seed_in_box,
+    line_band, find_candidates, split_furrows, group_collinear, groove_stretches, hole_zone, model_wall, one_furrow,
+    seed_in_box, stretch_darkness,
 )
 from station.vision.defects.rims import grow_by_skirt, hole_blur, marks_mask, rim_defects
 from station.vision.defects.scratches import BLUR_PRIOR_PX
@@ -134,6 +136,35 @@ def _regions(shape: tuple[int, int], examined: list[ExaminedCandidate]) -> np.nd
         if ex.defect is not None and ex.box is not None:
             mask[_region_slices(ex)] |= ex.region
     return mask
+
+
+def _drop_hatch_like(examined: list[ExaminedCandidate], wall, claimed: np.ndarray, mm_per_px: float,
+                     cfg: DefectConfig) -> list[ExaminedCandidate]:
+    """The scratches along the hatch less those no darker than the frame's own darkest
+    groove stretches along their family (``cfg.aligned_min_stretch_share`` of the
+    population's ``cfg.aligned_stretch_quantile``-th percentile, ``groove_stretches``):
+    a honing whose grooves stop short leaves groove pieces with cut ends, which the ends'
+    test (``_square_end``) takes for furrows."""
+    along = [(ex, near_hatch(ex.defect.angle_deg % 180.0, wall.angles_deg, cfg)) for ex in examined
+             if ex.defect is not None and ex.defect.kind == "scratch"
+             and is_along_hatch(ex.defect.angle_deg % 180.0, ex.defect.length_px, wall.angles_deg, cfg)]
+    if not along:
+        return examined
+    h, w = wall.darkness.shape
+    marks = cv2.resize(claimed[: h * 2, : w * 2].astype(np.float32), (w, h), interpolation=cv2.INTER_AREA) > 0
+    marks = cv2.dilate(marks.astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
+    families = {}
+    drop = set()
+    for ex, family in along:
+        if family not in families:
+            families[family] = groove_stretches(wall, family, marks, mm_per_px, cfg)
+        stretches = families[family]
+        d = ex.defect
+        own = stretch_darkness(stretches, d.x_px, d.y_px, d.length_px)
+        if stretches.quantile is not None and own is not None \
+                and own < cfg.aligned_min_stretch_share * stretches.quantile:
+            drop.add(id(ex))
+    return [ex for ex in examined if id(ex) not in drop]
 
 
 def _find(img: np.ndarray, mm_per_px: float, holes: list, wall, zone: np.ndarray, level_full: np.ndarray,
@@ -264,6 +295,7 @@ def _find(img: np.ndarray, mm_per_px: float, holes: list, wall, zone: np.ndarray
     examined = drop_scratch_pieces(examined)
     examined = track_scratches(img, level_full, examined, cfg, wall.angles_deg, wall.residual)
     examined = join_scratch_pieces(img, level_full, examined, cfg)
+    examined = _drop_hatch_like(examined, wall, claimed_regions, mm_per_px, cfg)
     found: list[Defect] = [ex.defect if ex.line is None else replace(ex.defect, line_px=line_points(ex.line))
                            for ex in examined if ex.defect is not None]
     others = [hole_zone(img.shape, [h for j, h in enumerate(holes) if j != i], reach_px) for i in range(len(holes))]

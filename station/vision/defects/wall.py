@@ -18,16 +18,24 @@ from station.vision.defects.config import DefectConfig, NOISE_FLOOR
 from station.vision.defects.common import mad_sigma, near_hatch
 
 
-def _family_mean(values: np.ndarray, weights: np.ndarray, angle_deg: float, window: int) -> np.ndarray:
-    """Weighted mean of ``values`` along lines of direction ``angle_deg`` (image sense),
-    over ``window`` px: the frame rotated so those lines run along rows, a box filter of
-    the weighted values and of the weights, rotated back."""
-    h, w = values.shape
+def _rotation(shape: tuple[int, int], angle_deg: float) -> tuple[np.ndarray, tuple[int, int]]:
+    """The affine map that turns a frame of ``shape`` so that lines of direction
+    ``angle_deg`` (image sense) run along rows, and the size (w, h) that holds it whole."""
+    h, w = shape
     m = cv2.getRotationMatrix2D((w / 2.0, h / 2.0), angle_deg, 1.0)
     c, s = abs(np.cos(np.deg2rad(angle_deg))), abs(np.sin(np.deg2rad(angle_deg)))
     w2, h2 = int(w * c + h * s) + 4, int(w * s + h * c) + 4
     m[0, 2] += (w2 - w) / 2.0
     m[1, 2] += (h2 - h) / 2.0
+    return m, (w2, h2)
+
+
+def _family_mean(values: np.ndarray, weights: np.ndarray, angle_deg: float, window: int) -> np.ndarray:
+    """Weighted mean of ``values`` along lines of direction ``angle_deg`` (image sense),
+    over ``window`` px: the frame rotated so those lines run along rows, a box filter of
+    the weighted values and of the weights, rotated back."""
+    h, w = values.shape
+    m, (w2, h2) = _rotation((h, w), angle_deg)
     num = cv2.blur(cv2.warpAffine(values * weights, m, (w2, h2)), (window, 1))
     den = cv2.blur(cv2.warpAffine(weights, m, (w2, h2)), (window, 1))
     mean = num / np.maximum(den, 1e-3)
@@ -43,11 +51,7 @@ def _line_support(shape: tuple[int, int], angle_deg: float, window: int) -> np.n
     false "pore" (bench frames: the same corner pixel in 1 frame in 200)."""
     ones = np.ones(shape, np.float32)
     h, w = shape
-    m = cv2.getRotationMatrix2D((w / 2.0, h / 2.0), angle_deg, 1.0)
-    c, s = abs(np.cos(np.deg2rad(angle_deg))), abs(np.sin(np.deg2rad(angle_deg)))
-    w2, h2 = int(w * c + h * s) + 4, int(w * s + h * c) + 4
-    m[0, 2] += (w2 - w) / 2.0
-    m[1, 2] += (h2 - h) / 2.0
+    m, (w2, h2) = _rotation(shape, angle_deg)
     den = cv2.blur(cv2.warpAffine(ones, m, (w2, h2)), (window, 1))
     support = cv2.warpAffine(den, cv2.invertAffineTransform(m), (w, h))
     support.setflags(write=False)
@@ -63,6 +67,7 @@ class _Wall:
     noise: float  # robust std of the 1 px-smoothed residual
     angles_deg: tuple[float, float]
     level: np.ndarray  # the wall's level (DN, half res), blotches and illumination
+    darkness: np.ndarray  # relative darkness under that level, the cross-hatch in it (half res)
 
 
 def _half(image: np.ndarray) -> np.ndarray:
@@ -154,7 +159,7 @@ def model_wall(image: np.ndarray, holes, reach_px: float, cfg: DefectConfig,
         valid &= _line_support((h, w), round(float(a), 1), cfg.groove_window_half_px) >= 1.0 / 3.0
     residual = _remove_grooves(darkness, weights, angles, cfg.groove_window_half_px, valid)
     noise = max(mad_sigma(cv2.GaussianBlur(residual, (0, 0), 1.0)[valid]), NOISE_FLOOR)
-    return _Wall(residual, valid, float(noise), angles, level)
+    return _Wall(residual, valid, float(noise), angles, level, darkness)
 
 
 def _remove_grooves(darkness: np.ndarray, weights: np.ndarray, angles, window: int, valid: np.ndarray) -> np.ndarray:
@@ -191,6 +196,61 @@ def _line_response(wall: _Wall, cfg: DefectConfig) -> np.ndarray:
     if up.shape != (h, w):
         up = cv2.copyMakeBorder(up, 0, h - up.shape[0], 0, w - up.shape[1], cv2.BORDER_REPLICATE)
     return up
+
+
+@dataclass
+class GrooveStretches:
+    """One groove family's stretches over the frame (``groove_stretches``)."""
+
+    rotation: np.ndarray  # half-res frame -> the turned frame in which the family runs along rows
+    darkness: np.ndarray  # the turned frame's darkness integrated across the lines (x full-res px)
+    quantile: float | None  # the population's cfg.aligned_stretch_quantile-th percentile (None: too few)
+
+
+def groove_stretches(wall: _Wall, angle_deg: float, marks: np.ndarray, mm_per_px: float,
+                     cfg: DefectConfig) -> GrooveStretches:
+    """How dark a groove family's lines get over the frame: the wall's darkness (its level
+    taken out, the cross-hatch left in), turned so the family runs along rows, averaged
+    along them over ``cfg.aligned_stretch_mm``, and integrated across the lines over a
+    core of +/- ``cfg.aligned_stretch_core_mm`` less the flanks beyond it (the same width
+    again on each side). A line's darkness integrated across is what the blur leaves
+    unchanged, so a thin deep groove and a broader shallow one compare fairly. The
+    population is each line's crest (a maximum across the lines) on the wall clear of the
+    holes' zones and of ``marks`` (half res, the defects measured), and the frame's dark
+    end of it its ``cfg.aligned_stretch_quantile``-th percentile."""
+    half = 2.0 * mm_per_px  # mm per half-res px
+    along = max(int(round(cfg.aligned_stretch_mm / half)), 3)
+    core = max(int(round(cfg.aligned_stretch_core_mm / 2.0 / half)), 1)
+    m, (w2, h2) = _rotation(wall.darkness.shape, angle_deg)
+    dark = cv2.warpAffine(np.where(wall.valid, wall.darkness, 0.0).astype(np.float32), m, (w2, h2))
+    usable = cv2.warpAffine((wall.valid & ~marks).astype(np.float32), m, (w2, h2))
+    mean = cv2.blur(dark, (along, 1))
+    usable = cv2.blur(usable, (along, 1)) > 0.99
+    n = 2 * core + 1
+    kernel = np.zeros((3 * n, 1), np.float32)
+    kernel[n:2 * n] = 1.0
+    kernel[:n] = kernel[2 * n:] = -0.5
+    integrated = 2.0 * cv2.filter2D(mean, -1, kernel, borderType=cv2.BORDER_REPLICATE)
+    crest = (integrated >= np.roll(integrated, 1, 0)) & (integrated >= np.roll(integrated, -1, 0)) & (integrated > 0)
+    usable &= cv2.erode(usable.astype(np.uint8), np.ones((3 * n, 1), np.uint8)).astype(bool)
+    pop = integrated[crest & usable]
+    q = float(np.percentile(pop, cfg.aligned_stretch_quantile)) if pop.size >= 1000 else None
+    return GrooveStretches(m, integrated, q)
+
+
+def stretch_darkness(stretches: GrooveStretches, x_px: float, y_px: float, length_px: float) -> float | None:
+    """A mark's darkness integrated across it, as ``groove_stretches`` reads the grooves':
+    the median, over the middle 70 % of its length, of the best of the three rows round
+    its centre line (full-res centre and length; the mark runs along the family)."""
+    cx, cy = (x_px - 0.5) / 2.0, (y_px - 0.5) / 2.0
+    px, py = stretches.rotation @ np.array([cx, cy, 1.0])
+    h2, w2 = stretches.darkness.shape
+    reach = 0.35 * length_px / 2.0
+    c0, c1 = max(int(np.floor(px - reach)), 0), min(int(np.ceil(px + reach)) + 1, w2)
+    r = int(round(py))
+    if c1 <= c0 or r < 1 or r > h2 - 2:
+        return None
+    return float(np.median(stretches.darkness[r - 1:r + 2, c0:c1].max(axis=0)))
 
 
 def find_candidates(wall: _Wall, cfg: DefectConfig) -> list[tuple[np.ndarray, int, tuple[int, int, int, int], float]]:
