@@ -230,6 +230,14 @@ class DefectConfig:
     #: 1.06 of the population's (1 above 0.9), the twin's true scratches along the hatch
     #: (25 found on 40 frames, seeds 541000-541039) 0.58-3.3 (3 under 0.9)
     aligned_min_stretch_share: float = 0.9
+    #: ... and where any mark along the hatch of the frame falls under that bar, the frame's
+    #: grooves evidently stop short (on a wall whose grooves fade, the ends' test passes no
+    #: groove piece: none of 172, session 45), its ends' test is no evidence there, and
+    #: every mark along its hatch must reach this share. The twin's walls with 40 % of the
+    #: grooves' length broken out (50 clean frames, seeds 1790000-1790049): 22 "scratches"
+    #: with neither bar, 9 with the first alone, 5 with this; scratches drawn along the
+    #: hatch on walls that fade (541000-541059, 56 above the limit): 51, 47, 46 found
+    aligned_min_stretch_share_stopped: float = 1.2
     aligned_stretch_quantile: float = 99.9
     #: the stretches' length along the lines and the half-width of the core across them
     #: that is integrated (mm; at the station's 0.010 mm/px, 20 and 4 px), the flanks

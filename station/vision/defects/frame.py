@@ -144,7 +144,8 @@ def _drop_hatch_like(examined: list[ExaminedCandidate], wall, claimed: np.ndarra
     groove stretches along their family (``cfg.aligned_min_stretch_share`` of the
     population's ``cfg.aligned_stretch_quantile``-th percentile, ``groove_stretches``):
     a honing whose grooves stop short leaves groove pieces with cut ends, which the ends'
-    test (``_square_end``) takes for furrows."""
+    test (``_square_end``) takes for furrows. When any falls under that bar, the frame's
+    grooves stop short, and each must reach ``cfg.aligned_min_stretch_share_stopped``."""
     along = [(ex, near_hatch(ex.defect.angle_deg % 180.0, wall.angles_deg, cfg)) for ex in examined
              if ex.defect is not None and ex.defect.kind == "scratch"
              and is_along_hatch(ex.defect.angle_deg % 180.0, ex.defect.length_px, wall.angles_deg, cfg)]
@@ -154,17 +155,19 @@ def _drop_hatch_like(examined: list[ExaminedCandidate], wall, claimed: np.ndarra
     marks = cv2.resize(claimed[: h * 2, : w * 2].astype(np.float32), (w, h), interpolation=cv2.INTER_AREA) > 0
     marks = cv2.dilate(marks.astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
     families = {}
-    drop = set()
+    shares = {}
     for ex, family in along:
         if family not in families:
             families[family] = groove_stretches(wall, family, marks, mm_per_px, cfg)
         stretches = families[family]
         d = ex.defect
         own = stretch_darkness(stretches, d.x_px, d.y_px, d.length_px)
-        if stretches.quantile is not None and own is not None \
-                and own < cfg.aligned_min_stretch_share * stretches.quantile:
-            drop.add(id(ex))
-    return [ex for ex in examined if id(ex) not in drop]
+        if stretches.quantile is not None and own is not None:
+            shares[id(ex)] = own / stretches.quantile
+    bar = cfg.aligned_min_stretch_share
+    if any(v < bar for v in shares.values()):
+        bar = max(bar, cfg.aligned_min_stretch_share_stopped)
+    return [ex for ex in examined if shares.get(id(ex), np.inf) >= bar]
 
 
 def _find(img: np.ndarray, mm_per_px: float, holes: list, wall, zone: np.ndarray, level_full: np.ndarray,
