@@ -162,9 +162,9 @@ BREAK_CELL_PX = (4.0, 48.0)
 
 
 def _breaks(rng: np.random.Generator, u: np.ndarray, t: np.ndarray, params: FrameParams) -> np.ndarray:
-    """1 where a groove family's lines are cut, 0 where they run (``groove_breaks`` of the
-    area off): a random field on cells across (``u``) and along (``t``) the lines,
-    bilinear between them and thresholded, so a groove stops and starts at a step."""
+    """1 where a groove family's lines run, 0 where they are cut (``groove_breaks`` of the
+    area): a random field on cells across (``u``) and along (``t``) the lines, bilinear
+    between them and thresholded, so a groove stops and starts at a step."""
     if not 0.0 <= params.groove_breaks < 1.0:
         raise ValueError(f"groove_breaks must be in [0, 1), not {params.groove_breaks}")
     du, dt = (c * params.texture_scale for c in BREAK_CELL_PX)

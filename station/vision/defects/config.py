@@ -226,9 +226,10 @@ class DefectConfig:
     #: (a grain that bites and leaves: cut ends) makes groove pieces with square ends too,
     #: and then a mark along the hatch fainter than the frame's darkest grooves is one of
     #: them. A foreign renderer of ours (grooves broken by a threshold, so with cut ends;
-    #: 20 clean frames) had 20 such "scratches" of 0.10-1.2 mm; their darkness read 0.28-
-    #: 1.06 of the population's (1 above 0.9), the twin's true scratches along the hatch
-    #: (25 found on 40 frames, seeds 541000-541039) 0.58-3.3 (3 under 0.9)
+    #: 20 + 20 frames) had 20 such "scratches" of 0.10-1.2 mm in its clean frames; the
+    #: marks along the hatch there read 0.12-1.5 of the population's (3 of 56 at 0.9 or
+    #: more), the twin's true scratches along the hatch (33 found on 60 frames, seeds
+    #: 541000-541059) 0.65-6.1 (5 under 0.9)
     aligned_min_stretch_share: float = 0.9
     #: ... and where any mark along the hatch of the frame falls under that bar, the frame's
     #: grooves evidently stop short (on a wall whose grooves fade, the ends' test passes no
