@@ -240,9 +240,9 @@ class DefectConfig:
     #: hatch on walls that fade (541000-541059, 56 above the limit): 51, 47, 46 found
     aligned_min_stretch_share_stopped: float = 1.2
     aligned_stretch_quantile: float = 99.9
-    #: the stretches' length along the lines and the half-width of the core across them
-    #: that is integrated (mm; at the station's 0.010 mm/px, 20 and 4 px), the flanks
-    #: beside the core its baseline
+    #: the stretches' length along the lines and the width of the core across them that
+    #: is integrated, from its first row to its last (mm; at the station's 0.010 mm/px, 20
+    #: px and +/- 2 px: three half-res rows), the flanks beside the core its baseline
     aligned_stretch_mm: float = 0.2
     aligned_stretch_core_mm: float = 0.04
     #: the least angle (deg) at which a groove family crosses a mark along the other for

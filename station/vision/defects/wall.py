@@ -212,7 +212,7 @@ def groove_stretches(wall: _Wall, angle_deg: float, marks: np.ndarray, mm_per_px
     """How dark a groove family's lines get over the frame: the wall's darkness (its level
     taken out, the cross-hatch left in), turned so the family runs along rows, averaged
     along them over ``cfg.aligned_stretch_mm``, and integrated across the lines over a
-    core of +/- ``cfg.aligned_stretch_core_mm`` less the flanks beyond it (the same width
+    core ``cfg.aligned_stretch_core_mm`` wide less the flanks beyond it (the same width
     again on each side). A line's darkness integrated across is what the blur leaves
     unchanged, so a thin deep groove and a broader shallow one compare fairly. The
     population is each line's crest (a maximum across the lines) on the wall clear of the
