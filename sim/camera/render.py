@@ -8,7 +8,8 @@ must survive is present and its size is known:
    (cross-hatch grooves at +/-30 deg, fine grain, low-frequency blotches) and dark
    holes (discs or ellipses);
 2. the lens: Brown distortion moves the geometry (each sensor pixel asks which ideal
-   point it sees), vignetting darkens the corners, Gaussian blur spreads edges;
+   point it sees), vignetting darkens the corners, Gaussian blur spreads edges (and,
+   when asked, a defocus disc or a motion smear on top of it: ``psf_kernel``);
 3. the sensor: each pixel integrates its area (hole edges are rendered by 48x48
    supersampling of the edge band, i.e. exact area coverage to 1/2304), shot noise,
    read noise, 8-bit quantisation.
@@ -118,6 +119,14 @@ class FrameParams:
     #: shallow stretches off) leaves groove pieces with cut ends, darkness stepping within
     #: the camera's blur as a furrow's does. 0: every groove runs on, fading in and out
     groove_breaks: float = 0.0
+    #: the lens's point spread beyond the Gaussian (``blur_sigma_px``), convolved with it:
+    #: a defocused lens's disc of this radius (px; geometric optics: the exit pupil's
+    #: image, uniform), and a smear of this length (px) at ``psf_smear_deg`` from the x
+    #: axis (a camera or part still moving during the exposure: a uniform line). 0: the
+    #: Gaussian alone, and every frame is what it was before these existed
+    psf_disc_px: float = 0.0
+    psf_smear_px: float = 0.0
+    psf_smear_deg: float = 0.0
 
 
 @dataclass
@@ -342,6 +351,64 @@ def wall_patch(params: FrameParams, seed: int | None) -> np.ndarray:
     return wall_radiance(np.random.default_rng(seed), xu, yu, params)
 
 
+#: sub-samples per pixel axis for the extra spread's kernel: its area coverage to ~1/1000
+PSF_FINE = 32
+
+
+def psf_kernel(params: FrameParams) -> np.ndarray | None:
+    """The spread beyond the Gaussian (``FrameParams.psf_disc_px``, ``psf_smear_px``)
+    as a normalised float32 kernel on the pixel grid, or None when there is none.
+
+    The disc: each kernel pixel's share of the disc's area (``PSF_FINE``^2 sub-samples);
+    its variance per axis is radius^2 / 4 and what the pixels' areas add (0.02-0.14
+    px^2 with the disc edge's phase on the grid). The smear: a uniform line, each pixel's share
+    of it from ``PSF_FINE`` x the length sub-samples along it, bilinearly spread; its
+    variance along the line is length^2 / 12 and at most 1/6 px^2 of the spreading. Both are cached by their sizes."""
+    r, length = float(params.psf_disc_px), float(params.psf_smear_px)
+    if r < 0 or length < 0:
+        raise ValueError(f"psf_disc_px and psf_smear_px must be >= 0, not {r} and {length}")
+    if r == 0 and length == 0:
+        return None
+    k = _disc_kernel(round(r, 4)) if r > 0 else np.ones((1, 1), np.float32)
+    if length > 0:
+        k = cv2.filter2D(np.pad(k, int(np.ceil(length / 2)) + 1), -1,
+                         _smear_kernel(round(length, 4), round(float(params.psf_smear_deg) % 180.0, 3)),
+                         borderType=cv2.BORDER_CONSTANT)
+        k = k[np.any(k > 0, axis=1)][:, np.any(k > 0, axis=0)]
+    return (k / k.sum()).astype(np.float32)
+
+
+@lru_cache(maxsize=8)
+def _disc_kernel(radius_px: float) -> np.ndarray:
+    half = int(np.ceil(radius_px))
+    sub = (np.arange(PSF_FINE) + 0.5) / PSF_FINE - 0.5
+    c = np.arange(-half, half + 1, dtype=np.float64)
+    xs = (c[:, None] + sub[None, :]).ravel()
+    inside = (xs[None, :] ** 2 + xs[:, None] ** 2) <= radius_px**2
+    k = inside.reshape(c.size, PSF_FINE, c.size, PSF_FINE).mean(axis=(1, 3)).astype(np.float32)
+    k /= k.sum()
+    k.setflags(write=False)
+    return k
+
+
+@lru_cache(maxsize=8)
+def _smear_kernel(length_px: float, angle_deg: float) -> np.ndarray:
+    half = int(np.ceil(length_px / 2)) + 1
+    n = 2 * half + 1
+    t = (np.arange(max(int(np.ceil(length_px * PSF_FINE)), 1)) + 0.5) / max(int(np.ceil(length_px * PSF_FINE)), 1) - 0.5
+    a = np.deg2rad(angle_deg)
+    x, y = t * length_px * np.cos(a) + half, t * length_px * np.sin(a) + half
+    k = np.zeros((n, n), np.float64)
+    x0, y0 = np.floor(x).astype(int), np.floor(y).astype(int)
+    fx, fy = x - x0, y - y0
+    for dx, dy, wgt in ((0, 0, (1 - fx) * (1 - fy)), (1, 0, fx * (1 - fy)), (0, 1, (1 - fx) * fy), (1, 1, fx * fy)):
+        np.add.at(k, (y0 + dy, x0 + dx), wgt)
+    k /= k.sum()
+    k = k.astype(np.float32)
+    k.setflags(write=False)
+    return k
+
+
 @lru_cache(maxsize=4)
 def vignetting_gain(width_px: int, height_px: int, cx: float, cy: float, strength: float) -> np.ndarray:
     """Relative illumination (r^2 law), float32, cached: it is the same for every frame."""
@@ -409,6 +476,11 @@ def render_frame(params: FrameParams, holes: list[HoleSpec], seed: int | None = 
         radiance = cv2.GaussianBlur(radiance, (0, 0), params.blur_sigma_px, borderType=cv2.BORDER_REFLECT)
         for (wx0, wy0, wx1, wy1), fix in edge_fixes:
             radiance[wy0:wy1, wx0:wx1] += fix
+    extra = psf_kernel(params)
+    if extra is not None:
+        # after the edges' correction: the convolutions are linear, so the exact edge
+        # under the Gaussian is what the extra spread is applied to
+        radiance = cv2.filter2D(radiance, -1, extra, borderType=cv2.BORDER_REFLECT)
     if params.vignetting:
         cx = params.lens.cx_px if params.lens else (w - 1) / 2
         cy = params.lens.cy_px if params.lens else (h - 1) / 2

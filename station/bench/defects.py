@@ -39,6 +39,7 @@ from typing import Optional
 import numpy as np
 import typer
 
+from station.bench.psf import PSF_DISC, PSF_SMEAR, PSF_SMEAR_DEG, psf_overrides, psf_title
 from station.bench.vision import fmt_cell
 
 #: (length, width) limits per kind, mm: recall is judged on the defects at or above both
@@ -193,7 +194,8 @@ def _twin_scratches(frames: int, seed: int, mm_per_px: float, tick) -> dict:
 def run(frames: int = 100, seed: int = 50000, envelope: str = "station", mm_per_px: float = 0.010,
         progress=None, twin_frames: int = 0, hatch_deg: float | None = None, texture_in_mm: bool = False,
         scratch_clearance_deg: float | None = None, scratch_within_deg: float | None = None,
-        groove_breaks: float = 0.0) -> dict:
+        groove_breaks: float = 0.0, psf_disc_px: float = 0.0, psf_smear_px: float = 0.0,
+        psf_smear_deg: float = 0.0) -> dict:
     """``frames`` frames with defects and ``frames`` clean ones, and ``twin_frames``
     frames of the camera twin with a long scratch (``twin_scratch_frame``, seeds from
     ``seed + 2,000,000``); ``progress()`` after each. ``hatch_deg``: the cross-hatch's
@@ -204,7 +206,9 @@ def run(frames: int = 100, seed: int = 50000, envelope: str = "station", mm_per_
     direction, along the grooves too); ``scratch_within_deg``: instead, every random
     scratch at most that far from a groove family (scratches along the hatch).
     ``groove_breaks``: the share of the grooves' length missing (a honing whose grooves
-    stop short, with cut ends; 0: they run on)."""
+    stop short, with cut ends; 0: they run on). ``psf_disc_px``, ``psf_smear_px``,
+    ``psf_smear_deg``: the lens's spread beyond the Gaussian (``psf_overrides``); the
+    twin's long-scratch frames keep the camera twin's own optics."""
     import cv2
 
     from sim.camera.defects import HONING_CLEARANCE_DEG, random_defect_frame  # the CLI side may import sim
@@ -221,6 +225,7 @@ def run(frames: int = 100, seed: int = 50000, envelope: str = "station", mm_per_
         wall["texture_scale"] = STATION_MM_PER_PX / mm_per_px
     if groove_breaks:
         wall["groove_breaks"] = float(groove_breaks)
+    wall |= psf_overrides(psf_disc_px, psf_smear_px, psf_smear_deg)
     clearance = HONING_CLEARANCE_DEG if scratch_clearance_deg is None else float(scratch_clearance_deg)
     warm_up()
     per_kind: dict[str, list[tuple]] = defaultdict(list)
@@ -285,6 +290,7 @@ def run(frames: int = 100, seed: int = 50000, envelope: str = "station", mm_per_
         "scratch_clearance_deg": clearance,
         "scratch_within_deg": scratch_within_deg,
         "groove_breaks": groove_breaks,
+        "psf": psf_overrides(psf_disc_px, psf_smear_px, psf_smear_deg),
         "holes": n_holes,
         "kinds": kinds,
         "false_per_100_clean_frames": 100.0 * len(false_clean) / frames,
@@ -340,6 +346,9 @@ def register(bench_app: typer.Typer) -> None:
         groove_breaks: float = typer.Option(0.0, "--groove-breaks", min=0.0, max=0.9,
                                             help="the share of the grooves' length missing: a honing whose grooves "
                                                  "stop short, with cut ends (default 0: they run on, fading)"),
+        psf_disc_px: float = PSF_DISC,
+        psf_smear_px: float = PSF_SMEAR,
+        psf_smear_deg: float = PSF_SMEAR_DEG,
         as_json: bool = typer.Option(False, "--json", help="one JSON object on stdout"),
     ) -> None:
         """Surface defects: recall above the limit per kind, false defects on clean walls, size errors, CPU time."""
@@ -353,7 +362,8 @@ def register(bench_app: typer.Typer) -> None:
             r = run(frames, seed, envelope, mm_per_px=mm_per_px, progress=lambda: bar.advance(task),
                     twin_frames=twin_frames, hatch_deg=hatch_deg, texture_in_mm=texture_in_mm,
                     scratch_clearance_deg=scratch_clearance_deg, scratch_within_deg=scratch_within_deg,
-                    groove_breaks=groove_breaks)
+                    groove_breaks=groove_breaks, psf_disc_px=psf_disc_px, psf_smear_px=psf_smear_px,
+                    psf_smear_deg=psf_smear_deg)
         if as_json:
             print_json(r)
             return
@@ -363,6 +373,7 @@ def register(bench_app: typer.Typer) -> None:
                         + (f"<= {r['scratch_within_deg']:g} deg off a groove family" if r["scratch_within_deg"]
                            else f">= {r['scratch_clearance_deg']:g} deg off it")
                         + (f", {r['groove_breaks']:.0%} of the grooves' length broken out" if r["groove_breaks"] else "")
+                        + psf_title(r["psf"])
                         + f", {r['holes']} holes (one core)")
         for c in ("kind", "seeded", "limit mm", "above", "recall", "below: recall", "other kind",
                   "L med mm", "L p90 mm", "L in tol", "W med mm", "W p90 mm", "W in tol", "L in 2u"):

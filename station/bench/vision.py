@@ -23,6 +23,7 @@ import cv2
 import numpy as np
 import typer
 
+from station.bench.psf import PSF_DISC, PSF_SMEAR, PSF_SMEAR_DEG, psf_overrides, psf_title
 from station.vision.scoring import Score, ratio_of_medians_ci, score_frame
 
 #: the smallest and largest hole radius the baselines look for (holes are 20-100 px)
@@ -87,16 +88,17 @@ SHORT = {"ours": "ours", "hough_gradient_alt": "Hough ALT", "contours_fit_ellips
 
 
 def run(frames: int = 400, seed: int = 1000, envelope: str = "station", photometric: bool = True,
-        progress=None) -> dict:
+        progress=None, psf: dict | None = None) -> dict:
     """``progress(n)``: called after each rendered frame and each measured frame (of the
-    3 methods), ``4 * frames`` calls in all."""
+    3 methods), ``4 * frames`` calls in all. ``psf``: the renderer's fields for a lens
+    spread beyond the Gaussian (``station.bench.defects.psf_overrides``; None: none)."""
     from sim.camera.render import random_frame  # the CLI side may import sim
 
     cv2.setNumThreads(1)
     tick = progress or (lambda: None)
     rendered = []
     for i in range(frames):
-        rendered.append(random_frame(seed + i, envelope=envelope))
+        rendered.append(random_frame(seed + i, envelope=envelope, **(psf or {})))
         tick()
     results, per_frame = {}, {}
     methods = {**METHODS, "ours": ours if photometric else (lambda im: ours(im, photometric=False))}
@@ -142,6 +144,7 @@ def run(frames: int = 400, seed: int = 1000, envelope: str = "station", photomet
         "seed": seed,
         "envelope": envelope,
         "photometric": photometric,
+        "psf": psf or {},
         "frame_size_px": [rendered[0].image.shape[1], rendered[0].image.shape[0]],
         "whole_holes": whole,
         "partial_holes": cut,
@@ -177,6 +180,9 @@ def register(bench_app: typer.Typer) -> None:
         envelope: str = typer.Option("station", "--envelope", help="station (default) or wide (stress test)"),
         rays_only: bool = typer.Option(False, "--rays-only",
                                        help="ours without the photometric diameter refinement (on by default)"),
+        psf_disc_px: float = PSF_DISC,
+        psf_smear_px: float = PSF_SMEAR,
+        psf_smear_deg: float = PSF_SMEAR_DEG,
         as_json: bool = typer.Option(False, "--json", help="one JSON object on stdout"),
     ) -> None:
         """Hole measurement: ours vs HoughCircles(ALT) vs contours+fitEllipse."""
@@ -188,12 +194,13 @@ def register(bench_app: typer.Typer) -> None:
 
         with Progress(console=out_console, transient=True, disable=as_json) as bar:
             task = bar.add_task("rendering, then measuring with 3 methods", total=4 * frames)
-            r = run(frames, seed, envelope, photometric=not rays_only, progress=lambda: bar.advance(task))
+            r = run(frames, seed, envelope, photometric=not rays_only, progress=lambda: bar.advance(task),
+                    psf=psf_overrides(psf_disc_px, psf_smear_px, psf_smear_deg))
         if as_json:
             print_json(r)
             return
         t = Table(title=f"vision: {r['frames']} frames, {r['whole_holes']} whole + {r['partial_holes']} cut holes, "
-                        f"{r['empty_frames']} empty frames (one core)")
+                        f"{r['empty_frames']} empty frames{psf_title(r['psf'])} (one core)")
         cols = ("method", "c med", "c worst", "d med", "d worst", "phantom", "miss", "flag err", "ms", "cpu ms")
         for c in cols:
             t.add_column(c, justify="right")

@@ -89,3 +89,32 @@ def test_scoring_judges_stated_uncertainties_by_the_errors():
     # detections without uncertainties leave the figures out
     plain = score_frame(truths, [d[:4] for d in dets]).summary()
     assert "diameter_within_2u" not in plain
+
+
+def test_the_benches_render_their_frames_under_the_lens_spread_asked_for():
+    """``--psf-disc`` / ``--psf-smear`` / ``--psf-smear-deg`` reach the renderer
+    (``sim.camera.render.psf_kernel``) in both benches and are reported; without them the
+    frames are the old ones."""
+    import json
+
+    from typer.testing import CliRunner
+
+    from station.bench.psf import psf_overrides
+    from station.cli import app
+
+    assert psf_overrides(0.0, 0.0, 0.0) == {}
+    runner = CliRunner()
+    plain = json.loads(runner.invoke(app, ["bench", "vision", "--frames", "4", "--seed", "1000", "--json"]).stdout)
+    res = runner.invoke(app, ["bench", "vision", "--frames", "4", "--seed", "1000", "--psf-disc", "3",
+                              "--psf-smear", "2", "--psf-smear-deg", "45", "--json"])
+    assert res.exit_code == 0, res.output
+    spread = json.loads(res.stdout)
+    assert plain["psf"] == {}
+    assert spread["psf"] == {"psf_disc_px": 3.0, "psf_smear_px": 2.0, "psf_smear_deg": 45.0}
+    assert spread["whole_holes"] == plain["whole_holes"] > 0
+    # the same holes, measured on other pixels
+    assert spread["methods"]["ours"]["rms_diameter_err_px"] != plain["methods"]["ours"]["rms_diameter_err_px"]
+    res = runner.invoke(app, ["bench", "defects", "--frames", "1", "--seed", "91010", "--twin-frames", "0",
+                              "--psf-disc", "2", "--json"])
+    assert res.exit_code == 0, res.output
+    assert json.loads(res.stdout)["psf"] == {"psf_disc_px": 2.0}
