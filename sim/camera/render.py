@@ -361,9 +361,11 @@ def psf_kernel(params: FrameParams) -> np.ndarray | None:
 
     The disc: each kernel pixel's share of the disc's area (``PSF_FINE``^2 sub-samples);
     its variance per axis is radius^2 / 4 and what the pixels' areas add (0.02-0.14
-    px^2 with the disc edge's phase on the grid). The smear: a uniform line, each pixel's share
-    of it from ``PSF_FINE`` x the length sub-samples along it, bilinearly spread; its
-    variance along the line is length^2 / 12 and at most 1/6 px^2 of the spreading. Both are cached by their sizes."""
+    px^2 with the disc edge's phase on the grid). The smear: a uniform line, each
+    pixel's share of it from ``PSF_FINE`` x the length sub-samples along it, bilinearly
+    spread; its variance along the line is length^2 / 12 and at most 1/6 px^2 of the
+    spreading. Both are cached by their sizes; the two together are convolved (both are
+    symmetric about their centre, so cv2's correlation is the convolution)."""
     r, length = float(params.psf_disc_px), float(params.psf_smear_px)
     if r < 0 or length < 0:
         raise ValueError(f"psf_disc_px and psf_smear_px must be >= 0, not {r} and {length}")
@@ -395,7 +397,8 @@ def _disc_kernel(radius_px: float) -> np.ndarray:
 def _smear_kernel(length_px: float, angle_deg: float) -> np.ndarray:
     half = int(np.ceil(length_px / 2)) + 1
     n = 2 * half + 1
-    t = (np.arange(max(int(np.ceil(length_px * PSF_FINE)), 1)) + 0.5) / max(int(np.ceil(length_px * PSF_FINE)), 1) - 0.5
+    samples = max(int(np.ceil(length_px * PSF_FINE)), 1)
+    t = (np.arange(samples) + 0.5) / samples - 0.5  # along the line, -1/2 .. 1/2 of it
     a = np.deg2rad(angle_deg)
     x, y = t * length_px * np.cos(a) + half, t * length_px * np.sin(a) + half
     k = np.zeros((n, n), np.float64)
