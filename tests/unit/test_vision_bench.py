@@ -94,7 +94,8 @@ def test_scoring_judges_stated_uncertainties_by_the_errors():
 def test_the_benches_render_their_frames_under_the_lens_spread_asked_for():
     """``--psf-disc`` / ``--psf-smear`` / ``--psf-smear-deg`` reach the renderer
     (``sim.camera.render.psf_kernel``) in both benches and are reported; without them the
-    frames are the old ones."""
+    benches ask for no spread (that the frames are then the old ones, byte for byte, is
+    the renderer's sha test in test_defects.py)."""
     import json
 
     from typer.testing import CliRunner
