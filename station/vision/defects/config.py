@@ -160,6 +160,13 @@ class DefectConfig:
     #: this (px) is a soft shading of the wall, not a cavity (the renderer's and the
     #: endoscope's envelope is 0.8-2 px; dev frames' texture blobs fit 3-3.5 px)
     max_edge_blur_px: float = 2.8
+    #: ... and where the camera's blur is known (the frame's holes' edges, ``--blur-px``, a
+    #: calibration), at least that blur plus this (px): the bar is the camera's blur and
+    #: what a ragged outline or the fit's noise adds to it, and an endoscope focused less
+    #: sharply than the station's 0.8-2 px must not lose its pores. 2.8 stands up to a
+    #: camera blur of 2.0 (the envelope's edge, unchanged there); at 2.84 px a 0.33 x 0.23
+    #: mm pore fitted its edge at 2.9-3.2 px and was lost (seed 981010, blur drawn 2-3 px)
+    edge_blur_over_camera_px: float = 0.8
     #: a candidate elongated along a groove direction (within this angle) is groove
     #: residue, not a scratch: the bench's scratches cross the hatch by >= 10 deg (measured
     #: down to 8.9 on dev frames); residue further off is caught by its width or contrast.
@@ -375,6 +382,14 @@ class DefectConfig:
     #: border, and the rest, part of the same candidate, was never measured:
     #: whole-surface part 24602)
     track_gap_px: float = 24.0
+
+    def edge_blur_limit(self, camera_blur_px: float | None) -> float:
+        """The largest edge blur (px) a pore's or a scratch's fit may read and still be a
+        cavity or a furrow: ``max_edge_blur_px``, raised to the camera's blur plus
+        ``edge_blur_over_camera_px`` where that blur is known."""
+        if camera_blur_px is None:
+            return self.max_edge_blur_px
+        return max(self.max_edge_blur_px, float(camera_blur_px) + self.edge_blur_over_camera_px)
 
 
 @dataclass(frozen=True)

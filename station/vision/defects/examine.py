@@ -213,7 +213,7 @@ def _examine_once(img: np.ndarray, box, seed: np.ndarray, excl: np.ndarray, zone
         if beside is not None:
             mp = measure_pore(patch, part, cfg, blur_hint=blur_hint, beside=beside)
             if mp is not None and not mp.get("scratch") and \
-                    _accept(mp, "pore", box, at_border_of(part), angles_deg, cfg, max_width_px) is not None:
+                    _accept(mp, "pore", box, at_border_of(part), angles_deg, cfg, max_width_px, blur_hint) is not None:
                 return part, mp
         return reg, measure_pore(patch, reg, cfg, allow_scratch=allow_scratch, blur_hint=blur_hint)
 
@@ -249,7 +249,7 @@ def _examine_once(img: np.ndarray, box, seed: np.ndarray, excl: np.ndarray, zone
                 # "scratch" between a crossing and a hole)
                 res_img = np.where(patch.zone, np.nan, 1.0 - patch.residual).astype(np.float32)
                 m["square_end"] = _square_end(res_img, np.ones_like(res_img), 0, 0, m, cfg, angles_deg)[0]
-    defect = _accept(m, kind, box, at_border, angles_deg, cfg, max_width_px)
+    defect = _accept(m, kind, box, at_border, angles_deg, cfg, max_width_px, blur_hint)
     if defect is None:
         core = _core_pore(patch, rs, seed, region, zone[y0:y1, x0:x1], peak, box, at_border, angles_deg, cfg,
                           max_width_px, blur_hint)
@@ -328,7 +328,7 @@ def _core_pore(patch: Patch, rs: np.ndarray, seed: np.ndarray, region: np.ndarra
     if ext_l >= cfg.scratch_elongation * ext_w:
         return none  # a line: the furrows' and the scratches' business, not a pore's
     m = measure_pore(patch, core, cfg, allow_scratch=False, blur_hint=blur_hint)
-    defect = _accept(m, "pore", box, at_border, angles_deg, cfg, max_width_px)
+    defect = _accept(m, "pore", box, at_border, angles_deg, cfg, max_width_px, blur_hint)
     if defect is None:
         return none
     return ExaminedCandidate(defect, core, tuple(box)), m, "pore"
@@ -527,8 +527,9 @@ def _along_share(rs: np.ndarray, region: np.ndarray, angle_deg: float, angles_de
 
 
 def _accept(m: dict | None, kind: str, box, at_border: bool, angles_deg, cfg: DefectConfig,
-            max_width_px: float) -> Defect | None:
-    """The tests a measured mark must pass to be a defect, and the defect."""
+            max_width_px: float, blur_hint: float | None) -> Defect | None:
+    """The tests a measured mark must pass to be a defect, and the defect (``blur_hint``:
+    the camera's blur if known, which the edge blur's bar follows)."""
     if m is None:
         return None
     # a mark cut by the frame's border has half the wall model round it (the grooves'
@@ -542,7 +543,7 @@ def _accept(m: dict | None, kind: str, box, at_border: bool, angles_deg, cfg: De
         return None  # broad and faint: the cross-hatch's residue, not a cavity
     if kind == "pore" and m["mean_darkness"] > cfg.max_pore_darkness_over_floor * m["contrast"]:
         return None  # darker on the whole than its own fitted floor: no cavity's blurred step
-    if kind == "scratch" and (m["contrast"] < cfg.min_scratch_contrast or m["blur"] > cfg.max_edge_blur_px
+    if kind == "scratch" and (m["contrast"] < cfg.min_scratch_contrast or m["blur"] > cfg.edge_blur_limit(blur_hint)
                               or m["width"] > max_width_px or m["length"] < cfg.scratch_elongation * m["width"]
                               or (m.get("along_hatch", False)
                                   and (not m.get("square_end", False)

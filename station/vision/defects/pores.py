@@ -199,14 +199,15 @@ def measure_pore(patch: Patch, region: np.ndarray, cfg: DefectConfig, allow_scra
         return dict(scratch=True)  # long and thin once the blur is taken out: a short scratch
     if c < cfg.min_pore_contrast:
         return None
-    if blur > cfg.max_edge_blur_px:
+    blur_limit = cfg.edge_blur_limit(blur_hint)
+    if blur > blur_limit:
         # the blurred ellipse takes a ragged outline's departure from an ellipse for blur
         # (a radial scatter rho widens the mean edge to sqrt(s^2 + rho^2)): what the
         # outline's own harmonics beyond the ellipse's say of it comes off first. A soft
         # shading of the wall has a smooth outline and keeps its blur
         th, rr = _outline(r, xx, yy, omega, cx, cy, mass, c, blur, deconvolve=False)
         rough = _outline_roughness(th, rr)
-        if np.sqrt(max(blur * blur - rough * rough, 0.0)) > cfg.max_edge_blur_px:
+        if np.sqrt(max(blur * blur - rough * rough, 0.0)) > blur_limit:
             return None
     held = blur_hint
     if held is None and c > 1.0:
