@@ -1388,6 +1388,21 @@ def test_the_edge_blurs_bar_follows_the_cameras_blur_where_it_is_known():
         assert _within(d.length_mm, t.length_mm) and _within(d.width_mm, t.width_mm), (d, t)
 
 
+def test_a_strong_scratch_whose_region_a_groove_pulls_onto_the_hatch_is_measured_as_a_line():
+    """A 640 x 480 frame (seed 982022): a 0.34 x 0.042 mm scratch, contrast 0.6, 10 deg
+    off the hatch beside a groove. The groove's residue joined to its region pulled the
+    region's axis to 5.9 deg off the hatch, its ends were read along the groove (no cut),
+    and it was dropped as groove residue; a strong mark is now measured as a line first,
+    and that line crosses the hatch."""
+    f = random_defect_frame(982022, None, mm_per_px=MM_PER_PX, width_px=640, height_px=480)
+    assert sorted(t.kind for t in f.defects) == ["scratch", "scratch"]
+    pairs, false = match(f.defects, detect_defects(f.image, MM_PER_PX), MM_PER_PX)
+    assert false == []
+    for t, d in pairs:
+        assert d is not None and d.kind == "scratch", t
+        assert _within(d.length_mm, t.length_mm) and _within(d.width_mm, t.width_mm), (d, t)
+
+
 def test_a_rim_defects_end_is_read_on_its_own_side():
     """``fit_end`` reads the crossing of the local half height that steps the way the
     end does: up at a defect's start, down at its end. A ragged chip's area-true profile

@@ -225,6 +225,10 @@ class DefectConfig:
     #: contrast): the twin's deep grooves (10 % on average, up to 30 %) leave pieces of
     #: 0.12-0.13 there; the true scratches along the hatch fitted 0.13 and more
     aligned_min_scratch_contrast: float = 0.14
+    #: a mark whose region runs along the hatch and ends in no cut is groove residue, but a
+    #: strong one (its peak this many times the patch's noise) is measured as a line first:
+    #: residue joined to a scratch pulls the region's axis onto the hatch (``_examine_once``)
+    along_hatch_remeasure_k: float = 15.0
     #: ... and at least this share of the frame's own darkest groove stretches along its
     #: family (``groove_stretches``: the darkness integrated across the lines, which the
     #: blur leaves unchanged, over stretches of ``aligned_stretch_mm``; the population's
