@@ -20,7 +20,7 @@ import cv2
 import numpy as np
 
 from drivers.interfaces import Camera, CommunicationLost, DeviceTimeout, Frame
-from drivers.interfaces.pixels import to_grey
+from drivers.interfaces.pixels import RESPONSE_GAMMA_RANGE, linearize, to_grey
 
 #: V4L2 exposure: 1 = manual exposure (V4L2_EXPOSURE_MANUAL); OpenCV passes it through as is
 _V4L2_MANUAL_EXPOSURE = 1
@@ -47,8 +47,14 @@ class OpenCVCamera(Camera):
         timeout_s: float = 1.0,
         loop: bool = False,
         name: str = "camera",
+        response_gamma: float = 1.0,
     ):
+        if not RESPONSE_GAMMA_RANGE[0] <= response_gamma <= RESPONSE_GAMMA_RANGE[1]:
+            raise ValueError(f"response_gamma must be within {RESPONSE_GAMMA_RANGE}, not {response_gamma}")
         self.source = source
+        #: the camera's encoding exponent (``pixels.linearize``): each frame is made linear
+        #: in light before anything measures it; 1 for a camera whose gamma is off
+        self.response_gamma = float(response_gamma)
         self.width, self.height = width, height
         self.exposure, self.gain, self.fps = exposure, gain, fps
         self.timeout_s = float(timeout_s)
@@ -109,6 +115,7 @@ class OpenCVCamera(Camera):
                 # the grey the vision stage takes from a colour file, so a saved frame and
                 # a live one measure alike
                 image = to_grey(image)
+            image = linearize(image, self.response_gamma)
             self._sequence += 1
             return Frame(np.ascontiguousarray(image), stamp, self._sequence)
 

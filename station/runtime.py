@@ -428,7 +428,14 @@ def build_station(config_path: str | Path | None = None, *, scenario: str | Path
                 raise ConfigError(f"{source}: [hardware.camera] needs 'mm_per_px' (from a calibration)")
             dev = k.get("device", 0)
             size = (int(k.get("width", 1280)), int(k.get("height", 1024)))
-            cam = OpenCVCamera(dev, width=size[0], height=size[1], exposure=k.get("exposure"), gain=k.get("gain"))
+            try:
+                # the camera's encoding gamma: frames are made linear in light before any
+                # measurement (drivers.interfaces.pixels.linearize); 1 when it is switched off
+                gamma = float(k.get("response_gamma", 1.0))
+                cam = OpenCVCamera(dev, width=size[0], height=size[1], exposure=k.get("exposure"), gain=k.get("gain"),
+                                   response_gamma=gamma)
+            except (TypeError, ValueError) as exc:
+                raise ConfigError(f"{source}: [hardware.camera] response_gamma: {exc}") from None
             if "exposure_s" in k and "readout_s" in k:
                 try:
                     cam.timing = CameraTiming(float(k["exposure_s"]), float(k["readout_s"]))

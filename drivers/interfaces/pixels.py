@@ -31,3 +31,31 @@ def to_grey(image: np.ndarray) -> np.ndarray:
     total = colour.sum(axis=2, dtype=np.uint32)
     n = colour.shape[2]
     return ((total + n // 2) // n).astype(image.dtype)
+
+
+#: the camera's response exponents accepted: an encoding gamma of a standard camera is
+#: 0.45 (sRGB, Rec. 709) to 1 (linear); below 0.2 or above 3 it is a configuration error
+RESPONSE_GAMMA_RANGE = (0.2, 3.0)
+
+
+def linearize(image: np.ndarray, gamma: float) -> np.ndarray:
+    """A frame whose pixels are proportional to the light again, from a camera that
+    encodes them with a power law, pixel = full * (light / full) ** ``gamma`` (sRGB-like
+    webcams and endoscope cameras 0.45, unless their gamma is switched off; 1: linear,
+    the frame returned as it is). The photometric hole fit and the defects' relative
+    darkness are models of light: an edge blurred in light and then encoded is no
+    longer symmetric, and holes read 0.17 / 0.31 / 0.46 px small at a gamma of 0.8 / 0.6 /
+    0.45 (vision bench frames 950000-950029, 41-43 holes; 0.000 linear), their u
+    covering none of that. Integer frames keep their type (a look-up table over the
+    full range); float frames are taken as 0-1."""
+    if not RESPONSE_GAMMA_RANGE[0] <= gamma <= RESPONSE_GAMMA_RANGE[1]:
+        raise ValueError(f"the camera's response gamma must be within {RESPONSE_GAMMA_RANGE}, not {gamma}")
+    if gamma == 1.0:
+        return image
+    if np.issubdtype(image.dtype, np.integer):
+        full = float(np.iinfo(image.dtype).max)
+        if image.dtype.itemsize > 2:
+            raise ValueError(f"unsupported pixel type {image.dtype} for linearizing (8 or 16 bits)")
+        lut = np.round(full * (np.arange(int(full) + 1) / full) ** (1.0 / gamma)).astype(image.dtype)
+        return lut[image]
+    return np.clip(image, 0.0, 1.0) ** (1.0 / gamma)

@@ -22,16 +22,32 @@ def _pattern(text: str) -> tuple[int, int]:
     return cols, rows
 
 
+def _read_linear(image: Path, gamma: float):
+    """The grey frame of ``image``, made linear in light for a camera of response ``gamma``
+    (``drivers.interfaces.pixels.linearize``); a bad file or gamma ends the command."""
+    from drivers.interfaces.pixels import RESPONSE_GAMMA_RANGE, linearize
+    from station.vision.imageio import ImageReadError, read_grey
+
+    if not RESPONSE_GAMMA_RANGE[0] <= gamma <= RESPONSE_GAMMA_RANGE[1]:
+        fail(f"{image}: --gamma must be within {RESPONSE_GAMMA_RANGE[0]}-{RESPONSE_GAMMA_RANGE[1]} "
+             f"(1: a linear camera), not {gamma}")
+    try:
+        return linearize(read_grey(image), gamma)
+    except ImageReadError as exc:
+        fail(str(exc))
+
+
 @vision_app.command("measure")
 def measure(
     image: Path = typer.Argument(..., help="frame to measure (any format OpenCV reads)"),
     mm_per_px: Optional[float] = typer.Option(None, "--mm-per-px", help="scale at the bore wall"),
     calibration: Optional[Path] = typer.Option(None, "--calibration", help="JSON from `station vision calibrate`"),
+    gamma: float = typer.Option(1.0, "--gamma", help="the camera's response gamma (pixel = full x light^gamma: "
+                                "sRGB-like cameras 0.45, 1 linear); frames are made linear first"),
     as_json: bool = typer.Option(False, "--json", help="one JSON object on stdout"),
 ) -> None:
     """Find the compensating holes in IMAGE and measure them sub-pixel."""
     from station.vision.calibration import CameraCalibration
-    from station.vision.imageio import ImageReadError, read_grey
     from station.vision.measure import measure_holes
 
     if mm_per_px is not None and calibration is not None:
@@ -44,10 +60,7 @@ def measure(
             cal = CameraCalibration.load(calibration)
         except (OSError, ValueError, KeyError, TypeError) as exc:
             fail(f"{calibration}: not a usable calibration file ({exc})")
-    try:
-        frame = read_grey(image)
-    except ImageReadError as exc:
-        fail(str(exc))
+    frame = _read_linear(image, gamma)
     if cal is not None and tuple(cal.image_size) != (frame.shape[1], frame.shape[0]):
         fail(f"calibration is for {cal.image_size[0]}x{cal.image_size[1]} px, the image is {frame.shape[1]}x{frame.shape[0]}")
     holes = measure_holes(frame, mm_per_px=mm_per_px, calibration=cal)
@@ -87,21 +100,19 @@ def defects_cmd(
                                                              "discs are holes)"),
     blur_px: Optional[float] = typer.Option(None, "--blur-px", help="the camera's blur (Gaussian sigma, px) if "
                                                                     "known; else read from the frame"),
+    gamma: float = typer.Option(1.0, "--gamma", help="the camera's response gamma (pixel = full x light^gamma: "
+                                "sRGB-like cameras 0.45, 1 linear); frames are made linear first"),
     as_json: bool = typer.Option(False, "--json", help="one JSON object on stdout"),
 ) -> None:
     """Find and measure surface defects in IMAGE: pores, scratches, and burrs and chips at
     the holes' edges (docs/surface.md)."""
     from station.vision.defects import detect_defects
-    from station.vision.imageio import ImageReadError, read_grey
 
     if not mm_per_px > 0:
         fail(f"{image}: --mm-per-px must be positive, not {mm_per_px}")
     if blur_px is not None and not blur_px > 0:
         fail(f"{image}: --blur-px must be positive, not {blur_px}")
-    try:
-        frame = read_grey(image)
-    except ImageReadError as exc:
-        fail(str(exc))
+    frame = _read_linear(image, gamma)
     if min(frame.shape) < 64:
         fail(f"{image}: {frame.shape[1]} x {frame.shape[0]} px is too small to model the wall (at least 64 x 64)")
     found = detect_defects(frame, mm_per_px, blur_px=blur_px)

@@ -101,3 +101,24 @@ def test_missing_file_is_communication_lost(tmp_path):
 def test_device_sources_use_v4l2():
     assert OpenCVCamera(0).is_device and OpenCVCamera("/dev/video2").is_device
     assert not OpenCVCamera("replay.avi").is_device
+
+
+def test_a_camera_that_encodes_with_a_gamma_delivers_frames_linear_in_light(video):
+    """A camera whose pixels are full x (light / full)^gamma: the driver makes each frame
+    linear again (``response_gamma``), so the vision stage models light; a gamma no camera
+    has is refused."""
+    async def run(gamma):
+        cam = OpenCVCamera(video, response_gamma=gamma)
+        try:
+            await cam.connect()
+            return [await cam.grab() for _ in LEVELS]
+        finally:
+            await cam.close()
+
+    plain, linear = asyncio.run(run(1.0)), asyncio.run(run(0.5))
+    for p, q in zip(plain, linear):
+        expected = np.round(255.0 * (p.image / 255.0) ** 2.0)
+        assert np.abs(q.image.astype(float) - expected).max() <= 0.5
+    assert int(np.median(linear[2].image)) < int(np.median(plain[2].image)) - 40  # 120 -> 56
+    with pytest.raises(ValueError, match="response_gamma"):
+        OpenCVCamera(video, response_gamma=0.0)

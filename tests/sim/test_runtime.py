@@ -52,6 +52,10 @@ def test_config_errors_name_file_and_key(tmp_path):
     p.write_text('[station]\nmode = "hardware"\n[hardware.Z]\ntransport = "can"\n[hardware.C]\nhost = "h"\n')
     with pytest.raises(ConfigError, match=r"\[hardware.Z\] transport must be 'tcp' or 'rtu'"):
         build_station(p)
+    p.write_text('[station]\nmode = "hardware"\n[hardware.Z]\nhost = "z"\n[hardware.C]\nhost = "c"\n'
+                 '[hardware.camera]\ndevice = "x.avi"\nmm_per_px = 0.01\nresponse_gamma = 0.05\n')
+    with pytest.raises(ConfigError, match=r"\[hardware.camera\] response_gamma: .*within"):
+        build_station(p)
     p.write_text("[station\n")
     with pytest.raises(ConfigError, match="not valid TOML"):
         build_station(p)

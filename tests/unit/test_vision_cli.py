@@ -203,3 +203,28 @@ def test_grey_with_alpha_reads_its_grey_channel(tmp_path, frame_png):
     np.testing.assert_array_equal(to_grey(la), f.image)
     with pytest.raises(ValueError, match="shape"):
         to_grey(np.zeros((4, 4, 5), np.uint8))
+
+
+def test_a_frame_from_a_camera_with_a_gamma_is_measured_linear_in_light(tmp_path, frame_png):
+    """A camera that encodes light with a gamma of 0.6 (pixel = 255 (light / 255)^0.6):
+    the blurred edge is no longer symmetric, and the holes read ~0.3 px small. Given
+    ``--gamma`` the frame is made linear first, and the holes read as the linear frame's;
+    a gamma no camera has is refused, naming the file."""
+    path, f = frame_png
+    encoded = np.clip(np.round(255.0 * (f.image / 255.0) ** 0.6), 0, 255).astype(np.uint8)
+    enc_path = tmp_path / "gamma.png"
+    cv2.imwrite(str(enc_path), encoded)
+
+    def diameters(p, *extra):
+        result = runner.invoke(app, ["vision", "measure", str(p), "--mm-per-px", "0.01", "--json", *extra])
+        assert result.exit_code == 0, result.output
+        holes = json.loads(result.stdout)["holes"]
+        return {round(t.x_px): [h["diameter_px"] for h in holes if np.hypot(h["x_px"] - t.x_px, h["y_px"] - t.y_px) < 1.0][0]
+                for t in f.holes if not t.partial}
+
+    linear, raw, mended = diameters(path), diameters(enc_path), diameters(enc_path, "--gamma", "0.6")
+    for k, d in linear.items():
+        assert raw[k] < d - 0.15  # the encoded edge reads the hole small
+        assert abs(mended[k] - d) < 0.05, (k, mended[k], d)
+    result = runner.invoke(app, ["vision", "defects", str(enc_path), "--mm-per-px", "0.01", "--gamma", "0"])
+    assert result.exit_code != 0 and "gamma.png" in result.output and "--gamma" in result.output
