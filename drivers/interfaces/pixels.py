@@ -47,9 +47,10 @@ def linearize(image: np.ndarray, gamma: float) -> np.ndarray:
     longer symmetric, and holes read 0.17 / 0.31 / 0.46 px small at a gamma of 0.8 / 0.6 /
     0.45 (vision bench frames 950000-950029, 41-43 holes; 0.000 linear), their u
     covering none of that. Integer frames keep their type (a look-up table over the
-    type's full range: a 16-bit frame is taken as 0-65535, so 10-14-bit data must sit at
-    the top of the container, as V4L2 delivers them; the files' ``read_grey`` makes 8-bit
-    frames first); float frames are taken as 0-1."""
+    type's full range: a 16-bit frame is taken as 0-65535, so 10-14-bit data at the
+    bottom of the container, as V4L2's Y10 / Y12 formats deliver them, must be shifted up
+    first; OpenCV's capture hands over 8-bit frames, and the files' ``read_grey`` makes
+    8-bit frames before this); float frames are taken as 0-1."""
     if not RESPONSE_GAMMA_RANGE[0] <= gamma <= RESPONSE_GAMMA_RANGE[1]:
         raise ValueError(f"the camera's response gamma must be within {RESPONSE_GAMMA_RANGE}, not {gamma}")
     if gamma == 1.0:
