@@ -8,6 +8,8 @@ alike.
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 
 
@@ -56,9 +58,16 @@ def linearize(image: np.ndarray, gamma: float) -> np.ndarray:
     if gamma == 1.0:
         return image
     if np.issubdtype(image.dtype, np.integer):
-        full = float(np.iinfo(image.dtype).max)
         if image.dtype.itemsize > 2:
             raise ValueError(f"unsupported pixel type {image.dtype} for linearizing (8 or 16 bits)")
-        lut = np.round(full * (np.arange(int(full) + 1) / full) ** (1.0 / gamma)).astype(image.dtype)
-        return lut[image]
+        return _linear_lut(image.dtype.str, float(gamma))[image]
     return np.clip(image, 0.0, 1.0) ** (1.0 / gamma)
+
+
+@lru_cache(maxsize=8)
+def _linear_lut(dtype: str, gamma: float) -> np.ndarray:
+    """``linearize``'s look-up table for an integer type, made once per type and gamma
+    (the camera driver linearizes every frame)."""
+    dt = np.dtype(dtype)
+    full = float(np.iinfo(dt).max)
+    return np.round(full * (np.arange(int(full) + 1) / full) ** (1.0 / gamma)).astype(dt)

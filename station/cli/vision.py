@@ -25,16 +25,17 @@ def _pattern(text: str) -> tuple[int, int]:
 def _read_linear(image: Path, gamma: float):
     """The grey frame of ``image``, made linear in light for a camera of response ``gamma``
     (``drivers.interfaces.pixels.linearize``); a bad file or gamma ends the command."""
-    from drivers.interfaces.pixels import RESPONSE_GAMMA_RANGE, linearize
+    from drivers.interfaces.pixels import linearize
     from station.vision.imageio import ImageReadError, read_grey
 
-    if not RESPONSE_GAMMA_RANGE[0] <= gamma <= RESPONSE_GAMMA_RANGE[1]:
-        fail(f"{image}: --gamma must be within {RESPONSE_GAMMA_RANGE[0]}-{RESPONSE_GAMMA_RANGE[1]} "
-             f"(1: a linear camera), not {gamma}")
     try:
-        return linearize(read_grey(image), gamma)
+        frame = read_grey(image)
     except ImageReadError as exc:
         fail(str(exc))
+    try:
+        return linearize(frame, gamma)
+    except ValueError as exc:
+        fail(f"{image}: --gamma: {exc} (1: a linear camera)")
 
 
 @vision_app.command("measure")
