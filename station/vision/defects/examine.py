@@ -545,7 +545,21 @@ def _accept(m: dict | None, kind: str, box, at_border: bool, angles_deg, cfg: De
     # a mark cut by the frame's border has half the wall model round it (the grooves'
     # means and the level end there): twice the significance (dev and bench frames:
     # small "pores" in the frame's corners at 8.8-10.5)
-    if m["significance"] < cfg.min_significance * (2.0 if at_border else 1.0):
+    significance = m["significance"]
+    if kind == "scratch" and not m.get("along_hatch", False):
+        # a scratch's darkening weighed by its own cross profile (``line_significance``):
+        # the box integrates a band of its core and 5 px each side, which a 1.6 px line
+        # fills a fifth of (station seed 994005: a 1.52 x 0.016 mm scratch, plain to see,
+        # at 7.0 by the box, 17.4 along its line). Not along the hatch: a groove's piece is
+        # such a line too, and the box alone judges it (a honing whose grooves stop short:
+        # pieces at 10-35 by their line and under 8 by the box). A furrow's darkening is in
+        # the box's band too, the line's figure at most ``cfg.line_significance_max_over_box``
+        # times the box's: a mark read darker than its flanks along its line and not over
+        # its band is light and dark side by side (the grooves' residue: a "scratch" at
+        # 26.5 by its line, -6.2 by the box, groove-breaks bench 640259)
+        line = float(m.get("line_significance", 0.0))
+        significance = max(significance, min(line, cfg.line_significance_max_over_box * significance))
+    if significance < cfg.min_significance * (2.0 if at_border else 1.0):
         return None
     if m["mean_darkness"] < cfg.min_mean_darkness:
         return None
@@ -562,6 +576,6 @@ def _accept(m: dict | None, kind: str, box, at_border: bool, angles_deg, cfg: De
                               or m["contrast"] * np.sqrt(max(m.get("along_share", 1.0), 0.0))
                               < cfg.min_scratch_line_contrast):
         return None  # the cross-hatch residue: broad, faint, soft, short, along a groove, not one line or faint, ragged
-    conf = confidence_of(m["significance"], cfg.min_significance)
+    conf = confidence_of(significance, cfg.min_significance)
     return Defect(kind, m["x"] + box[0], m["y"] + box[1], m["length"], m["width"], conf, m["angle"], m["u_length"],
-                  m["u_width"], m["significance"], at_border)
+                  m["u_width"], significance, at_border)
