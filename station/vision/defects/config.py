@@ -131,9 +131,9 @@ class DefectConfig:
     min_significance: float = 8.0
     #: a scratch not along the hatch is as significant as the larger of its box integral
     #: and its darkening weighed by its own cross profile (``_line_significance``), the
-    #: latter counted up to this multiple of the former: a thin line reads up to ~2.6x the
-    #: box at 0.010 mm/px (3.6 at 0.014: session 72's 9,100 frames), groove residue that a
-    #: line's weights pick out of a band lighter on the whole 4-50x or against a negative box
+    #: latter counted up to this multiple of the former: true scratches read 0.74-3.6x the
+    #: box (median 1.23; session 72's 9,100 frames), groove residue that a line's weights
+    #: pick out of a band lighter on the whole 4-50x or against a negative box
     line_significance_max_over_box: float = 3.0
     #: ... and this dark in the mean over its core (relative darkness): grain and noise
     #: integrated over a large faint area can be significant without being a defect
