@@ -548,8 +548,8 @@ def _accept(m: dict | None, kind: str, box, at_border: bool, angles_deg, cfg: De
     significance = m["significance"]
     if kind == "scratch" and not m.get("along_hatch", False):
         # a scratch's darkening weighed by its own cross profile (``line_significance``):
-        # the box integrates a band of its core and 5 px each side, which a 1.6 px line
-        # fills a fifth of (station seed 994005: a 1.52 x 0.016 mm scratch, plain to see,
+        # the box integrates a band of its profile's FWHM and 5 px each side, which a thin
+        # line fills about a quarter of (station seed 994005: a 1.52 x 0.016 mm scratch, plain to see,
         # at 7.0 by the box, 17.4 along its line). Not along the hatch: a groove's piece is
         # such a line too, and the box alone judges it (a honing whose grooves stop short:
         # pieces at 10-35 by their line and under 8 by the box). A furrow's darkening is in

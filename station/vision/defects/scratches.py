@@ -705,7 +705,7 @@ def measure_scratch(patch: Patch, region: np.ndarray, blur_hint: float | None = 
     significance = mass / (5.0 * patch.noise_box5 * np.sqrt(area))
     # ... and through the scratch's own model across (its fitted blurred box, the flanks
     # taking out what is as wide as they are), over the same noise: the box's band is the
-    # core and 5 px each side, which a 1.6 px line fills a fifth of
+    # mean profile's FWHM and 5 px each side, which a thin line fills about a quarter of
     line_significance = _line_significance(used_strip * factor, n_all[used], box_rows, sv, s1, s2, step,
                                            n0, width, b, patch.noise_box5)
     # the chord's direction (the centre line's mean slope over the scratch; its slope at
