@@ -231,6 +231,12 @@ def _bend_function(coef: np.ndarray, lo: float, hi: float):
     return at, slope
 
 
+def _flanks_take_out(f: np.ndarray, flank: np.ndarray) -> np.ndarray:
+    """A filter across a scratch, less a constant on its ``flank`` rows that makes it sum
+    to zero: darkening as wide as the band then reads nothing."""
+    return f - np.where(flank, f.sum() / flank.sum(), 0.0) if flank.any() else f
+
+
 def _line_significance(st: np.ndarray, nu: np.ndarray, core: np.ndarray, sv: np.ndarray, s1: float, s2: float,
                        step: float, n0: float, width: float, blur: float, noise_box5: float) -> float:
     """A scratch's significance through its own model across: the strip ``st`` (rows at
@@ -241,10 +247,7 @@ def _line_significance(st: np.ndarray, nu: np.ndarray, core: np.ndarray, sv: np.
     box mean's), i.e. the sum's standard deviation were that noise white. Without flank
     rows and for a box filling the core it is the box's significance; a thin line it reads
     higher (a 1.6 px line under 1.3 px of blur in a 14.5 px band and 5 px flanks: ~1.4x)."""
-    f = _blurred_box(nu, n0, width, blur)
-    flank = ~core
-    if flank.any():
-        f = f - np.where(flank, f.sum() / flank.sum(), 0.0)
+    f = _flanks_take_out(_blurred_box(nu, n0, width, blur), ~core)
     sel = (sv >= s1) & (sv <= s2)
     if not sel.any() or noise_box5 <= 0:
         return 0.0
@@ -557,9 +560,7 @@ def measure_scratch(patch: Patch, region: np.ndarray, blur_hint: float | None = 
     if filt.sum() <= 0:
         return None
     filt_norm = float(np.sum(filt * filt))
-    if flank.any():
-        filt = filt - np.where(flank, filt.sum() / flank.sum(), 0.0)
-    filt = filt[used]
+    filt = _flanks_take_out(filt, flank)[used]
     sv = s[valid]
     used_strip = strip_all[used][:, valid]
     box_rows = core_all[used]
