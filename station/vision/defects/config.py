@@ -257,6 +257,16 @@ class DefectConfig:
     #: hatch on walls that fade (541000-541059, 56 above the limit): 51, 47, 46 found
     aligned_min_stretch_share_stopped: float = 1.2
     aligned_stretch_quantile: float = 99.9
+    #: a scratch that keeps to one line of a groove family (``on_groove_line``) whose line
+    #: runs on beyond it as a groove is a piece of that groove: its line's stretches at
+    #: least ``groove_run_on_darkness`` of its own darkness over at least
+    #: ``groove_run_on_share`` of the line's length on the wall beyond its ends
+    #: (``line_runs_on``; not judged when less than ``groove_run_on_min_mm`` of it lies
+    #: there). A groove runs across the frame, its depth fading, its pieces cut apart where
+    #: the grooves stop short; a scratch is one furrow. Session 73 (set below)
+    groove_run_on_darkness: float = 0.5
+    groove_run_on_share: float = 0.15
+    groove_run_on_min_mm: float = 0.5
     #: the stretches' length along the lines and the width of the core across them that
     #: is integrated, from its first row to its last (mm; at the station's 0.010 mm/px, 20
     #: px and +/- 2 px: three half-res rows), the flanks beside the core its baseline

@@ -14,10 +14,10 @@ import numpy as np
 
 from station.vision.imageio import to_8bit, to_grey
 from station.vision.defects.config import Defect, DefectConfig, GROUP_DOMINANT_SHARE
-from station.vision.defects.common import is_along_hatch, near_hatch
+from station.vision.defects.common import is_along_hatch, near_hatch, on_groove_line
 from station.vision.defects.wall import (
-    line_band, find_candidates, split_furrows, group_collinear, groove_stretches, hole_zone, model_wall, one_furrow,
-    seed_in_box, stretch_darkness,
+    line_band, find_candidates, split_furrows, group_collinear, groove_stretches, hole_zone, line_runs_on, model_wall,
+    one_furrow, seed_in_box, stretch_darkness,
 )
 from station.vision.defects.rims import grow_by_skirt, hole_blur, marks_mask, rim_defects
 from station.vision.defects.scratches import BLUR_PRIOR_PX
@@ -140,34 +140,61 @@ def _regions(shape: tuple[int, int], examined: list[ExaminedCandidate]) -> np.nd
 
 def _drop_hatch_like(examined: list[ExaminedCandidate], wall, claimed: np.ndarray, mm_per_px: float,
                      cfg: DefectConfig) -> list[ExaminedCandidate]:
-    """The scratches along the hatch less those no darker than the frame's own darkest
-    groove stretches along their family (``cfg.aligned_min_stretch_share`` of the
-    population's ``cfg.aligned_stretch_quantile``-th percentile, ``groove_stretches``):
-    a honing whose grooves stop short leaves groove pieces with cut ends, which the ends'
+    """The examined candidates less the honing grooves' pieces among their scratches.
+
+    A scratch that keeps to one line of a groove family (``on_groove_line``) and whose
+    line runs on beyond it as a groove (``line_runs_on``: ``cfg.groove_run_on_share`` of
+    it at ``cfg.groove_run_on_darkness`` of the mark's darkness) is a piece of that groove.
+    And a scratch along the hatch no darker than the frame's own darkest groove stretches
+    along its family (``cfg.aligned_min_stretch_share`` of the population's
+    ``cfg.aligned_stretch_quantile``-th percentile, ``groove_stretches``) is one too: a
+    honing whose grooves stop short leaves groove pieces with cut ends, which the ends'
     test (``_square_end``) takes for furrows. When any falls under that bar, the frame's
     grooves stop short, and each must reach ``cfg.aligned_min_stretch_share_stopped``."""
-    along = [(ex, near_hatch(ex.defect.angle_deg % 180.0, wall.angles_deg, cfg)) for ex in examined
-             if ex.defect is not None and ex.defect.kind == "scratch"
-             and is_along_hatch(ex.defect.angle_deg % 180.0, ex.defect.length_px, wall.angles_deg, cfg)]
-    if not along:
+    on_line = []  # (a scratch, the family whose line it keeps to or None, whether it runs along the hatch)
+    for ex in examined:
+        if ex.defect is not None and ex.defect.kind == "scratch":
+            angle, length = ex.defect.angle_deg % 180.0, ex.defect.length_px
+            family = on_groove_line(angle, length, wall.angles_deg, cfg)
+            along = is_along_hatch(angle, length, wall.angles_deg, cfg)
+            if family is not None or along:
+                on_line.append((ex, family, along))
+    if not on_line:
         return examined
     h, w = wall.darkness.shape
     marks = cv2.resize(claimed[: h * 2, : w * 2].astype(np.float32), (w, h), interpolation=cv2.INTER_AREA) > 0
     marks = cv2.dilate(marks.astype(np.uint8), np.ones((5, 5), np.uint8)).astype(bool)
     families = {}
-    shares = {}
-    for ex, family in along:
+
+    def stretches_of(family):
         if family not in families:
             families[family] = groove_stretches(wall, family, marks, mm_per_px, cfg)
-        stretches = families[family]
+        return families[family]
+
+    pieces = set()
+    for ex, family, _ in on_line:
+        if family is None:
+            continue
         d = ex.defect
+        stretches = stretches_of(family)
+        own = stretch_darkness(stretches, d.x_px, d.y_px, d.length_px)
+        runs_on = (None if own is None
+                   else line_runs_on(stretches, d.x_px, d.y_px, d.length_px, own, mm_per_px, cfg))
+        if runs_on is not None and runs_on >= cfg.groove_run_on_share:
+            pieces.add(id(ex))
+    shares = {}
+    for ex, _, along in on_line:
+        if not along:
+            continue
+        d = ex.defect
+        stretches = stretches_of(near_hatch(d.angle_deg % 180.0, wall.angles_deg, cfg))
         own = stretch_darkness(stretches, d.x_px, d.y_px, d.length_px)
         if stretches.quantile is not None and own is not None:
             shares[id(ex)] = own / stretches.quantile
     bar = cfg.aligned_min_stretch_share
     if any(v < bar for v in shares.values()):
         bar = max(bar, cfg.aligned_min_stretch_share_stopped)
-    return [ex for ex in examined if shares.get(id(ex), np.inf) >= bar]
+    return [ex for ex in examined if id(ex) not in pieces and shares.get(id(ex), np.inf) >= bar]
 
 
 def _find(img: np.ndarray, mm_per_px: float, holes: list, wall, zone: np.ndarray, level_full: np.ndarray,

@@ -205,6 +205,8 @@ class GrooveStretches:
     rotation: np.ndarray  # half-res frame -> the turned frame in which the family runs along rows
     darkness: np.ndarray  # the turned frame's darkness integrated across the lines (x full-res px)
     quantile: float | None  # the population's cfg.aligned_stretch_quantile-th percentile (None: too few)
+    on_wall: np.ndarray  # the turned frame's wall (the holes' zones and the frame's outside left out)
+    along_px: int  # the stretches' length along the lines (half-res px)
 
 
 def groove_stretches(wall: _Wall, angle_deg: float, marks: np.ndarray, mm_per_px: float,
@@ -235,7 +237,8 @@ def groove_stretches(wall: _Wall, angle_deg: float, marks: np.ndarray, mm_per_px
     usable &= cv2.erode(usable.astype(np.uint8), np.ones((3 * n, 1), np.uint8)).astype(bool)
     pop = integrated[crest & usable]
     q = float(np.percentile(pop, cfg.aligned_stretch_quantile)) if pop.size >= 1000 else None
-    return GrooveStretches(m, integrated, q)
+    on_wall = cv2.warpAffine(wall.valid.astype(np.float32), m, (w2, h2)) > 0.99
+    return GrooveStretches(m, integrated, q, on_wall, along)
 
 
 def stretch_darkness(stretches: GrooveStretches, x_px: float, y_px: float, length_px: float) -> float | None:
@@ -251,6 +254,36 @@ def stretch_darkness(stretches: GrooveStretches, x_px: float, y_px: float, lengt
     if c1 <= c0 or r < 1 or r > h2 - 2:
         return None
     return float(np.median(stretches.darkness[r - 1:r + 2, c0:c1].max(axis=0)))
+
+
+def line_runs_on(stretches: GrooveStretches, x_px: float, y_px: float, length_px: float, own: float,
+                 mm_per_px: float, cfg: DefectConfig) -> float | None:
+    """How far a mark's line runs on as a groove beyond it: the share of its family's line
+    through the mark's centre (``stretches``: the family's, the mark on one of its lines;
+    full-res centre and length), beyond its ends and on the wall, where the line's stretches
+    are at least ``cfg.groove_run_on_darkness`` of the mark's own darkness ``own``
+    (``stretch_darkness``); read as that function reads the mark, the best of the three rows
+    round the line. None when less than ``cfg.groove_run_on_min_mm`` of the line lies on
+    the wall beyond the mark, or the mark is no darker than its flanks. A honing groove runs
+    across the frame (its depth fading, its pieces cut apart where the grooves stop short);
+    a scratch is one furrow, and its line beyond it is the wall's."""
+    if not own > 0.0:
+        return None
+    cx, cy = (x_px - 0.5) / 2.0, (y_px - 0.5) / 2.0
+    px, py = stretches.rotation @ np.array([cx, cy, 1.0])
+    h2, w2 = stretches.darkness.shape
+    r = int(round(py))
+    if r < 1 or r > h2 - 2:
+        return None
+    line = stretches.darkness[r - 1:r + 2].max(axis=0)
+    ok = stretches.on_wall[r - 1:r + 2].all(axis=0)
+    # beyond its ends by half a stretch and a little: no stretch there reads the mark itself
+    reach = length_px / 4.0 + stretches.along_px / 2.0 + 3.0
+    cols = np.arange(w2)
+    beyond = ok & (np.abs(cols - px) > reach)
+    if beyond.sum() * 2.0 * mm_per_px < cfg.groove_run_on_min_mm:
+        return None
+    return float(np.mean(line[beyond] >= cfg.groove_run_on_darkness * own))
 
 
 def find_candidates(wall: _Wall, cfg: DefectConfig) -> list[tuple[np.ndarray, int, tuple[int, int, int, int], float]]:
