@@ -453,41 +453,50 @@ def test_groove_pieces_with_cut_ends_on_a_clean_wall_are_no_scratches(seed):
 
 def test_a_marks_line_runs_on_as_a_groove_where_its_family_darkens_beyond_its_ends():
     """``line_runs_on``: the share of the family's line through a mark, beyond its ends and
-    on the wall, at least half as dark as the mark. A line of 400 half-res px, the mark
-    (80 px full-res, 40 half-res) at its middle: pieces of a groove at 0.6 of the mark's
-    darkness on 201 of the 343 px beyond it read 0.59; pieces at 0.4 and a bare line read
-    0; a line with less than 0.5 mm of wall beyond the mark is not judged."""
+    on the wall, at least half as dark as the mark, less the share of the whole wall's
+    places that are. A wall of 41 x 400 half-res px, the mark (80 px full-res, 40 half-res)
+    in the middle of row 20: pieces of a groove at 0.6 of the mark's darkness on 201 of the
+    343 px of its line beyond it read 201 / 343 less what the wall's places reach (the
+    three rows round row 20, whose best they are, on 242 of the 41 x 400 places); pieces at 0.4 of it run on no more than the wall
+    does; a faint mark whose every line is as dark runs on less than the wall; a line with
+    less than 0.5 mm of wall beyond the mark is not judged."""
     from station.vision.defects.wall import GrooveStretches, line_runs_on
 
     cfg = DefectConfig()
-    darkness = np.zeros((21, 400), np.float32)
-    darkness[10, 180:221] = 1.0
-    darkness[10, :101] = darkness[10, 300:] = 0.6
+    darkness = np.zeros((41, 400), np.float32)
+    darkness[20, 180:221] = 1.0
+    darkness[20, :101] = darkness[20, 300:] = 0.6
     identity = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
     on_wall = np.ones(darkness.shape, bool)
+    at = dict(x_px=400.5, y_px=40.5, length_px=80.0, mm_per_px=0.010, cfg=cfg)
     stretches = GrooveStretches(identity, darkness, None, on_wall, 10)
-    at = dict(x_px=400.5, y_px=20.5, length_px=80.0, mm_per_px=0.010, cfg=cfg)
-    assert line_runs_on(stretches, own=1.0, **at) == pytest.approx(201 / 343)
-    assert line_runs_on(stretches, own=1.6, **at) == 0.0  # the pieces at 0.375 of it
+    assert line_runs_on(stretches, own=1.0, **at) == pytest.approx(201 / 343 - 3 * 242 / (41 * 400))
+    # at 1.6 the bar is 0.8: only the mark's own 41 columns reach it, and they lie within the line's reach
+    assert line_runs_on(stretches, own=1.6, **at) == pytest.approx(-3 * 41 / (41 * 400))
     bare = darkness.copy()
-    bare[10, :101] = bare[10, 300:] = 0.0
-    assert line_runs_on(GrooveStretches(identity, bare, None, on_wall, 10), own=1.0, **at) == 0.0
+    bare[20, :101] = bare[20, 300:] = 0.0
+    assert line_runs_on(GrooveStretches(identity, bare, None, on_wall, 10), own=1.0, **at) == pytest.approx(
+        -3 * 41 / (41 * 400))
+    grooved = np.where(np.arange(41)[:, None] % 2 == 0, np.float32(0.6), np.float32(0.0)) * np.ones((1, 400), np.float32)
+    grooved[20] = darkness[20]
+    assert line_runs_on(GrooveStretches(identity, grooved, None, on_wall, 10), own=1.0, **at) < 0.0
     holed = on_wall.copy()
     holed[:, :160] = holed[:, 236:] = False  # 12 + 11 px of wall beyond the mark: 0.46 mm
     assert line_runs_on(GrooveStretches(identity, darkness, None, holed, 10), own=1.0, **at) is None
     assert line_runs_on(stretches, own=0.0, **at) is None
 
 
-@pytest.mark.parametrize("seed", [2650002, 2650045, 2650068, 2650077])
+@pytest.mark.parametrize("seed", [2650002, 2650045, 2650068, 2650077, 2680064])
 def test_a_groove_piece_whose_line_runs_on_beyond_it_is_no_scratch(seed):
     """Where the grooves stop short (30 % of their length broken out), a deep groove's piece
-    with cut ends is as dark as a scratch and ends as one; a short one reads its direction
-    8-14 deg off the hatch and escapes the tests along it. These four clean frames of the
-    groove-breaks bench (seed 1650000) each reported one such "scratch" (0.29-0.93 mm; 1.3,
-    8.1, 9.5 and 0.4 deg off a family). Each keeps to one line of its family, and that line
-    runs on beyond it as a groove (a quarter to two thirds of it at half the piece's
-    darkness, where the true scratches near the hatch read at most 0.11): nothing is
-    reported."""
+    with cut ends is as dark as a scratch and ends as one; a short one, or two pieces side
+    by side, reads its direction 8-14 deg off the hatch and escapes the tests along it.
+    These clean frames of the groove-breaks benches (seeds 1650000 and 1680000) each
+    reported one such "scratch" (0.29-0.93 mm; 1.3, 8.1, 9.5, 0.4 and 8.7 deg off a
+    family; the last 60 x 3.2 px, its chord crossing 9 px of the family's lines). Each
+    keeps to one line of its family, and that line runs on beyond it as a groove (a
+    quarter to two thirds of it at half the piece's darkness, where the true scratches
+    near the hatch read at most 0.12): nothing is reported."""
     f = random_defect_frame(seed, {}, groove_breaks=0.3)
     found = detect_defects(f.image, MM_PER_PX)
     assert not found, [(d.kind, round(d.x_px), round(d.y_px), round(d.length_mm, 3)) for d in found]

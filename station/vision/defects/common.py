@@ -56,15 +56,18 @@ def is_along_hatch(angle_deg: float, length_px: float, angles_deg, cfg: "DefectC
     return bool(length_px * np.sin(np.deg2rad(circ_diff_deg(angle_deg, g))) <= cfg.hatch_cross_px)
 
 
-def on_groove_line(angle_deg: float, length_px: float, angles_deg, cfg: "DefectConfig") -> float | None:
+def on_groove_line(angle_deg: float, length_px: float, width_px: float, angles_deg,
+                   cfg: "DefectConfig") -> float | None:
     """The groove family (of ``angles_deg``) one of whose lines a mark of direction
-    ``angle_deg`` and length ``length_px`` keeps to over its length (its chord crossing
-    no more than ``cfg.hatch_cross_px`` across the family's lines), the nearest in
-    direction; or None. A short mark's direction is read loosely: a groove's piece 25 px
-    long reads 8-14 deg off its family where the ends are cut obliquely or a neighbour's
-    piece lies beside it (groove-breaks bench 1650000, 2650000: 11 of 19 false scratches)."""
+    ``angle_deg``, length ``length_px`` and width ``width_px`` keeps to over its length
+    (its chord crossing no more than ``cfg.hatch_cross_px`` of the family's lines beyond
+    its own width), the nearest in direction; or None. A mark's direction along the hatch
+    is read loosely: a groove's piece 25 px long reads 8-14 deg off its family where its
+    ends are cut obliquely or a neighbour's piece lies beside it (groove-breaks bench
+    1650000, 2650000: 11 of 19 false scratches), and two pieces side by side read as one
+    mark as wide as their offset, its axis turned by it."""
     fits = [g for g in angles_deg
-            if length_px * np.sin(np.deg2rad(circ_diff_deg(angle_deg, g))) <= cfg.hatch_cross_px]
+            if length_px * np.sin(np.deg2rad(circ_diff_deg(angle_deg, g))) <= cfg.hatch_cross_px + width_px]
     return min(fits, key=lambda g: circ_diff_deg(angle_deg, g)) if fits else None
 
 

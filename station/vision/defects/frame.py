@@ -155,7 +155,7 @@ def _drop_hatch_like(examined: list[ExaminedCandidate], wall, claimed: np.ndarra
     for ex in examined:
         if ex.defect is not None and ex.defect.kind == "scratch":
             angle, length = ex.defect.angle_deg % 180.0, ex.defect.length_px
-            family = on_groove_line(angle, length, wall.angles_deg, cfg)
+            family = on_groove_line(angle, length, ex.defect.width_px, wall.angles_deg, cfg)
             along = is_along_hatch(angle, length, wall.angles_deg, cfg)
             if family is not None or along:
                 on_line.append((ex, family, along))
@@ -177,7 +177,9 @@ def _drop_hatch_like(examined: list[ExaminedCandidate], wall, claimed: np.ndarra
             continue
         d = ex.defect
         stretches = stretches_of(family)
-        own = stretch_darkness(stretches, d.x_px, d.y_px, d.length_px)
+        # its darkness over the middle third: a short mark a few degrees off the family
+        # leaves the three rows round the family's line towards its ends
+        own = stretch_darkness(stretches, d.x_px, d.y_px, d.length_px, middle=cfg.groove_run_on_middle)
         runs_on = (None if own is None
                    else line_runs_on(stretches, d.x_px, d.y_px, d.length_px, own, mm_per_px, cfg))
         if runs_on is not None and runs_on >= cfg.groove_run_on_share:

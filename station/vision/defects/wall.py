@@ -207,6 +207,14 @@ class GrooveStretches:
     quantile: float | None  # the population's cfg.aligned_stretch_quantile-th percentile (None: too few)
     on_wall: np.ndarray  # the turned frame's wall (the holes' zones and the frame's outside left out)
     along_px: int  # the stretches' length along the lines (half-res px)
+    best: np.ndarray | None = None  # each place's best of the three rows round it (``line_runs_on``)
+    best_on_wall: np.ndarray | None = None  # ... where all three are on the wall
+
+    def __post_init__(self):
+        if self.best is None:
+            three = np.ones((3, 1), np.uint8)
+            self.best = cv2.dilate(self.darkness, three)
+            self.best_on_wall = cv2.erode(self.on_wall.astype(np.uint8), three).astype(bool)
 
 
 def groove_stretches(wall: _Wall, angle_deg: float, marks: np.ndarray, mm_per_px: float,
@@ -241,14 +249,15 @@ def groove_stretches(wall: _Wall, angle_deg: float, marks: np.ndarray, mm_per_px
     return GrooveStretches(m, integrated, q, on_wall, along)
 
 
-def stretch_darkness(stretches: GrooveStretches, x_px: float, y_px: float, length_px: float) -> float | None:
+def stretch_darkness(stretches: GrooveStretches, x_px: float, y_px: float, length_px: float,
+                     middle: float = 0.7) -> float | None:
     """A mark's darkness integrated across it, as ``groove_stretches`` reads the grooves':
-    the median, over the middle 70 % of its length, of the best of the three rows round
-    its centre line (full-res centre and length; the mark runs along the family)."""
+    the median, over the ``middle`` share of its length, of the best of the three rows
+    round its centre line (full-res centre and length; the mark runs along the family)."""
     cx, cy = (x_px - 0.5) / 2.0, (y_px - 0.5) / 2.0
     px, py = stretches.rotation @ np.array([cx, cy, 1.0])
     h2, w2 = stretches.darkness.shape
-    reach = 0.35 * length_px / 2.0
+    reach = middle * length_px / 4.0
     c0, c1 = max(int(np.floor(px - reach)), 0), min(int(np.ceil(px + reach)) + 1, w2)
     r = int(round(py))
     if c1 <= c0 or r < 1 or r > h2 - 2:
@@ -262,11 +271,13 @@ def line_runs_on(stretches: GrooveStretches, x_px: float, y_px: float, length_px
     through the mark's centre (``stretches``: the family's, the mark on one of its lines;
     full-res centre and length), beyond its ends and on the wall, where the line's stretches
     are at least ``cfg.groove_run_on_darkness`` of the mark's own darkness ``own``
-    (``stretch_darkness``); read as that function reads the mark, the best of the three rows
-    round the line. None when less than ``cfg.groove_run_on_min_mm`` of the line lies on
-    the wall beyond the mark, or the mark is no darker than its flanks. A honing groove runs
-    across the frame (its depth fading, its pieces cut apart where the grooves stop short);
-    a scratch is one furrow, and its line beyond it is the wall's."""
+    (``stretch_darkness``), read as that function reads the mark, the best of the three rows
+    round the line; less the share of the whole wall's places that reach it so (what any
+    line of the wall reads: a faint scratch among deep grooves has half its darkness
+    reached along most lines). None when less than ``cfg.groove_run_on_min_mm`` of the line
+    lies on the wall beyond the mark, or the mark is no darker than its flanks. A honing
+    groove runs across the frame (its depth fading, its pieces cut apart where the grooves
+    stop short); a scratch is one furrow, and its line beyond it is the wall's."""
     if not own > 0.0:
         return None
     cx, cy = (x_px - 0.5) / 2.0, (y_px - 0.5) / 2.0
@@ -283,7 +294,9 @@ def line_runs_on(stretches: GrooveStretches, x_px: float, y_px: float, length_px
     beyond = ok & (np.abs(cols - px) > reach)
     if beyond.sum() * 2.0 * mm_per_px < cfg.groove_run_on_min_mm:
         return None
-    return float(np.mean(line[beyond] >= cfg.groove_run_on_darkness * own))
+    bar = cfg.groove_run_on_darkness * own
+    anywhere = stretches.best[stretches.best_on_wall]
+    return float(np.mean(line[beyond] >= bar)) - (float(np.mean(anywhere >= bar)) if anywhere.size else 0.0)
 
 
 def find_candidates(wall: _Wall, cfg: DefectConfig) -> list[tuple[np.ndarray, int, tuple[int, int, int, int], float]]:
