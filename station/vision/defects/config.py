@@ -259,8 +259,8 @@ class DefectConfig:
     aligned_stretch_quantile: float = 99.9
     #: a scratch that keeps to one line of a groove family (``on_groove_line``) whose line
     #: runs on beyond it as a groove is a piece of that groove: its line's stretches at
-    #: least ``groove_run_on_darkness`` of its own darkness over at least
-    #: ``groove_run_on_share`` of the line's length on the wall beyond its ends
+    #: least ``groove_run_on_darkness`` of its own darkness over ``groove_run_on_share`` more
+    #: of the line's length on the wall beyond its ends than of the whole wall's places
     #: (``line_runs_on``; not judged when less than ``groove_run_on_min_mm`` of it lies
     #: there). A groove runs across the frame, its depth fading, its pieces cut apart where
     #: the grooves stop short; a scratch is one furrow. Session 73, every scratch within
@@ -270,7 +270,10 @@ class DefectConfig:
     #: a line, the share read 0.106 at most (all but that one under 0.05; wide 610168's
     #: 0.21 mm scratch 13 deg off: 0.119); of the 29 groove pieces the other tests passed,
     #: all but one read 0.226-0.62 (the one, 2650027: a 1.26 mm piece whose line's rest is
-    #: faint, 0.014)
+    #: faint, 0.014). The whole wall's share (taken off since) read 0.006-0.11 on the walls
+    #: whose grooves stop short, under the pieces' shares by 0.227 or more; up to 0.115 on
+    #: wide walls, where a faint true scratch 15 deg off, its middle on a groove's line,
+    #: still reads 0.36 over it (610128: 0.34 x 0.03 mm, lost)
     groove_run_on_darkness: float = 0.5
     groove_run_on_share: float = 0.2
     groove_run_on_min_mm: float = 0.5
