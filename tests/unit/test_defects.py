@@ -457,9 +457,10 @@ def test_a_marks_line_runs_on_as_a_groove_where_its_family_darkens_beyond_its_en
     places that are. A wall of 41 x 400 half-res px, the mark (80 px full-res, 40 half-res)
     in the middle of row 20: pieces of a groove at 0.6 of the mark's darkness on 201 of the
     343 px of its line beyond it read 201 / 343 less what the wall's places reach (the
-    three rows round row 20, whose best they are, on 242 of the 41 x 400 places); pieces at 0.4 of it run on no more than the wall
-    does; a faint mark whose every line is as dark runs on less than the wall; a line with
-    less than 0.5 mm of wall beyond the mark is not judged."""
+    three rows round row 20, whose best they are, on 242 of the 41 x 400 places); pieces
+    at 0.4 of it run on no more than the wall does; a faint mark whose every line is as
+    dark runs on less than the wall; a line with less than 0.5 mm of wall beyond the mark
+    is not judged."""
     from station.vision.defects.wall import GrooveStretches, line_runs_on
 
     cfg = DefectConfig()
@@ -471,7 +472,7 @@ def test_a_marks_line_runs_on_as_a_groove_where_its_family_darkens_beyond_its_en
     at = dict(x_px=400.5, y_px=40.5, length_px=80.0, mm_per_px=0.010, cfg=cfg)
     stretches = GrooveStretches(identity, darkness, None, on_wall, 10)
     assert line_runs_on(stretches, own=1.0, **at) == pytest.approx(201 / 343 - 3 * 242 / (41 * 400))
-    # at 1.6 the bar is 0.8: only the mark's own 41 columns reach it, and they lie within the line's reach
+    # at 1.6 the bar is 0.8: only the mark's own 41 columns reach it, within the line's reach
     assert line_runs_on(stretches, own=1.6, **at) == pytest.approx(-3 * 41 / (41 * 400))
     bare = darkness.copy()
     bare[20, :101] = bare[20, 300:] = 0.0

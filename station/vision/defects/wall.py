@@ -207,14 +207,23 @@ class GrooveStretches:
     quantile: float | None  # the population's cfg.aligned_stretch_quantile-th percentile (None: too few)
     on_wall: np.ndarray  # the turned frame's wall (the holes' zones and the frame's outside left out)
     along_px: int  # the stretches' length along the lines (half-res px)
-    best: np.ndarray | None = None  # each place's best of the three rows round it (``line_runs_on``)
-    best_on_wall: np.ndarray | None = None  # ... where all three are on the wall
 
-    def __post_init__(self):
-        if self.best is None:
-            three = np.ones((3, 1), np.uint8)
-            self.best = cv2.dilate(self.darkness, three)
-            self.best_on_wall = cv2.erode(self.on_wall.astype(np.uint8), three).astype(bool)
+    @functools.cached_property
+    def best(self) -> np.ndarray:
+        """Each place's best of the three rows round it, as a mark's line is read."""
+        return cv2.dilate(self.darkness, np.ones((3, 1), np.uint8))
+
+    @functools.cached_property
+    def best_on_wall(self) -> np.ndarray:
+        """Where the three rows round a place are all on the wall."""
+        return cv2.erode(self.on_wall.astype(np.uint8), np.ones((3, 1), np.uint8)).astype(bool)
+
+    def place(self, x_px: float, y_px: float) -> tuple[float, int] | None:
+        """A full-res point on the turned frame: its column (half-res, fractional) and its
+        row, or None when the three rows round it are not all in the frame."""
+        px, py = self.rotation @ np.array([(x_px - 0.5) / 2.0, (y_px - 0.5) / 2.0, 1.0])
+        r = int(round(py))
+        return None if r < 1 or r > self.darkness.shape[0] - 2 else (float(px), r)
 
 
 def groove_stretches(wall: _Wall, angle_deg: float, marks: np.ndarray, mm_per_px: float,
@@ -254,13 +263,13 @@ def stretch_darkness(stretches: GrooveStretches, x_px: float, y_px: float, lengt
     """A mark's darkness integrated across it, as ``groove_stretches`` reads the grooves':
     the median, over the ``middle`` share of its length, of the best of the three rows
     round its centre line (full-res centre and length; the mark runs along the family)."""
-    cx, cy = (x_px - 0.5) / 2.0, (y_px - 0.5) / 2.0
-    px, py = stretches.rotation @ np.array([cx, cy, 1.0])
-    h2, w2 = stretches.darkness.shape
+    at = stretches.place(x_px, y_px)
+    if at is None:
+        return None
+    px, r = at
     reach = middle * length_px / 4.0
-    c0, c1 = max(int(np.floor(px - reach)), 0), min(int(np.ceil(px + reach)) + 1, w2)
-    r = int(round(py))
-    if c1 <= c0 or r < 1 or r > h2 - 2:
+    c0, c1 = max(int(np.floor(px - reach)), 0), min(int(np.ceil(px + reach)) + 1, stretches.darkness.shape[1])
+    if c1 <= c0:
         return None
     return float(np.median(stretches.darkness[r - 1:r + 2, c0:c1].max(axis=0)))
 
@@ -278,20 +287,15 @@ def line_runs_on(stretches: GrooveStretches, x_px: float, y_px: float, length_px
     lies on the wall beyond the mark, or the mark is no darker than its flanks. A honing
     groove runs across the frame (its depth fading, its pieces cut apart where the grooves
     stop short); a scratch is one furrow, and its line beyond it is the wall's."""
-    if not own > 0.0:
+    at = stretches.place(x_px, y_px) if own > 0.0 else None
+    if at is None:
         return None
-    cx, cy = (x_px - 0.5) / 2.0, (y_px - 0.5) / 2.0
-    px, py = stretches.rotation @ np.array([cx, cy, 1.0])
-    h2, w2 = stretches.darkness.shape
-    r = int(round(py))
-    if r < 1 or r > h2 - 2:
-        return None
+    px, r = at
     line = stretches.darkness[r - 1:r + 2].max(axis=0)
     ok = stretches.on_wall[r - 1:r + 2].all(axis=0)
     # beyond its ends by half a stretch and a little: no stretch there reads the mark itself
     reach = length_px / 4.0 + stretches.along_px / 2.0 + 3.0
-    cols = np.arange(w2)
-    beyond = ok & (np.abs(cols - px) > reach)
+    beyond = ok & (np.abs(np.arange(line.size) - px) > reach)
     if beyond.sum() * 2.0 * mm_per_px < cfg.groove_run_on_min_mm:
         return None
     bar = cfg.groove_run_on_darkness * own
