@@ -454,13 +454,17 @@ def test_groove_pieces_with_cut_ends_on_a_clean_wall_are_no_scratches(seed):
 def test_a_marks_line_runs_on_as_a_groove_where_its_family_darkens_beyond_its_ends():
     """``line_runs_on``: the share of the family's line through a mark, beyond its ends and
     on the wall, at least half as dark as the mark, less the share of the whole wall's
-    places that are. A wall of 41 x 400 half-res px, the mark (80 px full-res, 40 half-res)
-    in the middle of row 20: pieces of a groove at 0.6 of the mark's darkness on 201 of the
-    343 px of its line beyond it read 201 / 343 less what the wall's places reach (the
-    three rows round row 20, whose best they are, on 242 of the 41 x 400 places); pieces
-    at 0.4 of it run on no more than the wall does; a faint mark whose every line is as
-    dark runs on less than the wall; a line with less than 0.5 mm of wall beyond the mark
-    is not judged."""
+    places that are, and that excess in standard deviations of a line's share (its
+    stretches, 10 half-res px each, independent draws at the wall's share, read as at
+    least one stretch's worth). A wall of 41 x 400 half-res px, the mark (80 px full-res,
+    40 half-res) in the middle of row 20: pieces of a groove at 0.6 of the mark's darkness
+    on 201 of the 343 px of its line beyond it read 201 / 343 less what the wall's places
+    reach (the three rows round row 20, whose best they are, on 242 of the 41 x 400
+    places); pieces at 0.4 of it run on no more than the wall does; a faint mark whose
+    every line is as dark runs on less than the wall; a line with less than 0.5 mm of wall
+    beyond the mark is not judged. Pieces on 60 px of the line (0.16 over the wall's share)
+    stand out on a bare wall (z 5.4), and not where four other lines are as dark over a
+    quarter of their length (z 1.7)."""
     from station.vision.defects.wall import GrooveStretches, line_runs_on
 
     cfg = DefectConfig()
@@ -470,21 +474,44 @@ def test_a_marks_line_runs_on_as_a_groove_where_its_family_darkens_beyond_its_en
     identity = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
     on_wall = np.ones(darkness.shape, bool)
     at = dict(x_px=400.5, y_px=40.5, length_px=80.0, mm_per_px=0.010, cfg=cfg)
+    draws = 343 / 10
+
+    def z(excess, wall_share):
+        p = max(wall_share, 1 / draws)
+        return excess / np.sqrt(p * (1 - p) / draws)
+
     stretches = GrooveStretches(identity, darkness, None, on_wall, 10)
-    assert line_runs_on(stretches, own=1.0, **at) == pytest.approx(201 / 343 - 3 * 242 / (41 * 400))
+    run = line_runs_on(stretches, own=1.0, **at)
+    assert run.share == pytest.approx(201 / 343 - 3 * 242 / (41 * 400))
+    assert run.z == pytest.approx(z(run.share, 3 * 242 / (41 * 400)))  # 15.4
     # at 1.6 the bar is 0.8: only the mark's own 41 columns reach it, within the line's reach
-    assert line_runs_on(stretches, own=1.6, **at) == pytest.approx(-3 * 41 / (41 * 400))
+    run = line_runs_on(stretches, own=1.6, **at)
+    assert run.share == pytest.approx(-3 * 41 / (41 * 400))
+    assert run.z == pytest.approx(z(run.share, 0.0)) and run.z < 0.0
     bare = darkness.copy()
     bare[20, :101] = bare[20, 300:] = 0.0
-    assert line_runs_on(GrooveStretches(identity, bare, None, on_wall, 10), own=1.0, **at) == pytest.approx(
+    assert line_runs_on(GrooveStretches(identity, bare, None, on_wall, 10), own=1.0, **at).share == pytest.approx(
         -3 * 41 / (41 * 400))
     grooved = np.where(np.arange(41)[:, None] % 2 == 0, np.float32(0.6), np.float32(0.0)) * np.ones((1, 400), np.float32)
     grooved[20] = darkness[20]
-    assert line_runs_on(GrooveStretches(identity, grooved, None, on_wall, 10), own=1.0, **at) < 0.0
+    assert line_runs_on(GrooveStretches(identity, grooved, None, on_wall, 10), own=1.0, **at).share < 0.0
     holed = on_wall.copy()
     holed[:, :160] = holed[:, 236:] = False  # 12 + 11 px of wall beyond the mark: 0.46 mm
     assert line_runs_on(GrooveStretches(identity, darkness, None, holed, 10), own=1.0, **at) is None
     assert line_runs_on(stretches, own=0.0, **at) is None
+    # pieces on 60 px of the line beyond: under the share's bar, over the z's on a bare wall
+    short = bare.copy()
+    short[20, :60] = 0.6
+    run = line_runs_on(GrooveStretches(identity, short, None, on_wall, 10), own=1.0, **at)
+    assert run.share == pytest.approx(60 / 343 - 3 * 101 / (41 * 400)) and run.share < cfg.groove_run_on_share
+    assert run.z == pytest.approx(z(run.share, 3 * 101 / (41 * 400))) and run.z > cfg.groove_run_on_z  # 5.4
+    # ... and where lines 5, 15, 25 and 35 are as dark over their last 100 px, any line's
+    among = short.copy()
+    among[5::10, 300:] = 0.6
+    run = line_runs_on(GrooveStretches(identity, among, None, on_wall, 10), own=1.0, **at)
+    wall_share = (3 * 101 + 4 * 3 * 100) / (41 * 400)
+    assert run.share == pytest.approx(60 / 343 - wall_share)
+    assert run.z == pytest.approx(z(run.share, wall_share)) and run.z < cfg.groove_run_on_z  # 1.7
 
 
 @pytest.mark.parametrize("seed", [2650002, 2650045, 2650068, 2650077, 2680064])
@@ -501,6 +528,26 @@ def test_a_groove_piece_whose_line_runs_on_beyond_it_is_no_scratch(seed):
     f = random_defect_frame(seed, {}, groove_breaks=0.3)
     found = detect_defects(f.image, MM_PER_PX)
     assert not found, [(d.kind, round(d.x_px), round(d.y_px), round(d.length_mm, 3)) for d in found]
+
+
+@pytest.mark.parametrize("seed, mm_per_px, wall", [
+    (4140005, 0.007, dict(hatch_deg=20.0, groove_breaks=0.3, texture_scale=10 / 7)),
+    (4100030, 0.007, dict(hatch_deg=20.0, groove_breaks=0.3, texture_scale=10 / 7)),
+    (4210002, 0.010, dict(hatch_deg=25.0, groove_breaks=0.2, psf_smear_px=4.0, psf_smear_deg=30.0)),
+])
+def test_a_groove_piece_whose_line_runs_on_more_than_any_lines_does_is_no_scratch(seed, mm_per_px, wall):
+    """A groove's piece, not along the hatch as the ends' tests take it (it reads 1.6-8 deg
+    off its family and crosses more than 8 px of its lines), whose line runs on beyond it
+    over less than a fifth of its length more than the wall's lines do, but on a wall where
+    hardly any line reaches half its darkness, so that the excess is 5.5-7.6 standard
+    deviations of a line's share. Clean frames with grooves stopping short: a 20 deg hatch
+    seen at 0.007 mm/px (the texture at its size in mm: pieces of 0.39 and 3.2 mm, shares
+    0.18), a smeared lens on a 25 deg hatch (a 0.25 mm piece, share 0.14). Each reported a
+    scratch before session 74."""
+    f = random_defect_frame(seed, {}, mm_per_px=mm_per_px, **wall)
+    found = detect_defects(f.image, mm_per_px)
+    assert not [d for d in found if d.kind == "scratch"], [
+        (d.kind, round(d.x_px), round(d.y_px), round(d.length_mm, 3)) for d in found]
 
 
 def test_a_long_scratch_a_few_degrees_off_the_hatch_crosses_its_lines_and_is_found():

@@ -276,6 +276,22 @@ class DefectConfig:
     #: still reads 0.36 over it (610128: 0.34 x 0.03 mm, lost)
     groove_run_on_darkness: float = 0.5
     groove_run_on_share: float = 0.2
+    #: ... or, for a mark not along the hatch (``is_along_hatch``), when that excess is this
+    #: many of its standard deviations had the line been any of the wall's (``RunOn.z``: its
+    #: stretches beyond the mark independent draws at the wall's share, read as at least one
+    #: stretch's worth). A share of 0.2 is much on a wall where nothing else reaches the bar
+    #: and little on a wall of deep grooves. Session 74, the same log on 13 sets (station,
+    #: broken, along and within 20 deg of the hatch, wide, a 20 deg hatch broken at 0.007
+    #: mm/px, a smeared lens on broken walls; 266 true scratches read 0.2 mm or longer that
+    #: keep to a line): the true ones read z 3.15 at most (wide 610009: a 0.42 mm scratch 11 deg off
+    #: on deep grooves, share 0.119; then 2.8), but for 610128 above (9.5); the groove pieces
+    #: that passed the share's bar and every other test read 4.2-7.6 for six of eleven
+    #: (shares 0.089-0.197), 3.6 and less for the rest (a long piece whose line's rest is
+    #: faint, pieces at a 20 deg hatch's V). Along the hatch a scratch may lie on a groove's
+    #: line over its whole length: a fresh 1.44 mm one drawn along it read z 6.0 at share
+    #: 0.092 (720067) and is judged by its ends and its darkness (above) instead; so are two
+    #: of the six pieces
+    groove_run_on_z: float = 4.0
     groove_run_on_min_mm: float = 0.5
     #: ... the mark's own darkness read over this share of its length round its middle
     groove_run_on_middle: float = 0.35

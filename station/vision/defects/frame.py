@@ -144,7 +144,9 @@ def _drop_hatch_like(examined: list[ExaminedCandidate], wall, claimed: np.ndarra
 
     A scratch that keeps to one line of a groove family (``on_groove_line``) and whose
     line runs on beyond it as a groove (``line_runs_on``: ``cfg.groove_run_on_share`` of
-    it at ``cfg.groove_run_on_darkness`` of the mark's darkness) is a piece of that groove.
+    it at ``cfg.groove_run_on_darkness`` of the mark's darkness more than the wall's lines,
+    or, a mark not along the hatch, ``cfg.groove_run_on_z`` of their spread more) is a
+    piece of that groove.
     And a scratch along the hatch no darker than the frame's own darkest groove stretches
     along its family (``cfg.aligned_min_stretch_share`` of the population's
     ``cfg.aligned_stretch_quantile``-th percentile, ``groove_stretches``) is one too: a
@@ -172,7 +174,7 @@ def _drop_hatch_like(examined: list[ExaminedCandidate], wall, claimed: np.ndarra
         return families[family]
 
     pieces = set()
-    for ex, family, _ in on_line:
+    for ex, family, along in on_line:
         if family is None:
             continue
         d = ex.defect
@@ -182,7 +184,10 @@ def _drop_hatch_like(examined: list[ExaminedCandidate], wall, claimed: np.ndarra
         own = stretch_darkness(stretches, d.x_px, d.y_px, d.length_px, middle=cfg.groove_run_on_middle)
         runs_on = (None if own is None
                    else line_runs_on(stretches, d.x_px, d.y_px, d.length_px, own, mm_per_px, cfg))
-        if runs_on is not None and runs_on >= cfg.groove_run_on_share:
+        # the excess's significance off the hatch only: a scratch drawn along it may lie on a
+        # groove's line over its whole length (and its ends' tests judge it there)
+        if runs_on is not None and (runs_on.share >= cfg.groove_run_on_share
+                                    or (not along and runs_on.z >= cfg.groove_run_on_z)):
             pieces.add(id(ex))
     shares = {}
     for ex, _, along in on_line:

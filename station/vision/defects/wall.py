@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 import functools
+from typing import NamedTuple
 
 import cv2
 import numpy as np
@@ -274,8 +275,15 @@ def stretch_darkness(stretches: GrooveStretches, x_px: float, y_px: float, lengt
     return float(np.median(stretches.darkness[r - 1:r + 2, c0:c1].max(axis=0)))
 
 
+class RunOn(NamedTuple):
+    """How a mark's line runs on beyond it (``line_runs_on``)."""
+
+    share: float  # the line's share beyond the mark at the bar, less the whole wall's share
+    z: float  # that excess over its spread had the line been any line of the wall's
+
+
 def line_runs_on(stretches: GrooveStretches, x_px: float, y_px: float, length_px: float, own: float,
-                 mm_per_px: float, cfg: DefectConfig) -> float | None:
+                 mm_per_px: float, cfg: DefectConfig) -> RunOn | None:
     """How far a mark's line runs on as a groove beyond it: the share of its family's line
     through the mark's centre (``stretches``: the family's, the mark on one of its lines;
     full-res centre and length), beyond its ends and on the wall, where the line's stretches
@@ -286,7 +294,12 @@ def line_runs_on(stretches: GrooveStretches, x_px: float, y_px: float, length_px
     reached along most lines). None when less than ``cfg.groove_run_on_min_mm`` of the line
     lies on the wall beyond the mark, or the mark is no darker than its flanks. A honing
     groove runs across the frame (its depth fading, its pieces cut apart where the grooves
-    stop short); a scratch is one furrow, and its line beyond it is the wall's."""
+    stop short); a scratch is one furrow, and its line beyond it is the wall's.
+
+    ``z``: that excess in standard deviations of a line's share had the line been any of
+    the wall's, its stretches beyond the mark (``along_px`` each) taken as independent
+    draws at the wall's share, that share read as at least one stretch's worth (a wall
+    where nothing reaches the bar cannot tell a share under one in so many)."""
     at = stretches.place(x_px, y_px) if own > 0.0 else None
     if at is None:
         return None
@@ -300,7 +313,11 @@ def line_runs_on(stretches: GrooveStretches, x_px: float, y_px: float, length_px
         return None
     bar = cfg.groove_run_on_darkness * own
     anywhere = stretches.best[stretches.best_on_wall]
-    return float(np.mean(line[beyond] >= bar)) - (float(np.mean(anywhere >= bar)) if anywhere.size else 0.0)
+    wall_share = float(np.mean(anywhere >= bar)) if anywhere.size else 0.0
+    excess = float(np.mean(line[beyond] >= bar)) - wall_share
+    draws = max(float(beyond.sum()) / stretches.along_px, 1.0)
+    p = min(max(wall_share, 1.0 / draws), 0.5)
+    return RunOn(excess, excess / float(np.sqrt(p * (1.0 - p) / draws)))
 
 
 def find_candidates(wall: _Wall, cfg: DefectConfig) -> list[tuple[np.ndarray, int, tuple[int, int, int, int], float]]:
