@@ -492,7 +492,8 @@ def test_a_marks_line_runs_on_as_a_groove_where_its_family_darkens_beyond_its_en
     bare[20, :101] = bare[20, 300:] = 0.0
     assert line_runs_on(GrooveStretches(identity, bare, None, on_wall, 10), own=1.0, **at).share == pytest.approx(
         -3 * 41 / (41 * 400))
-    grooved = np.where(np.arange(41)[:, None] % 2 == 0, np.float32(0.6), np.float32(0.0)) * np.ones((1, 400), np.float32)
+    grooved = (np.where(np.arange(41)[:, None] % 2 == 0, np.float32(0.6), np.float32(0.0))
+               * np.ones((1, 400), np.float32))
     grooved[20] = darkness[20]
     assert line_runs_on(GrooveStretches(identity, grooved, None, on_wall, 10), own=1.0, **at).share < 0.0
     holed = on_wall.copy()
