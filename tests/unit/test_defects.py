@@ -487,7 +487,7 @@ def test_a_marks_line_runs_on_as_a_groove_where_its_family_darkens_beyond_its_en
     # at 1.6 the bar is 0.8: only the mark's own 41 columns reach it, within the line's reach
     run = line_runs_on(stretches, own=1.6, **at)
     assert run.share == pytest.approx(-3 * 41 / (41 * 400))
-    assert run.z == pytest.approx(z(run.share, 0.0)) and run.z < 0.0
+    assert run.z == pytest.approx(z(run.share, 3 * 41 / (41 * 400))) and run.z < 0.0
     bare = darkness.copy()
     bare[20, :101] = bare[20, 300:] = 0.0
     assert line_runs_on(GrooveStretches(identity, bare, None, on_wall, 10), own=1.0, **at).share == pytest.approx(
@@ -537,8 +537,8 @@ def test_a_groove_piece_whose_line_runs_on_beyond_it_is_no_scratch(seed):
     (4210002, 0.010, dict(hatch_deg=25.0, groove_breaks=0.2, psf_smear_px=4.0, psf_smear_deg=30.0)),
 ])
 def test_a_groove_piece_whose_line_runs_on_more_than_any_lines_does_is_no_scratch(seed, mm_per_px, wall):
-    """A groove's piece, not along the hatch as the ends' tests take it (it reads 1.6-8 deg
-    off its family and crosses more than 8 px of its lines), whose line runs on beyond it
+    """A groove's piece, not along the hatch as the ends' tests take it (read 7.5-8 deg off
+    its family, or 1.6 deg off but crossing 12.6 px of its lines), whose line runs on beyond it
     over less than a fifth of its length more than the wall's lines do, but on a wall where
     hardly any line reaches half its darkness, so that the excess is 5.5-7.6 standard
     deviations of a line's share. Clean frames with grooves stopping short: a 20 deg hatch
