@@ -304,8 +304,7 @@ def line_runs_on(stretches: GrooveStretches, x_px: float, y_px: float, length_px
     if at is None:
         return None
     px, r = at
-    line = stretches.darkness[r - 1:r + 2].max(axis=0)
-    ok = stretches.on_wall[r - 1:r + 2].all(axis=0)
+    line, ok = stretches.best[r], stretches.best_on_wall[r]  # the three rows round its line
     # beyond its ends by half a stretch and a little: no stretch there reads the mark itself
     reach = length_px / 4.0 + stretches.along_px / 2.0 + 3.0
     beyond = ok & (np.abs(np.arange(line.size) - px) > reach)
