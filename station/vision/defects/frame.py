@@ -14,7 +14,7 @@ import numpy as np
 
 from station.vision.imageio import to_8bit, to_grey
 from station.vision.defects.config import Defect, DefectConfig, GROUP_DOMINANT_SHARE
-from station.vision.defects.common import is_along_hatch, near_hatch, on_groove_line
+from station.vision.defects.common import circ_diff_deg, is_along_hatch, near_hatch, on_groove_line
 from station.vision.defects.wall import (
     line_band, find_candidates, split_furrows, group_collinear, groove_stretches, hole_zone, line_runs_on, model_wall,
     one_furrow, seed_in_box, stretch_darkness,
@@ -152,8 +152,12 @@ def _drop_hatch_like(examined: list[ExaminedCandidate], wall, claimed: np.ndarra
     ``cfg.aligned_stretch_quantile``-th percentile, ``groove_stretches``) is one too: a
     honing whose grooves stop short leaves groove pieces with cut ends, which the ends'
     test (``_square_end``) takes for furrows. When any falls under that bar, the frame's
-    grooves stop short, and each must reach ``cfg.aligned_min_stretch_share_stopped``."""
+    grooves stop short, and each must reach ``cfg.aligned_min_stretch_share_stopped``.
+    A pore cut by the frame's border that reads as a short piece of a groove
+    (``_border_piece_family``) whose line runs on by ``cfg.groove_run_on_share`` is a
+    piece of that groove as well."""
     on_line = []  # (a scratch, the family whose line it keeps to or None, whether it runs along the hatch)
+    border_pieces = []  # (a pore cut by the border, the family it lies along)
     for ex in examined:
         if ex.defect is not None and ex.defect.kind == "scratch":
             angle, length = ex.defect.angle_deg % 180.0, ex.defect.length_px
@@ -161,7 +165,11 @@ def _drop_hatch_like(examined: list[ExaminedCandidate], wall, claimed: np.ndarra
             along = is_along_hatch(angle, length, wall.angles_deg, cfg)
             if family is not None or along:
                 on_line.append((ex, family, along))
-    if not on_line:
+        elif ex.defect is not None and ex.defect.kind == "pore" and ex.defect.partial:
+            family = _border_piece_family(ex.defect, claimed.shape, wall.angles_deg, mm_per_px, cfg)
+            if family is not None:
+                border_pieces.append((ex, family))
+    if not on_line and not border_pieces:
         return examined
     h, w = wall.darkness.shape
     marks = cv2.resize(claimed[: h * 2, : w * 2].astype(np.float32), (w, h), interpolation=cv2.INTER_AREA) > 0
@@ -177,17 +185,15 @@ def _drop_hatch_like(examined: list[ExaminedCandidate], wall, claimed: np.ndarra
     for ex, family, along in on_line:
         if family is None:
             continue
-        d = ex.defect
-        stretches = stretches_of(family)
-        # its darkness over the middle third: a short mark a few degrees off the family
-        # leaves the three rows round the family's line towards its ends
-        own = stretch_darkness(stretches, d.x_px, d.y_px, d.length_px, middle=cfg.groove_run_on_middle)
-        runs_on = (None if own is None
-                   else line_runs_on(stretches, d.x_px, d.y_px, d.length_px, own, mm_per_px, cfg))
+        runs_on = _mark_runs_on(stretches_of(family), ex.defect, mm_per_px, cfg)
         # the excess's significance off the hatch only: a scratch drawn along it may lie on a
         # groove's line over its whole length (and its ends' tests judge it there)
         if runs_on is not None and (runs_on.share >= cfg.groove_run_on_share
                                     or (not along and runs_on.z >= cfg.groove_run_on_z)):
+            pieces.add(id(ex))
+    for ex, family in border_pieces:
+        runs_on = _mark_runs_on(stretches_of(family), ex.defect, mm_per_px, cfg)
+        if runs_on is not None and runs_on.share >= cfg.groove_run_on_share:
             pieces.add(id(ex))
     shares = {}
     for ex, _, along in on_line:
@@ -202,6 +208,35 @@ def _drop_hatch_like(examined: list[ExaminedCandidate], wall, claimed: np.ndarra
     if any(v < bar for v in shares.values()):
         bar = max(bar, cfg.aligned_min_stretch_share_stopped)
     return [ex for ex in examined if id(ex) not in pieces and shares.get(id(ex), np.inf) >= bar]
+
+
+def _mark_runs_on(stretches, d: Defect, mm_per_px: float, cfg: DefectConfig):
+    """How the line of ``stretches``' family through a mark runs on beyond it
+    (``line_runs_on``), the mark's own darkness read over its middle
+    (``cfg.groove_run_on_middle``: a short mark a few degrees off the family leaves the
+    three rows round the family's line towards its ends); None as there."""
+    own = stretch_darkness(stretches, d.x_px, d.y_px, d.length_px, middle=cfg.groove_run_on_middle)
+    return None if own is None else line_runs_on(stretches, d.x_px, d.y_px, d.length_px, own, mm_per_px, cfg)
+
+
+def _border_piece_family(d: Defect, shape: tuple[int, int], angles_deg, mm_per_px: float,
+                         cfg: DefectConfig) -> float | None:
+    """The groove family a pore cut by the frame's border (``shape``, full res) lies along
+    as a short piece of one of its grooves, or None: its long axis at least
+    ``cfg.border_piece_min_aspect`` times its width and within
+    ``cfg.border_piece_max_off_deg`` of the family and nearer it than the nearest border's
+    direction, the family at least that far off the border's (the visible part of a round
+    pore lies along the border that cuts it), and the mark no wider than
+    ``cfg.border_piece_max_width_mm``."""
+    if d.length_px < cfg.border_piece_min_aspect * d.width_px or d.width_px * mm_per_px > cfg.border_piece_max_width_mm:
+        return None
+    h, w = shape
+    border_deg = 90.0 if min(d.x_px, w - 1 - d.x_px) <= min(d.y_px, h - 1 - d.y_px) else 0.0
+    angle = d.angle_deg % 180.0
+    off_border = circ_diff_deg(angle, border_deg)
+    near = [g for g in angles_deg if circ_diff_deg(angle, g) <= min(cfg.border_piece_max_off_deg, off_border)
+            and circ_diff_deg(g, border_deg) >= cfg.border_piece_max_off_deg]
+    return min(near, key=lambda g: circ_diff_deg(angle, g)) if near else None
 
 
 def _find(img: np.ndarray, mm_per_px: float, holes: list, wall, zone: np.ndarray, level_full: np.ndarray,
