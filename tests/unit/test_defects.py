@@ -593,7 +593,7 @@ def _pores_across_the_border(seed: int, envelope: str = "station", **overrides):
 def test_a_pore_cut_by_the_border_along_a_grooves_line_is_still_a_pore(seed, envelope, wall):
     """The pores the border cuts that lie most like a groove's piece: 0.38-0.49 mm pores on
     a groove whose line runs on beyond them (by 0.37-0.73), their visible part read 1.3-1.6
-    times as long as wide and within 7-15 deg of the family. They are 0.23-0.30 mm wide,
+    times as long as wide and within 6.5-15 deg of the family. They are 0.23-0.30 mm wide,
     which no groove is: each is found, cut by the border, and measured as a pore."""
     f, truths = _pores_across_the_border(seed, envelope, **wall)
     found = detect_defects(f.image, MM_PER_PX)
