@@ -785,6 +785,63 @@ def test_a_scratch_ending_on_a_deep_groove_across_it_keeps_its_end():
         assert float(np.min(np.hypot(line[[0, -1], 0] - px, line[[0, -1], 1] - py))) <= 2.0, ((px, py), line[[0, -1]])
 
 
+def test_a_scratch_ending_on_a_groove_deeper_than_it_keeps_its_end():
+    """A frame of a whole-surface scan through the camera twin (bench seed 23400, part 0):
+    a thin 1.86 mm scratch (1.75 px) 5.5 deg off the frame's rows ends on a deep groove
+    that crosses it. The grooves' scaling, clipped at 2.5 where the modelled groove through
+    the scratch's filter is 1.2-2.5 times the scratch's level, lifted the model's misfit
+    of the groove to the scratch's level, and its end was read 12.5 px on, at the groove's
+    far side (1.96 mm; the part's record placed it 0.067 mm off). The raw amplitude there
+    does not rise with the groove, and the stretch is no shelf; but it lies far above what
+    the scratch's smooth floor would leave through so deep a groove (its level less the
+    groove's, under zero), so it is the groove's (``_misfit_beyond_end``): the end stays
+    where the furrow stops."""
+    from sim.camera.twin import CameraOptics
+
+    p = CameraOptics().params
+    spec = DefectSpec("scratch", 587.6016558375272, 958.1096484133544, 185.87774064574361, 1.7460944204496067,
+                      -5.542872896112307, None, None, 985449586)
+    f = render_frame(p, [], seed=156652361, wall=wall_patch(p, 1813401533), defects=[spec])
+    truth = f.defects[0].with_scale(MM_PER_PX)
+    found = [d for d in detect_defects(f.image, MM_PER_PX) if d.kind == "scratch"
+             and np.hypot(d.x_px - truth.image_x_px, d.y_px - truth.image_y_px) < 60.0]
+    assert len(found) == 1, found
+    d = found[0]
+    assert _within(d.length_mm, truth.length_mm), (d.length_mm, truth.length_mm)
+    assert np.hypot(d.x_px - truth.image_x_px, d.y_px - truth.image_y_px) * MM_PER_PX <= 0.02, (d, truth)
+    ends = np.array(geometry(spec, []).scratch_ends_px())
+    ex, ey = p.lens.distort_px(ends[:, 0], ends[:, 1])
+    line = np.array(d.line_px)
+    for px, py in zip(ex, ey):
+        assert float(np.min(np.hypot(line[[0, -1], 0] - px, line[[0, -1], 1] - py))) <= 2.0, ((px, py), line[[0, -1]])
+
+
+def test_a_stretch_past_a_scratchs_end_far_above_its_smooth_floor_through_a_deep_groove_is_the_grooves():
+    """``_misfit_beyond_end``: where a scratch runs through a groove its floor is smooth, so
+    its raw amplitude is its own level less the modelled groove, whatever the model's
+    misfit of the groove; past its end, on a groove the model under-reads, the raw
+    amplitude is that misfit, which lies above the floor's read by more than
+    ``MISFIT_BEYOND_END_SHARE`` of the scratch's level when the groove is deeper than the
+    scratch. A stretch under 4 px says nothing."""
+    from station.vision.defects.scratches import MISFIT_BEYOND_END_SHARE, _misfit_beyond_end
+
+    rng = np.random.default_rng(23400)
+    step, own = 0.5, 0.94
+    groove = np.linspace(1.15, 2.35, 40)  # through the scratch's filter, deeper than the scratch
+    noise = rng.normal(0.0, 0.05, groove.size)
+    # the scratch through it: its floor's read, however deep the groove
+    assert not _misfit_beyond_end(own - groove + noise, groove, 0, groove.size, own, step)
+    # the groove alone, the model reading two thirds of it: a misfit of half the model's
+    assert _misfit_beyond_end(0.5 * groove + noise, groove, 0, groove.size, own, step)
+    # ... a misfit just past the bar over the floor, and just short of it
+    assert _misfit_beyond_end(own - groove + (MISFIT_BEYOND_END_SHARE + 0.05) * own, groove, 0, groove.size, own,
+                              step)
+    assert not _misfit_beyond_end(own - groove + (MISFIT_BEYOND_END_SHARE - 0.05) * own, groove, 0, groove.size,
+                                  own, step)
+    # too short to say
+    assert not _misfit_beyond_end(0.5 * groove, groove, 0, 7, own, step)
+
+
 def test_a_scratch_is_not_followed_straight_on_through_a_groove_that_diverges_from_it():
     """A frame of the camera twin (the bench's seed 2088050): a 1.65 mm scratch 12 deg off
     the hatch ends on a deep groove. Following the furrow past its end on the raw

@@ -332,6 +332,31 @@ def _groove_beyond_end(raw: np.ndarray, groove: np.ndarray, a: int, b: int, step
     return bool(coef[1] > 0 and (se == 0.0 or coef[1] / se >= GROOVE_BEYOND_END_T))
 
 
+#: how far above a smooth floor's read a stretch past a scratch's raw end may lie, as a
+#: share of the scratch's own level, and still be the scratch: ``_misfit_beyond_end``
+MISFIT_BEYOND_END_SHARE = 0.5
+
+
+def _misfit_beyond_end(raw: np.ndarray, groove: np.ndarray, a: int, b: int, own: float, step: float) -> bool:
+    """Whether the stretch ``[a, b)`` past a scratch's end on its raw amplitude ``raw`` is
+    the wall model's misfit of a groove deeper than the scratch rather than the scratch
+    running through it: a scratch's floor is smooth, so where it runs through a groove the
+    raw amplitude is its own level ``own`` less the modelled groove (``groove``, through
+    the same filter), at or under zero on a groove deeper than it, whatever the model's
+    misfit; a stretch whose raw amplitude lies above that by ``MISFIT_BEYOND_END_SHARE``
+    of ``own`` (medians) is no furrow's floor but the groove's own darkness the model
+    left. The grooves' scaling, clipped at 2.5 where the groove through the filter is 1.2
+    to 2.5 times the scratch's level, lifted that misfit to the scratch's level beyond a
+    1.86 mm scratch's end on a deep groove, and its end read 13 px on (whole-surface seed
+    23400, its place 0.067 mm off); the raw amplitude there rises with the groove too
+    little for ``_groove_beyond_end``. A stretch under 4 px says nothing (False)."""
+    k = max(int(round(1.0 / step)), 1)
+    if b - a < 4 * k or not own > 0:
+        return False
+    floor = own - groove[a:b]
+    return bool(float(np.median(raw[a:b] - floor)) >= MISFIT_BEYOND_END_SHARE * own)
+
+
 #: a stretch of a scratch's centre-line peaks at one end that is the groove it ends on:
 #: at least ``HATCH_TAIL_MIN_PX`` long, within ``HATCH_TAIL_DEG`` of a groove family,
 #: the rest (at least ``HATCH_TAIL_MIN_BODY_PX``) off the hatch, and the two straight
@@ -625,13 +650,18 @@ def measure_scratch(patch: Patch, region: np.ndarray, blur_hint: float | None = 
         # below the scratch's own level (``_shelf_beyond``)
         lo, hi = ext
         trim = int(np.ceil(2.0 * b / step))  # the raw end's own blurred step
+        # ... or lifts a deep groove's misfit that lies above what a smooth floor would
+        # leave through it (``_misfit_beyond_end``)
+        own_raw = float(np.median(av_raw[ext_raw[0]:ext_raw[1]])) if ext_raw[1] > ext_raw[0] else 0.0
         if _groove_beyond_end(av_raw, groove_av, ext[0], ext_raw[0] - trim, step) \
-                or _shelf_beyond(av, groove_av, ext[0], ext_raw[0], ext_raw, step):
+                or _shelf_beyond(av, groove_av, ext[0], ext_raw[0], ext_raw, step) \
+                or _misfit_beyond_end(av_raw, groove_av, ext[0], ext_raw[0] - trim, own_raw, step):
             lo = ext_raw[0]
             av[:lo] = av_raw[:lo]
             groove_ends[0] = True
         if _groove_beyond_end(av_raw, groove_av, ext_raw[1] + trim, ext[1], step) \
-                or _shelf_beyond(av, groove_av, ext_raw[1], ext[1], ext_raw, step):
+                or _shelf_beyond(av, groove_av, ext_raw[1], ext[1], ext_raw, step) \
+                or _misfit_beyond_end(av_raw, groove_av, ext_raw[1] + trim, ext[1], own_raw, step):
             hi = ext_raw[1]
             av[hi:] = av_raw[hi:]
             groove_ends[1] = True
