@@ -295,25 +295,25 @@ class DefectConfig:
     groove_run_on_min_mm: float = 0.5
     #: ... the mark's own darkness read over this share of its length round its middle
     groove_run_on_middle: float = 0.35
-    #: a pore cut by the frame's border (``partial``) that reads as a short piece of a
-    #: groove is one too (``frame._drop_hatch_like``): its long axis, at least
+    #: a pore cut by the frame's border (``partial``) that reads as a short piece of a groove
+    #: is one too (``frame._drop_hatch_like``): its long axis, at least
     #: ``border_piece_min_aspect`` times its width, within ``border_piece_max_off_deg`` of a
-    #: family and nearer it than the border's direction (the family at least that far off
-    #: the border's); no wider than ``border_piece_max_width_mm``; and its line running on
-    #: beyond it by ``groove_run_on_share``.
-    #: Where a honing's grooves stop short, a piece may end a few px inside the frame, and
-    #: the grooves' means along the lines, one-sided at the border, leave it out; its few px
-    #: are no line, and it was measured as a pore. The visible part of a round pore cut by a
-    #: straight border lies along that border, or is most of the pore and nearly round.
-    #: Session 75, every pore of six sets logged (wide walls broken 20 %, clean and with
-    #: defects; station, wide and broken walls with 3 pores drawn across the border of each
-    #: frame; 1,541 reads of pores): the 20 false pores at the border were such pieces, 16 of
-    #: them within 15 deg of a family, 1.4-2.2 times as long as wide, 0.06-0.145 mm wide (as
-    #: read in either of a frame's two examinations), their lines running on by 0.43-0.90 (but
-    #: one at a corner, where too little of its line is in the frame to tell). Of the 14 true pores cut by the border within 15 deg of a family whose
-    #: lines ran on by 0.2 or more, 12 were 0.20-0.39 mm wide (pores of 0.26-0.50 mm); the
-    #: other two, a 0.15 mm pore about as wide as long and one of 0.064 mm. With these bars
-    #: 15 of the 20 go, and of the 1,376 true pores cut by the border the one of 0.064 mm
+    #: family and nearer it than the border's direction (the family at least that far off the
+    #: border's); no wider than ``border_piece_max_width_mm``; and its line running on beyond
+    #: it by ``groove_run_on_share``. Where a honing's grooves stop short, a piece may end a
+    #: few px inside the frame, and the grooves' means along the lines, one-sided at the
+    #: border, leave it out; its few px are no line, and it was measured as a pore. The visible
+    #: part of a round pore cut by a straight border lies along that border, or is most of the
+    #: pore and nearly round. Session 75, every pore of six sets logged (wide walls broken
+    #: 20 %, clean and with defects; station, wide and broken walls with 3 pores drawn across the
+    #: border of each frame; 1,541 reads of pores): the 20 false pores at the border were such
+    #: pieces, 16 of them within 15 deg of a family, 1.4-2.2 times as long as wide, 0.06-0.145
+    #: mm wide (as read in either of a frame's two examinations), their lines running on by
+    #: 0.43-0.90 (but one at a corner, where too little of its line is in the frame to tell).
+    #: Of the 14 true pores cut by the border within 15 deg of a family whose lines ran on by
+    #: 0.2 or more, 12 were 0.20-0.39 mm wide (pores of 0.26-0.50 mm); the other two, a 0.15 mm
+    #: pore about as wide as long and one of 0.064 mm. With these bars 15 of the 20 go, and of
+    #: the 1,376 true pores cut by the border the one of 0.064 mm
     border_piece_min_aspect: float = 1.3
     border_piece_max_off_deg: float = 15.0
     border_piece_max_width_mm: float = 0.15
