@@ -757,6 +757,28 @@ def test_a_scratch_that_ends_on_a_deep_groove_is_not_followed_along_the_groove()
     _the_twin_scratch_found(2087087)
 
 
+def _the_scan_frames_scratch(spec: DefectSpec, seed: int, wall_seed: int):
+    """A frame of a whole-surface scan through the camera twin, rendered again from the
+    scan's draws (its one scratch ``spec``, the frame's seed and its wall patch's): the one
+    scratch found within 60 px of the truth, each of its ends within 2 px of the truth's
+    (the lens's distortion applied). (truth in mm, found)."""
+    from sim.camera.twin import CameraOptics
+
+    p = CameraOptics().params
+    f = render_frame(p, [], seed=seed, wall=wall_patch(p, wall_seed), defects=[spec])
+    truth = f.defects[0].with_scale(MM_PER_PX)
+    found = [d for d in detect_defects(f.image, MM_PER_PX) if d.kind == "scratch"
+             and np.hypot(d.x_px - truth.image_x_px, d.y_px - truth.image_y_px) < 60.0]
+    assert len(found) == 1, found
+    d = found[0]
+    ends = np.array(geometry(spec, []).scratch_ends_px())
+    ex, ey = p.lens.distort_px(ends[:, 0], ends[:, 1])
+    line = np.array(d.line_px)
+    for px, py in zip(ex, ey):
+        assert float(np.min(np.hypot(line[[0, -1], 0] - px, line[[0, -1], 1] - py))) <= 2.0, ((px, py), line[[0, -1]])
+    return truth, d
+
+
 def test_a_scratch_ending_on_a_deep_groove_across_it_keeps_its_end():
     """A frame of a whole-surface scan through the camera twin (bench seed 25300, part 0):
     a 0.88 mm scratch ends on a deep groove 30 deg off it, which the wall model reads at
@@ -765,24 +787,11 @@ def test_a_scratch_ending_on_a_deep_groove_across_it_keeps_its_end():
     groove: 1.06 mm, its middle 9 px off. Past the raw end, an amplitude that rises with
     the groove is the groove's (``_groove_beyond_end``): the end stays where the furrow
     stops."""
-    from sim.camera.twin import CameraOptics
-
-    p = CameraOptics().params
     spec = DefectSpec("scratch", 762.5159943699219, 485.84110074797, 88.40636391653848, 1.648476601492594,
                       -2.5387004904315402, None, None, 55980413)
-    f = render_frame(p, [], seed=1389828893, wall=wall_patch(p, 1197323378), defects=[spec])
-    truth = f.defects[0]
-    found = [d for d in detect_defects(f.image, MM_PER_PX) if d.kind == "scratch"
-             and np.hypot(d.x_px - truth.image_x_px, d.y_px - truth.image_y_px) < 60.0]
-    assert len(found) == 1, found
-    d = found[0]
+    truth, d = _the_scan_frames_scratch(spec, seed=1389828893, wall_seed=1197323378)
     assert abs(d.length_px - truth.length_px) <= 2.0, (d.length_px, truth.length_px)
     assert np.hypot(d.x_px - truth.image_x_px, d.y_px - truth.image_y_px) <= 2.0, (d, truth)
-    ends = np.array(geometry(spec, []).scratch_ends_px())
-    ex, ey = p.lens.distort_px(ends[:, 0], ends[:, 1])
-    line = np.array(d.line_px)
-    for px, py in zip(ex, ey):
-        assert float(np.min(np.hypot(line[[0, -1], 0] - px, line[[0, -1], 1] - py))) <= 2.0, ((px, py), line[[0, -1]])
 
 
 def test_a_scratch_ending_on_a_groove_deeper_than_it_keeps_its_end():
@@ -796,24 +805,11 @@ def test_a_scratch_ending_on_a_groove_deeper_than_it_keeps_its_end():
     the scratch's smooth floor would leave through so deep a groove (its level less the
     groove's, under zero), so it is the groove's (``_misfit_beyond_end``): the end stays
     where the furrow stops."""
-    from sim.camera.twin import CameraOptics
-
-    p = CameraOptics().params
     spec = DefectSpec("scratch", 587.6016558375272, 958.1096484133544, 185.87774064574361, 1.7460944204496067,
                       -5.542872896112307, None, None, 985449586)
-    f = render_frame(p, [], seed=156652361, wall=wall_patch(p, 1813401533), defects=[spec])
-    truth = f.defects[0].with_scale(MM_PER_PX)
-    found = [d for d in detect_defects(f.image, MM_PER_PX) if d.kind == "scratch"
-             and np.hypot(d.x_px - truth.image_x_px, d.y_px - truth.image_y_px) < 60.0]
-    assert len(found) == 1, found
-    d = found[0]
+    truth, d = _the_scan_frames_scratch(spec, seed=156652361, wall_seed=1813401533)
     assert _within(d.length_mm, truth.length_mm), (d.length_mm, truth.length_mm)
     assert np.hypot(d.x_px - truth.image_x_px, d.y_px - truth.image_y_px) * MM_PER_PX <= 0.02, (d, truth)
-    ends = np.array(geometry(spec, []).scratch_ends_px())
-    ex, ey = p.lens.distort_px(ends[:, 0], ends[:, 1])
-    line = np.array(d.line_px)
-    for px, py in zip(ex, ey):
-        assert float(np.min(np.hypot(line[[0, -1], 0] - px, line[[0, -1], 1] - py))) <= 2.0, ((px, py), line[[0, -1]])
 
 
 def test_a_stretch_past_a_scratchs_end_far_above_its_smooth_floor_through_a_deep_groove_is_the_grooves():
