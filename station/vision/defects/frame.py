@@ -155,9 +155,10 @@ def _drop_hatch_like(examined: list[ExaminedCandidate], wall, claimed: np.ndarra
     grooves stop short, and each must reach ``cfg.aligned_min_stretch_share_stopped``.
     A pore cut by the frame's border that reads as a short piece of a groove
     (``_border_piece_family``) whose line runs on by ``cfg.groove_run_on_share`` is a
-    piece of that groove as well."""
+    piece of that groove as well, and so is a small one (``_border_stub``) on a line of
+    either family that runs on by ``cfg.border_stub_min_run_on``."""
     on_line = []  # (a scratch, the family whose line it keeps to or None, whether it runs along the hatch)
-    border_pieces = []  # (a pore cut by the border, the family it lies along)
+    border_pieces = []  # (a pore cut by the border, a family it may lie on, the run-on that makes it a piece)
     for ex in examined:
         if ex.defect is not None and ex.defect.kind == "scratch":
             angle, length = ex.defect.angle_deg % 180.0, ex.defect.length_px
@@ -168,7 +169,9 @@ def _drop_hatch_like(examined: list[ExaminedCandidate], wall, claimed: np.ndarra
         elif ex.defect is not None and ex.defect.kind == "pore" and ex.defect.partial:
             family = _border_piece_family(ex.defect, claimed.shape, wall.angles_deg, mm_per_px, cfg)
             if family is not None:
-                border_pieces.append((ex, family))
+                border_pieces.append((ex, family, cfg.groove_run_on_share))
+            elif _border_stub(ex.defect, mm_per_px, cfg):
+                border_pieces.extend((ex, g, cfg.border_stub_min_run_on) for g in wall.angles_deg)
     if not on_line and not border_pieces:
         return examined
     h, w = wall.darkness.shape
@@ -191,9 +194,9 @@ def _drop_hatch_like(examined: list[ExaminedCandidate], wall, claimed: np.ndarra
         if runs_on is not None and (runs_on.share >= cfg.groove_run_on_share
                                     or (not along and runs_on.z >= cfg.groove_run_on_z)):
             pieces.add(id(ex))
-    for ex, family in border_pieces:
+    for ex, family, share in border_pieces:
         runs_on = _mark_runs_on(stretches_of(family), ex.defect, mm_per_px, cfg)
-        if runs_on is not None and runs_on.share >= cfg.groove_run_on_share:
+        if runs_on is not None and runs_on.share >= share:
             pieces.add(id(ex))
     shares = {}
     for ex, _, along in on_line:
@@ -237,6 +240,14 @@ def _border_piece_family(d: Defect, shape: tuple[int, int], angles_deg, mm_per_p
     near = [g for g in angles_deg if circ_diff_deg(angle, g) <= min(cfg.border_piece_max_off_deg, off_border)
             and circ_diff_deg(g, border_deg) >= cfg.border_piece_max_off_deg]
     return min(near, key=lambda g: circ_diff_deg(angle, g)) if near else None
+
+
+def _border_stub(d: Defect, mm_per_px: float, cfg: DefectConfig) -> bool:
+    """A mark cut by the frame's border too small to tell a pore by
+    (``cfg.border_stub_max_length_mm`` by ``cfg.border_stub_max_width_mm``): a groove's stub
+    if a family's line through it runs on (``_drop_hatch_like``)."""
+    return (d.length_px * mm_per_px <= cfg.border_stub_max_length_mm
+            and d.width_px * mm_per_px <= cfg.border_stub_max_width_mm)
 
 
 def _find(img: np.ndarray, mm_per_px: float, holes: list, wall, zone: np.ndarray, level_full: np.ndarray,
