@@ -623,6 +623,20 @@ def test_a_pore_cut_by_the_border_along_a_grooves_line_is_still_a_pore(seed, env
     assert near[0].width_mm > 0.2
 
 
+def test_a_pore_over_the_limit_cut_by_the_border_on_a_running_on_line_is_still_a_pore():
+    """The groove stub's rule (``_border_stub``) leaves what shows enough of a pore to size
+    it: a 0.21 mm pore, the border through it, on a wide wall with grooves 20 % broken,
+    shows 0.18 x 0.17 mm of itself on a line that runs on by 0.53. It is found, cut by the
+    border, and measured as a pore."""
+    f, truths = _pores_across_the_border(5300004, "wide", groove_breaks=0.2)
+    found = detect_defects(f.image, MM_PER_PX)
+    (t,) = [t for t in truths if 0.2 <= t.length_mm <= 0.23]
+    near = [d for d in found if d.kind == "pore" and d.partial
+            and np.hypot(d.x_px - t.image_x_px, d.y_px - t.image_y_px) < 0.5 * t.length_px + 0.5 * d.width_px]
+    assert near, (round(t.length_mm, 3), [(d.kind, round(d.x_px), round(d.y_px)) for d in found])
+    assert near[0].length_mm > 0.14
+
+
 def test_a_long_scratch_a_few_degrees_off_the_hatch_crosses_its_lines_and_is_found():
     """A scratch 3.5-7 deg off a groove family was judged as the hatch's residue (kept
     only when both its ends were square cuts), though over 1.5-2 mm it crosses 10-25 px

@@ -322,7 +322,7 @@ class DefectConfig:
     #: either family that runs on beyond it by ``border_stub_min_run_on`` or more, is a
     #: groove's stub too: where two grooves cross at the border, or one meets it, the darkness
     #: the one-sided means leave is cut by the border, and lies along it as a cut pore's visible
-    #: part does (session 76: of 11 false pores at the border over 550 clean frames of wide and
+    #: part does (session 76: of 12 false pores at the border over 550 clean frames of wide and
     #: broken walls, 9 were 0.09-0.14 x 0.055-0.09 mm, their lines running on by 0.52-0.90).
     #: Such a mark shows too little of a pore to size it: a round one whose chord is 0.14 mm
     #: and which shows 0.03 mm of itself is under 0.2 mm across, and a coverage scan sees it

@@ -170,7 +170,7 @@ def _drop_hatch_like(examined: list[ExaminedCandidate], wall, claimed: np.ndarra
             family = _border_piece_family(ex.defect, claimed.shape, wall.angles_deg, mm_per_px, cfg)
             if family is not None:
                 border_pieces.append((ex, family, cfg.groove_run_on_share))
-            elif _border_stub(ex.defect, mm_per_px, cfg):
+            if _border_stub(ex.defect, mm_per_px, cfg):
                 border_pieces.extend((ex, g, cfg.border_stub_min_run_on) for g in wall.angles_deg)
     if not on_line and not border_pieces:
         return examined
