@@ -171,7 +171,8 @@ def _drop_hatch_like(examined: list[ExaminedCandidate], wall, claimed: np.ndarra
             if family is not None:
                 border_pieces.append((ex, family, cfg.groove_run_on_share))
             if _border_stub(ex.defect, mm_per_px, cfg):
-                border_pieces.extend((ex, g, cfg.border_stub_min_run_on) for g in wall.angles_deg)
+                # the family it lies along is judged above, by a lower bar
+                border_pieces.extend((ex, g, cfg.border_stub_min_run_on) for g in wall.angles_deg if g != family)
     if not on_line and not border_pieces:
         return examined
     h, w = wall.darkness.shape
@@ -195,6 +196,8 @@ def _drop_hatch_like(examined: list[ExaminedCandidate], wall, claimed: np.ndarra
                                     or (not along and runs_on.z >= cfg.groove_run_on_z)):
             pieces.add(id(ex))
     for ex, family, share in border_pieces:
+        if id(ex) in pieces:
+            continue
         runs_on = _mark_runs_on(stretches_of(family), ex.defect, mm_per_px, cfg)
         if runs_on is not None and runs_on.share >= share:
             pieces.add(id(ex))
