@@ -331,6 +331,28 @@ class DefectConfig:
     border_stub_max_length_mm: float = 0.14
     border_stub_max_width_mm: float = 0.09
     border_stub_min_run_on: float = 0.5
+    #: a pore inside the frame whose darkness two crossing grooves explain is their
+    #: crossing (``frame._drop_crossings``): each family's profile across its lines, read
+    #: beside the mark along the line through it (over ``crossing_arm_mm`` beyond its
+    #: blurred outline, the median along the line, the side that holds more), laid along
+    #: that line through the mark, explains at least ``crossing_min_explained`` of the
+    #: mark's darkness over its blurred outline, and each family at least
+    #: ``crossing_min_family_share`` of it. Where a honing's grooves stop short, the
+    #: frame's and the patch's means along the lines hold their pieces' depth too low, and
+    #: where two pieces cross, the two shortfalls add up to a dark spot the size of a pore
+    #: (session 78, wide walls broken 20 %: 9 false interior pores, explained 0.57-1.17,
+    #: the lesser family 0.10-0.57). A pore takes the wall's place, grooves and all: of
+    #: 405 true interior pores (those walls, the wide envelope's, the station's) small ones
+    #: on one groove were explained up to 0.80 by its family, and where over 0.25 the
+    #: lesser family explained 0.13 at most (a 0.32 mm pore where two grooves cross)
+    #: Only a mark at least ``crossing_min_length_mm`` long is judged so: a pore far under
+    #: any limit may be no larger than a crossing of two fine grooves, and be explained as
+    #: much (a 0.074 x 0.053 mm pore where two grooves cross, wide frame 95088: 0.43 and
+    #: 0.49); the crossings read as pores were 0.11-0.39 mm
+    crossing_min_length_mm: float = 0.1
+    crossing_arm_mm: float = 0.2
+    crossing_min_explained: float = 0.5
+    crossing_min_family_share: float = 0.2
     #: the stretches' length along the lines and the width of the core across them that
     #: is integrated, from its first row to its last (mm; at the station's 0.010 mm/px, 20
     #: px and +/- 2 px: three half-res rows), the flanks beside the core its baseline

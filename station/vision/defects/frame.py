@@ -216,6 +216,102 @@ def _drop_hatch_like(examined: list[ExaminedCandidate], wall, claimed: np.ndarra
     return [ex for ex in examined if id(ex) not in pieces and shares.get(id(ex), np.inf) >= bar]
 
 
+def _crossing_shares(dark: np.ndarray, d: Defect, angles_deg, blur: float, arm_px: float,
+                     blocked: np.ndarray | None = None) -> tuple[float, ...]:
+    """How much of a mark's darkness each groove family's line through it explains: the
+    family's profile across its lines, read beside the mark along the line (from 2 blur +
+    2 px beyond its outline over ``arm_px``, the median along the line: the other family's
+    grooves cross there; the side whose profile holds more: a piece may end at the mark),
+    laid along the line through the mark; its sum over the mark's outline grown by the
+    blur, over the mark's darkness summed there. ``dark``: the frame's relative darkness
+    (level out, grooves in), NaN where nothing may be read (the holes); ``blocked``: where
+    the arms may not read besides (other marks). A share is 0 where neither side has 80 %
+    of its samples."""
+    h, w = dark.shape
+    th = np.deg2rad(d.angle_deg)
+    half_l, half_w = d.length_px / 2.0, d.width_px / 2.0
+    reach = int(np.ceil(half_l + blur + 1.0))
+    yy, xx = np.mgrid[int(d.y_px) - reach:int(d.y_px) + reach + 1,
+                      int(d.x_px) - reach:int(d.x_px) + reach + 1].astype(np.float32)
+    du = (xx - d.x_px) * np.cos(th) + (yy - d.y_px) * np.sin(th)
+    dv = -(xx - d.x_px) * np.sin(th) + (yy - d.y_px) * np.cos(th)
+    inside = ((du / (half_l + blur)) ** 2 + (dv / (half_w + blur)) ** 2 <= 1.0) \
+        & (xx >= 0) & (yy >= 0) & (xx <= w - 1) & (yy <= h - 1)
+    own = dark[yy[inside].astype(np.int64), xx[inside].astype(np.int64)]
+    total = float(np.nansum(np.clip(own, 0.0, None)))
+    if total <= 0.0:
+        return tuple(0.0 for _ in angles_deg)
+    arms = dark if blocked is None else np.where(blocked, np.float32(np.nan), dark)
+    shares = []
+    for a in angles_deg:
+        ar = np.deg2rad(a)
+        t, n = np.array([np.cos(ar), np.sin(ar)]), np.array([-np.sin(ar), np.cos(ar)])
+        along = np.hypot(half_l * np.cos(th - ar), half_w * np.sin(th - ar))
+        across = np.hypot(half_l * np.sin(th - ar), half_w * np.cos(th - ar))
+        c = np.arange(-across - 2.0 * blur - 2.0, across + 2.0 * blur + 2.01, 0.5)
+        best = None
+        for side in (-1.0, 1.0):
+            s = side * (along + 2.0 * blur + 2.0 + np.arange(0.0, arm_px))
+            ss, cc = np.meshgrid(s, c)
+            mx = (d.x_px + ss * t[0] + cc * n[0]).astype(np.float32)
+            my = (d.y_px + ss * t[1] + cc * n[1]).astype(np.float32)
+            v = cv2.remap(arms, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=np.nan)
+            if np.isfinite(v).mean() < 0.8:
+                continue
+            prof = np.clip(np.nan_to_num(np.nanmedian(v, axis=1)), 0.0, None)
+            if best is None or prof.sum() > best.sum():
+                best = prof
+        if best is None:
+            shares.append(0.0)
+            continue
+        across_px = (xx[inside] - d.x_px) * n[0] + (yy[inside] - d.y_px) * n[1]
+        shares.append(float(np.interp(across_px, c, best, left=0.0, right=0.0).sum()) / total)
+    return tuple(shares)
+
+
+def _drop_crossings(examined: list[ExaminedCandidate], img: np.ndarray, level_full: np.ndarray, zone: np.ndarray,
+                    angles_deg, blur: float, mm_per_px: float, cfg: DefectConfig) -> list[ExaminedCandidate]:
+    """The examined candidates less the pores inside the frame, at least
+    ``cfg.crossing_min_length_mm`` long, that are two grooves' crossing
+    (``_crossing_shares``: the two lines through the mark explain
+    ``cfg.crossing_min_explained`` of its darkness, each family
+    ``cfg.crossing_min_family_share`` of it)."""
+    pores = [ex for ex in examined if ex.defect is not None and ex.defect.kind == "pore" and not ex.defect.partial
+             and ex.defect.length_px * mm_per_px >= cfg.crossing_min_length_mm]
+    if not pores or len(angles_deg) < 2:
+        return examined
+    hh, ww = img.shape
+    count = np.zeros(img.shape, np.int32)  # how many defects' regions cover each pixel
+    for ex in examined:
+        if ex.defect is not None and ex.box is not None:
+            b = ex.box
+            count[b[1]:b[3], b[0]:b[2]] += ex.region if ex.cover is None else ex.region | ex.cover
+    arm_px = max(cfg.crossing_arm_mm / mm_per_px, 8.0)
+    drop = set()
+    for ex in pores:
+        d = ex.defect
+        # the window the arms' samples reach into (``_crossing_shares``), and a margin
+        reach = 0.5 * d.length_px + 2.0 * blur + 2.0
+        r = int(np.ceil(np.hypot(reach + arm_px, reach))) + 3
+        x0, y0 = max(int(d.x_px) - r, 0), max(int(d.y_px) - r, 0)
+        x1, y1 = min(int(d.x_px) + r + 2, ww), min(int(d.y_px) + r + 2, hh)
+        others = count[y0:y1, x0:x1].copy()
+        if ex.box is not None:
+            b = ex.box
+            bx0, by0, bx1, by1 = max(b[0], x0), max(b[1], y0), min(b[2], x1), min(b[3], y1)
+            if bx1 > bx0 and by1 > by0:
+                others[by0 - y0:by1 - y0, bx0 - x0:bx1 - x0] -= ex.region[by0 - b[1]:by1 - b[1], bx0 - b[0]:bx1 - b[0]]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            dark = 1.0 - img[y0:y1, x0:x1].astype(np.float32) / np.maximum(level_full[y0:y1, x0:x1], 1.0)
+        dark = cv2.GaussianBlur(dark, (0, 0), 0.7, borderType=cv2.BORDER_REPLICATE)
+        dark[zone[y0:y1, x0:x1]] = np.nan
+        shares = _crossing_shares(dark, replace(d, x_px=d.x_px - x0, y_px=d.y_px - y0), angles_deg, blur, arm_px,
+                                  blocked=others > 0)
+        if sum(shares) >= cfg.crossing_min_explained and min(shares) >= cfg.crossing_min_family_share:
+            drop.add(id(ex))
+    return [ex for ex in examined if id(ex) not in drop]
+
+
 def _mark_runs_on(stretches, d: Defect, mm_per_px: float, cfg: DefectConfig):
     """How the line of ``stretches``' family through a mark runs on beyond it
     (``line_runs_on``), the mark's own darkness read over its middle
@@ -382,6 +478,8 @@ def _find(img: np.ndarray, mm_per_px: float, holes: list, wall, zone: np.ndarray
     examined = track_scratches(img, level_full, examined, cfg, wall.angles_deg, wall.residual)
     examined = join_scratch_pieces(img, level_full, examined, cfg)
     examined = _drop_hatch_like(examined, wall, claimed_regions, mm_per_px, cfg)
+    examined = _drop_crossings(examined, img, level_full, zone, wall.angles_deg,
+                               blur_hint if blur_hint is not None else BLUR_PRIOR_PX[0], mm_per_px, cfg)
     found: list[Defect] = [ex.defect if ex.line is None else replace(ex.defect, line_px=line_points(ex.line))
                            for ex in examined if ex.defect is not None]
     others = [hole_zone(img.shape, [h for j, h in enumerate(holes) if j != i], reach_px) for i in range(len(holes))]
