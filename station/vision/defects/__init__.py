@@ -34,7 +34,8 @@ defect (docs/surface.md has the figures behind each choice):
    re-estimated *locally* as 1-D profiles across their lines (0.5 px bins, the candidate
    masked out, backfitted in turn), the patch's own noise. A mark must be significant
    against that noise integrated over its area, and must not be the cross-hatch's residue
-   (along a groove direction, too faint, too soft an edge, too broad).
+   (along a groove direction, too faint, too soft an edge, too broad; a pore whose
+   darkness the two groove lines through it explain is their crossing).
 5. **Kind and size.** Elongated (3:1, the blur taken out by a blurred-ellipse fit) is a
    scratch, else a pore. *Pore*: its floor's contrast c from the blurred-ellipse fit; its
    outline from the darkening's angular density round its centroid, which is c r^2 / 2

@@ -344,7 +344,7 @@ class DefectConfig:
     #: the lesser family 0.10-0.57). A pore takes the wall's place, grooves and all: of
     #: 405 true interior pores (those walls, the wide envelope's, the station's) small ones
     #: on one groove were explained up to 0.80 by its family, and where over 0.25 the
-    #: lesser family explained 0.13 at most (a 0.32 mm pore where two grooves cross)
+    #: lesser family explained 0.13 at most (a 0.32 mm pore where two grooves cross).
     #: Only a mark at least ``crossing_min_length_mm`` long is judged so: a pore far under
     #: any limit may be no larger than a crossing of two fine grooves, and be explained as
     #: much (a 0.074 x 0.053 mm pore where two grooves cross, wide frame 95088: 0.43 and
