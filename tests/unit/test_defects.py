@@ -1079,6 +1079,32 @@ def test_two_scratches_crossing_are_both_found_and_measured(angles, lengths):
             assert _within(d.length_mm, t.length_mm), (seed, t.length_mm, d.length_mm)
 
 
+@pytest.mark.parametrize("scratch, pore, frame_seed, sized", [
+    ((320.0, 256.0, 250.0, 3.0, 70.0, 0.5, 1), (330.3, 284.2, 40.0, 30.0, 10.0, 0.35, 2), 7, False),
+    ((287.0, 253.6, 204.0, 4.64, 125.5, 0.68, 12), (280.7, 262.4, 34.3, 31.3, 43.4, 0.22, 112), 1012, True),
+    ((308.3, 267.6, 248.9, 5.7, 92.1, 0.65, 19), (309.8, 225.7, 47.5, 31.1, 46.3, 0.22, 119), 1019, True),
+    ((353.6, 254.6, 240.6, 5.62, 159.6, 0.52, 24), (332.0, 262.6, 30.9, 23.4, 129.8, 0.4, 124), 1024, True),
+], ids=["0.40 mm pore", "0.34 mm pore", "0.48 mm pore", "0.31 mm pore"])
+def test_a_pore_on_a_scratchs_line_is_found_and_the_scratch_kept_whole(scratch, pore, frame_seed, sized):
+    """A pore on a scratch's line is one candidate with it. The scratch measured, the pore
+    was never read, and the scratch's part beyond it went with it (the first case: a
+    2.5 mm scratch read 1.47 mm; all four pores lost, each 0.3-0.5 mm, over the limit). What
+    a seed's scratch leaves is examined on its own (``frame._seed_rest``), and the pieces
+    are joined through the pore (``_scratch_gap``): both found, the scratch's length in
+    tolerance and, where the pore is the darker by far, the pore's too (the first pore,
+    barely darker than the scratch, takes a little of it in: 0.46 mm)."""
+    specs = [DefectSpec("scratch", *scratch[:6], None, scratch[6]), DefectSpec("pore", *pore[:6], None, pore[6])]
+    f = render_frame(FrameParams(**SMALL), [], seed=frame_seed, defects=specs)
+    truths = [d.with_scale(MM_PER_PX) for d in f.defects]
+    found = detect_defects(f.image, MM_PER_PX)
+    pairs, false = match(truths, found, MM_PER_PX)
+    report = [(e.kind, round(e.x_px), round(e.y_px), round(e.length_mm, 3)) for e in found]
+    assert not false and all(d is not None and d.kind == t.kind for t, d in pairs), report
+    for t, d in pairs:
+        if t.kind == "scratch" or sized:
+            assert _within(d.length_mm, t.length_mm), (t.kind, t.length_mm, report)
+
+
 @pytest.mark.parametrize("shape_seed, hatch", [(187, 150.0), (205, 30.0), (231, 150.0), (142, 30.0)])
 def test_a_scratch_bent_along_the_hatch_in_its_middle_is_one_scratch_of_its_length(shape_seed, hatch):
     """A 9 mm scratch bent in an S (its second mode ~2 sigma of the twin's) whose chord is

@@ -86,7 +86,7 @@ class ExaminedCandidate:
 def examine_candidate(img: np.ndarray, box, seed: np.ndarray, zone: np.ndarray, angles_deg, wall_level: np.ndarray,
                       cfg: DefectConfig, blur_hint: float | None, max_width_px: float, excl: np.ndarray | None = None,
                       confine: tuple[float, float, float, float] | None = None,
-                      others: np.ndarray | None = None) -> ExaminedCandidate:
+                      others: np.ndarray | None = None, keep_out: np.ndarray | None = None) -> ExaminedCandidate:
     """One candidate at full resolution: the local wall model, its region, its kind,
     its measurement and the tests it must pass.
 
@@ -104,7 +104,8 @@ def examine_candidate(img: np.ndarray, box, seed: np.ndarray, zone: np.ndarray, 
     ``excl``: what the first wall model leaves out besides the seed (a crossing furrow);
     ``confine``: a line the region keeps to (one furrow of several, ``split_furrows``);
     ``others``: what the defects measured so far cover over the frame, which the wall
-    model leaves out in every patch."""
+    model leaves out in every patch; ``keep_out``: where the region may not grow (frame
+    px: what another mark of the same seed covers, ``frame._seed_rest``)."""
     hh, ww = img.shape
 
     def beside(b) -> np.ndarray:
@@ -115,7 +116,7 @@ def examine_candidate(img: np.ndarray, box, seed: np.ndarray, zone: np.ndarray, 
     box0 = tuple(box)
     for attempt in range(3):
         again, m, kind = _examine_once(img, box, seed, excl, zone, angles_deg, wall_level, cfg, blur_hint,
-                                       max_width_px, confine, line_out=attempt > 0)
+                                       max_width_px, confine, line_out=attempt > 0, keep_out=keep_out)
         if ex is not None and ex.defect is not None and again.defect is None and not (
                 box0[0] == 0 or box0[1] == 0 or box0[2] == ww or box0[3] == hh):
             # the grown patch lost it (bench frames: short scratches of 0.14-0.17 mm, taken for
@@ -154,7 +155,8 @@ def examine_candidate(img: np.ndarray, box, seed: np.ndarray, zone: np.ndarray, 
 
 def _examine_once(img: np.ndarray, box, seed: np.ndarray, excl: np.ndarray, zone: np.ndarray, angles_deg,
                   wall_level: np.ndarray, cfg: DefectConfig, blur_hint: float | None, max_width_px: float,
-                  confine: tuple[float, float, float, float] | None = None, line_out: bool = False):
+                  confine: tuple[float, float, float, float] | None = None, line_out: bool = False,
+                  keep_out: np.ndarray | None = None):
     """``examine_candidate`` in one patch: (the examined candidate, its measurement, its kind).
     ``excl``: what the local wall model leaves out (the seed, or more); ``confine``: the
     line the region keeps to (``examine_candidate``); ``line_out``: ``excl`` holds the mark's line
@@ -173,6 +175,8 @@ def _examine_once(img: np.ndarray, box, seed: np.ndarray, excl: np.ndarray, zone
     grow = (rs > max(cfg.grow_k * noise_s, cfg.grow_share * peak)) & ~zone[y0:y1, x0:x1]
     if confine is not None:
         grow &= line_band(grow.shape, (x0, y0), confine, cfg.furrow_half_band_px)
+    if keep_out is not None:
+        grow &= ~keep_out[y0:y1, x0:x1]
     n_lab, labels = cv2.connectedComponents(grow.astype(np.uint8), connectivity=8)
     hit = np.unique(labels[seed & grow])
     hit = hit[hit > 0]

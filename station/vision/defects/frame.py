@@ -8,6 +8,7 @@ Part of ``station.vision.defects`` (its docstring tells the method).
 from __future__ import annotations
 
 from dataclasses import asdict, replace
+from typing import NamedTuple
 
 import cv2
 import numpy as np
@@ -349,6 +350,45 @@ def _border_stub(d: Defect, mm_per_px: float, cfg: DefectConfig) -> bool:
             and d.width_px * mm_per_px <= cfg.border_stub_max_width_mm)
 
 
+class _Rest(NamedTuple):
+    """What a seed's defects left of it (``_seed_rest``): a seed of its own."""
+
+    box: tuple[int, int, int, int]
+    seed: np.ndarray  # over ``box``
+    depth: int  # how many measurements it is the rest of
+    #: over ``box``, where its region may not grow: what the seed's defects measured and
+    #: what was claimed before them, less the part itself
+    keep_out: np.ndarray
+
+
+def _or_over(dst: np.ndarray, dst_box, src: np.ndarray, src_box) -> None:
+    """``dst`` (over ``dst_box``) |= ``src`` (over ``src_box``) where the two boxes meet."""
+    x0, y0 = max(dst_box[0], src_box[0]), max(dst_box[1], src_box[1])
+    x1, y1 = min(dst_box[2], src_box[2]), min(dst_box[3], src_box[3])
+    if x1 > x0 and y1 > y0:
+        dst[y0 - dst_box[1]:y1 - dst_box[1], x0 - dst_box[0]:x1 - dst_box[0]] |= \
+            src[y0 - src_box[1]:y1 - src_box[1], x0 - src_box[0]:x1 - src_box[0]]
+
+
+def _seed_rest(seed: np.ndarray, claimed: np.ndarray, max_width_px: float, blur: float, mm_per_px: float,
+               cfg: DefectConfig) -> list[np.ndarray]:
+    """The parts of a seed (over its box) that the defects measured from it leave
+    unclaimed (``claimed``: over the same box, what they measured and what was claimed
+    before them), each of at least ``cfg.rest_min_area_mm2``: a pore on a scratch's line
+    is one seed with it, and once the scratch was measured the pore was never read. A
+    scratch's cover cuts a mark it crosses in two, so the parts are closed across a
+    cover's width (the widest scratch's and the blur's reach) within the seed."""
+    left = seed & ~claimed
+    if not left.any():
+        return []
+    k = 2 * int(np.ceil(max_width_px / 2.0 + 2.5 * blur + 1.0)) + 1
+    closed = cv2.morphologyEx(left.astype(np.uint8), cv2.MORPH_CLOSE,
+                              cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k))).astype(bool) & seed
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(closed.astype(np.uint8), connectivity=8)
+    least = cfg.rest_min_area_mm2 / mm_per_px ** 2
+    return [labels == j for j in range(1, n) if stats[j, cv2.CC_STAT_AREA] >= least]
+
+
 def _find(img: np.ndarray, mm_per_px: float, holes: list, wall, zone: np.ndarray, level_full: np.ndarray,
           reach_px: float, blur_hint: float | None, cfg: DefectConfig) -> tuple[list[Defect], list[ExaminedCandidate]]:
     """``detect_defects`` under one blur (``blur_hint``; None: each mark reads its own):
@@ -374,20 +414,32 @@ def _find(img: np.ndarray, mm_per_px: float, holes: list, wall, zone: np.ndarray
     queue = [(group, None) for group in group_collinear(candidates)]
     while queue:
         group, own_group = queue.pop(0)
-        bx0 = min(candidates[i][2][0] for i in group)
-        by0 = min(candidates[i][2][1] for i in group)
-        bx1 = max(candidates[i][2][2] for i in group)
-        by1 = max(candidates[i][2][3] for i in group)
-        size = max(bx1 - bx0, by1 - by0) * 2
-        margin = int(np.clip(0.6 * size, 14, 40))  # room for the wall model round the mark
-        box = (max(2 * bx0 - margin, 0), max(2 * by0 - margin, 0), min(2 * bx1 + margin, ww), min(2 * by1 + margin, hh))
-        seed = np.zeros((box[3] - box[1], box[2] - box[0]), bool)
-        for i in group:
-            seed |= seed_in_box(candidates[i][0], candidates[i][1], box)
+        keep_out, depth = None, 0
+        if isinstance(group, _Rest):
+            # what a seed's defects left of it: examined on its own, its region kept off
+            # what they measured beyond it (not off a scratch's whole region, which may
+            # have grown over part of a pore on its line: the pore read 0.22 mm of 0.32,
+            # and its other part, a candidate of its own, was reported again)
+            box, seed, depth, inside = group
+            keep_out = claimed.copy()
+            keep_out[box[1]:box[3], box[0]:box[2]] = inside
+            group = []
+        else:
+            bx0 = min(candidates[i][2][0] for i in group)
+            by0 = min(candidates[i][2][1] for i in group)
+            bx1 = max(candidates[i][2][2] for i in group)
+            by1 = max(candidates[i][2][3] for i in group)
+            size = max(bx1 - bx0, by1 - by0) * 2
+            margin = int(np.clip(0.6 * size, 14, 40))  # room for the wall model round the mark
+            box = (max(2 * bx0 - margin, 0), max(2 * by0 - margin, 0), min(2 * bx1 + margin, ww),
+                   min(2 * by1 + margin, hh))
+            seed = np.zeros((box[3] - box[1], box[2] - box[0]), bool)
+            for i in group:
+                seed |= seed_in_box(candidates[i][0], candidates[i][1], box)
         taken = claimed[box[1]:box[3], box[0]:box[2]]
         if own_group is not None:  # its own group's claim grew over it, not a measurement of it
             taken = taken & ~own_group[box[1]:box[3], box[0]:box[2]]
-        if taken[seed].mean() > 0.5:
+        if keep_out is None and taken[seed].mean() > 0.5:
             continue  # already measured as part of another candidate's defect
         # two scratches crossing are one candidate (an X, a V): each furrow is examined on
         # its own, its region confined to its line, the other's pixels left out of the wall
@@ -400,14 +452,14 @@ def _find(img: np.ndarray, mm_per_px: float, holes: list, wall, zone: np.ndarray
         if furrows:
             results = [examine_candidate(img, box, seed & line_band(seed.shape, box[:2], line, cfg.furrow_half_band_px),
                                          zone, wall.angles_deg, level_full, cfg, blur_hint, max_width_px, excl=seed,
-                                         confine=line, others=claimed)
+                                         confine=line, others=claimed, keep_out=keep_out)
                        for line in furrows]
             if not any(ex.defect is not None for ex in results) or \
                     any(ex.defect is not None and ex.defect.kind != "scratch" for ex in results):
                 results = []
         if not results:
             results = [examine_candidate(img, box, seed, zone, wall.angles_deg, level_full, cfg, blur_hint,
-                                         max_width_px, others=claimed)]
+                                         max_width_px, others=claimed, keep_out=keep_out)]
             line = one_furrow(seed) if results[0].defect is None else None
             if line is not None:
                 # one furrow whose region, grown unconfined, was no defect: a deep groove's
@@ -418,9 +470,11 @@ def _find(img: np.ndarray, mm_per_px: float, holes: list, wall, zone: np.ndarray
                 line = (line[0] + box[0], line[1] + box[1], line[2], line[3])
                 own_line = seed & line_band(seed.shape, box[:2], line, cfg.furrow_half_band_px)
                 again = examine_candidate(img, box, own_line, zone, wall.angles_deg, level_full, cfg, blur_hint,
-                                          max_width_px, excl=seed, confine=line, others=claimed)
+                                          max_width_px, excl=seed, confine=line, others=claimed, keep_out=keep_out)
                 if again.defect is not None and again.defect.kind == "scratch":
                     results = [again]
+        prior = claimed[box[1]:box[3], box[0]:box[2]].copy() if depth < cfg.rest_max_depth else None
+        measured = []  # this seed's defects kept
         for ex in results:
             if ex.defect is None:
                 continue
@@ -441,6 +495,20 @@ def _find(img: np.ndarray, mm_per_px: float, holes: list, wall, zone: np.ndarray
                 mine[fresh] = len(pore_sizes)
                 pore_sizes.append(int(np.count_nonzero(fresh)))
             examined.append(ex)
+            measured.append(ex)
+        if prior is not None and measured and (depth > 0 or any(ex.defect.kind == "scratch" for ex in measured)):
+            # the rest of a seed a scratch was measured from (a scratch's line runs through
+            # the marks it meets), and the rest of that. What they measured: a scratch its
+            # line (its cover: its region may have grown over a mark on its line), another
+            # mark its region and its blurred skirt (a seed reaches past a pore's region,
+            # and its skirt read as two more pores)
+            skirt = blur_hint if blur_hint is not None else BLUR_PRIOR_PX[0]
+            for ex in measured:
+                own = ex.cover if ex.cover is not None else grow_by_skirt(ex.region.astype(np.uint8), skirt) > 0
+                _or_over(prior, box, own, ex.box or box)
+            queue.extend((_Rest(box, rest, depth + 1, prior & ~rest), None)
+                         for rest in _seed_rest(seed, prior, max_width_px,
+                                                blur_hint if blur_hint is not None else BLUR_PRIOR_PX[0], mm_per_px, cfg))
         if len(group) > 1 and not any(ex.defect is not None for ex in results):
             # a group is the guess that its members are pieces of one scratch; when the
             # group is no defect and one member stands out of it (its peak at least

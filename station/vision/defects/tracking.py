@@ -107,7 +107,7 @@ def _gap_path(pa: np.ndarray, ta: np.ndarray, pb: np.ndarray, tb: np.ndarray, st
 
 
 def _scratch_gap(img: np.ndarray, level: np.ndarray, a: "ExaminedCandidate", b: "ExaminedCandidate",
-                 cfg: DefectConfig) -> tuple[float, int, int, np.ndarray] | None:
+                 cfg: DefectConfig, pores: np.ndarray | None = None) -> tuple[float, int, int, np.ndarray] | None:
     """Whether two scratches of one frame are one furrow with a stretch between them that
     was not measured, and how well: (the gap, a's end, b's end, the gap's path), or None.
 
@@ -120,7 +120,10 @@ def _scratch_gap(img: np.ndarray, level: np.ndarray, a: "ExaminedCandidate", b: 
     the gap's and of the other's), their widths agree, and the raw darkness along a
     smooth path between the ends (the grooves not removed), core less flanks, is at
     least ``scratch_join_dark_share`` of what it is along the pieces' own last 40 px
-    over nearly all of the gap: a groove's residue does not carry it, the furrow does."""
+    over nearly all of the gap: a groove's residue does not carry it, the furrow does.
+    Where the path crosses a pore measured (``pores``: the frame's pores' regions), the
+    pore carries it: a scratch through a pore is dark across its whole width there, its
+    core no darker than its flanks."""
     da, db = a.defect, b.defect
     if max(da.width_px, db.width_px) > 2.5 * max(min(da.width_px, db.width_px), 1.0) + 2.0:
         return None
@@ -167,6 +170,10 @@ def _scratch_gap(img: np.ndarray, level: np.ndarray, a: "ExaminedCandidate", b: 
             return None
         c = _furrow_contrast(img, level, path, tang, core)
         c = gaussian_filter1d(np.nan_to_num(c, nan=-1.0), 1.5)
+        if pores is not None:
+            ix = np.clip(np.round(path[:, 0]).astype(int), 0, pores.shape[1] - 1)
+            iy = np.clip(np.round(path[:, 1]).astype(int), 0, pores.shape[0] - 1)
+            c = np.where(pores[iy, ix], ref, c)
         if float(np.median(c)) < cfg.scratch_join_dark_share * ref or \
                 float(np.mean(c >= 0.5 * cfg.scratch_join_dark_share * ref)) < 0.9:
             return None
@@ -503,14 +510,22 @@ def join_scratch_pieces(img: np.ndarray, level: np.ndarray, examined: list["Exam
                         cfg: DefectConfig) -> list["ExaminedCandidate"]:
     """Scratches of one frame that are pieces of one furrow (``_scratch_gap``) as one:
     its centre line the pieces' and the gap's path, its length theirs along it, its
-    place that line's middle, its width the pieces' length-weighted mean."""
+    place that line's middle, its width the pieces' length-weighted mean. A gap may run
+    through a pore (``_scratch_gap``)."""
+    pores = None
+    for ex in examined:
+        if ex.defect is not None and ex.defect.kind == "pore" and ex.box is not None:
+            if pores is None:
+                pores = np.zeros(img.shape, bool)
+            b = ex.box
+            pores[b[1]:b[3], b[0]:b[2]] |= ex.region
     while True:
         items = [ex for ex in examined if ex.defect is not None and ex.defect.kind == "scratch"
                  and ex.line is not None and len(ex.line) >= 2]
         best = None
         for i, a in enumerate(items):
             for b in items[i + 1:]:
-                r = _scratch_gap(img, level, a, b, cfg)
+                r = _scratch_gap(img, level, a, b, cfg, pores)
                 if r is not None and (best is None or r[0] < best[0]):
                     best = (r[0], a, b, r)
         if best is None:
