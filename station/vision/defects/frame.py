@@ -506,9 +506,8 @@ def _find(img: np.ndarray, mm_per_px: float, holes: list, wall, zone: np.ndarray
             for ex in measured:
                 own = ex.cover if ex.cover is not None else grow_by_skirt(ex.region.astype(np.uint8), skirt) > 0
                 _or_over(prior, box, own, ex.box or box)
-            queue.extend((_Rest(box, rest, depth + 1, prior & ~rest), None)
-                         for rest in _seed_rest(seed, prior, max_width_px,
-                                                blur_hint if blur_hint is not None else BLUR_PRIOR_PX[0], mm_per_px, cfg))
+            rests = _seed_rest(seed, prior, max_width_px, skirt, mm_per_px, cfg)
+            queue.extend((_Rest(box, rest, depth + 1, prior & ~rest), None) for rest in rests)
         if len(group) > 1 and not any(ex.defect is not None for ex in results):
             # a group is the guess that its members are pieces of one scratch; when the
             # group is no defect and one member stands out of it (its peak at least
