@@ -418,16 +418,25 @@ def random_scratch_angle(rng: np.random.Generator, honing_angle_deg: float = 30.
 def random_defects(rng: np.random.Generator, params, holes: list, kinds: dict[str, int], mm_per_px: float,
                    border_px: float = 8.0, clearance_px: float = 12.0,
                    scratch_clearance_deg: float = HONING_CLEARANCE_DEG,
-                   scratch_within_deg: float | None = None) -> list[DefectSpec]:
+                   scratch_within_deg: float | None = None, pores_on_scratches: float = 0.0) -> list[DefectSpec]:
     """Defects drawn across ``RANDOM_SIZES_MM``: ``kinds`` maps a kind to how many.
 
     Pores and scratches lie wholly in the frame, clear of the holes and of each other
     by ``clearance_px``; burrs and chips go on the rims of whole holes, apart from each
     other along the rim. What does not fit after a few hundred tries is left out.
+    ``pores_on_scratches``: the chance that a pore lies on a scratch's line instead (its
+    centre on the line's middle 70 %, painted over it), when the frame has a scratch: a
+    scratch that runs through a pore of the casting; the scratches are then drawn first.
+    0 (the default) draws every frame as before.
     """
+    if not 0.0 <= pores_on_scratches <= 1.0:
+        raise ValueError(f"pores_on_scratches must be in [0, 1], not {pores_on_scratches}")
+    if pores_on_scratches > 0.0 and "scratch" in kinds:
+        kinds = {"scratch": kinds["scratch"], **{k: v for k, v in kinds.items() if k != "scratch"}}
     w, h = params.width_px, params.height_px
     out: list[DefectSpec] = []
     boxes: list[tuple[float, float, float, float]] = []
+    placed: list[DefectSpec] = []  # the pores and scratches, box by box
     rim_used: dict[int, list[tuple[float, float]]] = {}
     # rim defects go on holes whose rim and defects stay clear of the frame's border
     keep = border_px + 12.0
@@ -488,13 +497,22 @@ def random_defects(rng: np.random.Generator, params, holes: list, kinds: dict[st
                     continue  # longer than the frame has room for
                 x = float(rng.uniform(margin, w - 1 - margin))
                 y = float(rng.uniform(margin, h - 1 - margin))
+                on = None  # the scratch a pore lies on, whose box it may overlap
+                scratches = [o for o in out if o.kind == "scratch"]
+                if kind == "pore" and pores_on_scratches > 0.0 and scratches and rng.uniform() < pores_on_scratches:
+                    on = scratches[int(rng.integers(len(scratches)))]
+                    t = float(rng.uniform(-0.35, 0.35)) * on.length_px
+                    x = on.x_px + t * float(np.cos(np.deg2rad(on.angle_deg)))
+                    y = on.y_px + t * float(np.sin(np.deg2rad(on.angle_deg)))
                 refl = float(rng.uniform(*RANDOM_REFLECTANCE[kind]))
                 spec = DefectSpec(kind, x, y, float(length), float(width), angle, refl, None, seed)
                 box = DefectGeometry(spec).bbox_ideal(0.0)
                 if box[0] < border_px or box[1] < border_px or box[2] > w - 1 - border_px or box[3] > h - 1 - border_px:
                     continue
-                if not clear(box, boxes + hole_boxes):
+                others = boxes if on is None else [b for b, o in zip(boxes, placed) if o is not on]
+                if not clear(box, others + hole_boxes):
                     continue
+                placed.append(spec)
                 boxes.append(box)
                 out.append(spec)
                 break
@@ -504,7 +522,7 @@ def random_defects(rng: np.random.Generator, params, holes: list, kinds: dict[st
 def random_defect_frame(seed: int, kinds: dict[str, int] | None = None, *, mm_per_px: float = 0.010,
                         n_holes: int | None = None, hole_diameter_mm: tuple[float, float] = (0.6, 1.0),
                         envelope: str = "station", scratch_clearance_deg: float = HONING_CLEARANCE_DEG,
-                        scratch_within_deg: float | None = None, **overrides):
+                        scratch_within_deg: float | None = None, pores_on_scratches: float = 0.0, **overrides):
     """A random frame with random defects from one seed (the defect bench's and tests'
     unit of work), its truth in px and mm.
 
@@ -514,7 +532,8 @@ def random_defect_frame(seed: int, kinds: dict[str, int] | None = None, *, mm_pe
     how many of each kind (None: 0-2 pores, 0-2 scratches, and 0-2 burrs and 0-2 chips
     when there are holes; ``{}``: a clean frame). ``scratch_clearance_deg``: how far the
     scratches' directions keep from the hatch's (0: any direction); ``scratch_within_deg``:
-    instead, at most that far from a groove family (scratches along the hatch).
+    instead, at most that far from a groove family (scratches along the hatch);
+    ``pores_on_scratches``: the chance that a pore lies on a scratch (``random_defects``).
     """
     from sim.camera.render import random_holes, random_params, render_frame
 
@@ -529,7 +548,7 @@ def random_defect_frame(seed: int, kinds: dict[str, int] | None = None, *, mm_pe
         if holes:
             kinds.update(burr=int(rng.integers(0, 3)), chip=int(rng.integers(0, 3)))
     defects = random_defects(rng, params, holes, kinds, mm_per_px, scratch_clearance_deg=scratch_clearance_deg,
-                             scratch_within_deg=scratch_within_deg)
+                             scratch_within_deg=scratch_within_deg, pores_on_scratches=pores_on_scratches)
     frame = render_frame(params, holes, seed=int(rng.integers(2**31)), defects=defects)
     frame.defects = [d.with_scale(mm_per_px) for d in frame.defects]
     return frame

@@ -195,7 +195,7 @@ def run(frames: int = 100, seed: int = 50000, envelope: str = "station", mm_per_
         progress=None, twin_frames: int = 0, hatch_deg: float | None = None, texture_in_mm: bool = False,
         scratch_clearance_deg: float | None = None, scratch_within_deg: float | None = None,
         groove_breaks: float = 0.0, psf_disc_px: float = 0.0, psf_smear_px: float = 0.0,
-        psf_smear_deg: float = 0.0) -> dict:
+        psf_smear_deg: float = 0.0, pores_on_scratches: float = 0.0) -> dict:
     """``frames`` frames with defects and ``frames`` clean ones, and ``twin_frames``
     frames of the camera twin with a long scratch (``twin_scratch_frame``, seeds from
     ``seed + 2,000,000``); ``progress()`` after each. ``hatch_deg``: the cross-hatch's
@@ -208,7 +208,9 @@ def run(frames: int = 100, seed: int = 50000, envelope: str = "station", mm_per_
     ``groove_breaks``: the share of the grooves' length missing (a honing whose grooves
     stop short, with cut ends; 0: they run on). ``psf_disc_px``, ``psf_smear_px``,
     ``psf_smear_deg``: the lens's spread beyond the Gaussian (``psf_overrides``); the
-    twin's long-scratch frames keep the camera twin's own optics."""
+    twin's long-scratch frames keep the camera twin's own optics. ``pores_on_scratches``:
+    the chance that a pore of a frame with a scratch lies on the scratch's line
+    (``random_defects``; 0: every defect clear of the others)."""
     import cv2
 
     from sim.camera.defects import HONING_CLEARANCE_DEG, random_defect_frame  # the CLI side may import sim
@@ -238,7 +240,8 @@ def run(frames: int = 100, seed: int = 50000, envelope: str = "station", mm_per_
             # clean frames from their own seeds: other walls than the defect frames'
             s = seed + i + (1_000_000 if clean else 0)
             f = random_defect_frame(s, {} if clean else None, mm_per_px=mm_per_px, envelope=envelope,
-                                    scratch_clearance_deg=clearance, scratch_within_deg=scratch_within_deg, **wall)
+                                    scratch_clearance_deg=clearance, scratch_within_deg=scratch_within_deg,
+                                    pores_on_scratches=pores_on_scratches, **wall)
             n_holes += len(f.holes)
             c0 = time.process_time()
             found = detect_defects(f.image, mm_per_px)
@@ -290,6 +293,7 @@ def run(frames: int = 100, seed: int = 50000, envelope: str = "station", mm_per_
         "scratch_clearance_deg": clearance,
         "scratch_within_deg": scratch_within_deg,
         "groove_breaks": groove_breaks,
+        "pores_on_scratches": pores_on_scratches,
         "psf": psf_overrides(psf_disc_px, psf_smear_px, psf_smear_deg),
         "holes": n_holes,
         "kinds": kinds,
@@ -349,6 +353,10 @@ def register(bench_app: typer.Typer) -> None:
         psf_disc_px: float = PSF_DISC,
         psf_smear_px: float = PSF_SMEAR,
         psf_smear_deg: float = PSF_SMEAR_DEG,
+        pores_on_scratches: float = typer.Option(0.0, "--pores-on-scratches", min=0.0, max=1.0,
+                                                 help="the chance that a pore of a frame with a scratch lies on the "
+                                                      "scratch's line, touching it (default 0: every defect clear of "
+                                                      "the others)"),
         as_json: bool = typer.Option(False, "--json", help="one JSON object on stdout"),
     ) -> None:
         """Surface defects: recall above the limit per kind, false defects on clean walls, size errors, CPU time."""
@@ -363,7 +371,7 @@ def register(bench_app: typer.Typer) -> None:
                     twin_frames=twin_frames, hatch_deg=hatch_deg, texture_in_mm=texture_in_mm,
                     scratch_clearance_deg=scratch_clearance_deg, scratch_within_deg=scratch_within_deg,
                     groove_breaks=groove_breaks, psf_disc_px=psf_disc_px, psf_smear_px=psf_smear_px,
-                    psf_smear_deg=psf_smear_deg)
+                    psf_smear_deg=psf_smear_deg, pores_on_scratches=pores_on_scratches)
         if as_json:
             print_json(r)
             return
@@ -373,6 +381,8 @@ def register(bench_app: typer.Typer) -> None:
                         + (f"<= {r['scratch_within_deg']:g} deg off a groove family" if r["scratch_within_deg"]
                            else f">= {r['scratch_clearance_deg']:g} deg off it")
                         + (f", {r['groove_breaks']:.0%} of the grooves' length broken out" if r["groove_breaks"] else "")
+                        + (f", pores on a scratch's line at {r['pores_on_scratches']:.0%}"
+                           if r["pores_on_scratches"] else "")
                         + psf_title(r["psf"])
                         + f", {r['holes']} holes (one core)")
         for c in ("kind", "seeded", "limit mm", "above", "recall", "below: recall", "other kind",

@@ -164,6 +164,34 @@ def test_defects_change_only_their_own_pixels():
     assert all(inside)
 
 
+def test_random_pores_may_lie_on_a_scratchs_line_and_by_default_keep_clear():
+    """``random_defects(pores_on_scratches=...)``: each pore drawn on a scratch lies on its
+    chord's middle 70 % and is painted over it; by default every pore keeps clear of every
+    scratch, and the draw is what it was."""
+    params = FrameParams(**SMALL)
+    kinds = {"pore": 2, "scratch": 1}
+    for seed in range(8):
+        on = random_defects(np.random.default_rng(seed), params, [], kinds, MM_PER_PX, pores_on_scratches=1.0)
+        (scratch,) = [d for d in on if d.kind == "scratch"]
+        pores = [d for d in on if d.kind == "pore"]
+        assert pores and on.index(scratch) < min(on.index(p) for p in pores)  # painted after it
+        a = np.deg2rad(scratch.angle_deg)
+        for p in pores:
+            dx, dy = p.x_px - scratch.x_px, p.y_px - scratch.y_px
+            assert abs(-dx * np.sin(a) + dy * np.cos(a)) < 1e-6
+            assert abs(dx * np.cos(a) + dy * np.sin(a)) <= 0.35 * scratch.length_px + 1e-6
+        clear = random_defects(np.random.default_rng(seed), params, [], kinds, MM_PER_PX)
+        assert clear == random_defects(np.random.default_rng(seed), params, [], kinds, MM_PER_PX,
+                                       pores_on_scratches=0.0)
+        boxes = {id(d): geometry(d, []).bbox_ideal(0.0) for d in clear}
+        for p in (d for d in clear if d.kind == "pore"):
+            for q in (d for d in clear if d.kind == "scratch"):
+                bp, bq = boxes[id(p)], boxes[id(q)]
+                assert bp[2] < bq[0] or bq[2] < bp[0] or bp[3] < bq[1] or bq[3] < bp[1]
+    with pytest.raises(ValueError, match="pores_on_scratches"):
+        random_defects(np.random.default_rng(0), params, [], kinds, MM_PER_PX, pores_on_scratches=1.5)
+
+
 def test_pore_truth_is_its_outline():
     spec = DefectSpec("pore", 100.0, 80.0, 30.0, 22.0, 20.0, shape_seed=7)
     g = geometry(spec, [])
