@@ -370,21 +370,24 @@ def _or_over(dst: np.ndarray, dst_box, src: np.ndarray, src_box) -> None:
             src[y0 - src_box[1]:y1 - src_box[1], x0 - src_box[0]:x1 - src_box[0]]
 
 
-def _seed_rest(seed: np.ndarray, claimed: np.ndarray, max_width_px: float, blur: float, mm_per_px: float,
+def _seed_rest(seed: np.ndarray, claimed: np.ndarray, covers: list[np.ndarray], mm_per_px: float,
                cfg: DefectConfig) -> list[np.ndarray]:
     """The parts of a seed (over its box) that the defects measured from it leave
     unclaimed (``claimed``: over the same box, what they measured and what was claimed
     before them), each of at least ``cfg.rest_min_area_mm2``: a pore on a scratch's line
     is one seed with it, and once the scratch was measured the pore was never read. A
-    scratch's cover cuts a mark it crosses in two, so the parts are closed across a
-    cover's width (the widest scratch's and the blur's reach) within the seed."""
+    scratch's cover (``covers``: the seed's scratches') cuts a mark it crosses in two, so
+    the parts are closed across the widest cover within the seed."""
     left = seed & ~claimed
     if not left.any():
         return []
-    k = 2 * int(np.ceil(max_width_px / 2.0 + 2.5 * blur + 1.0)) + 1
-    closed = cv2.morphologyEx(left.astype(np.uint8), cv2.MORPH_CLOSE,
-                              cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k))).astype(bool) & seed
-    n, labels, stats, _ = cv2.connectedComponentsWithStats(closed.astype(np.uint8), connectivity=8)
+    across = max((2.0 * float(cv2.distanceTransform(c.astype(np.uint8), cv2.DIST_L2, 3).max()) for c in covers),
+                 default=0.0)
+    if across > 0.0:
+        k = 2 * int(np.ceil(across / 2.0)) + 3
+        left = cv2.morphologyEx(left.astype(np.uint8), cv2.MORPH_CLOSE,
+                                cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k))).astype(bool) & seed
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(left.astype(np.uint8), connectivity=8)
     least = cfg.rest_min_area_mm2 / mm_per_px ** 2
     return [labels == j for j in range(1, n) if stats[j, cv2.CC_STAT_AREA] >= least]
 
@@ -496,17 +499,16 @@ def _find(img: np.ndarray, mm_per_px: float, holes: list, wall, zone: np.ndarray
                 pore_sizes.append(int(np.count_nonzero(fresh)))
             examined.append(ex)
             measured.append(ex)
-        if prior is not None and measured and (depth > 0 or any(ex.defect.kind == "scratch" for ex in measured)):
-            # the rest of a seed a scratch was measured from (a scratch's line runs through
-            # the marks it meets), and the rest of that. What they measured: a scratch its
-            # line (its cover: its region may have grown over a mark on its line), another
-            # mark its region and its blurred skirt (a seed reaches past a pore's region,
-            # and its skirt read as two more pores)
+        if prior is not None and measured:
+            # the rest of the seed, what its defects measured taken out: a scratch its line
+            # (its cover: its region may have grown over a mark on its line), another mark
+            # its region and its blurred skirt (a seed reaches past a pore's region, and
+            # its skirt read as two more pores)
             skirt = blur_hint if blur_hint is not None else BLUR_PRIOR_PX[0]
             for ex in measured:
                 own = ex.cover if ex.cover is not None else grow_by_skirt(ex.region.astype(np.uint8), skirt) > 0
                 _or_over(prior, box, own, ex.box or box)
-            rests = _seed_rest(seed, prior, max_width_px, skirt, mm_per_px, cfg)
+            rests = _seed_rest(seed, prior, [ex.cover for ex in measured if ex.cover is not None], mm_per_px, cfg)
             queue.extend((_Rest(box, rest, depth + 1, prior & ~rest), None) for rest in rests)
         if len(group) > 1 and not any(ex.defect is not None for ex in results):
             # a group is the guess that its members are pieces of one scratch; when the
