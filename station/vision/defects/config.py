@@ -358,7 +358,9 @@ class DefectConfig:
     #: ``rest_max_depth`` times over: a candidate is one connected mark of the residual, and
     #: defects that touch (a pore on a scratch's line) are one. A 0.40 mm pore on a 2.5 mm
     #: scratch was never reported, and the scratch read 1.47 mm, its part beyond the pore
-    #: left with it
+    #: left with it. Session 79, pores drawn on the scratches' lines (station envelope,
+    #: 100 frames, ``--pores-on-scratches 1``): pores over the limit found 25 -> 39 of 42,
+    #: scratches 70 -> 79 of 94, no false mark either way (docs/surface.md)
     rest_min_area_mm2: float = 0.005
     rest_max_depth: int = 2
     #: the stretches' length along the lines and the width of the core across them that
