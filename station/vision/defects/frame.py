@@ -361,8 +361,8 @@ class _Rest(NamedTuple):
     keep_out: np.ndarray
     #: whether only a scratch is taken from it: the rest of a seed measured as pores alone
     scratches_only: bool
-    #: the defects measured from the seed (``id`` of each examined candidate)
-    parents: tuple[int, ...]
+    #: the defects measured from the seed (their examined candidates)
+    parents: tuple
 
 
 def _or_over(dst: np.ndarray, dst_box, src: np.ndarray, src_box) -> None:
@@ -397,9 +397,10 @@ def _seed_rest(seed: np.ndarray, claimed: np.ndarray, covers: list[np.ndarray], 
 
 
 def _drop_rests_of_dropped(examined: list[ExaminedCandidate], before: set[int],
-                           rest_of: dict[int, tuple[int, ...]]) -> list[ExaminedCandidate]:
-    """The examined candidates less those measured from a seed's rest (``rest_of``: the
-    seed's defects) all of whose seed's defects were dropped (in ``before``, not in
+                           rest_of: dict[int, tuple]) -> list[ExaminedCandidate]:
+    """The examined candidates less those measured from a seed's rest (``rest_of``, by
+    ``id``: the candidate and its seed's defects, held so that no ``id`` is reused) all
+    of whose seed's defects were dropped (their ``id`` in ``before``, not in
     ``examined``: a groove's piece, a crossing), and the rests of those in turn: what a
     groove's piece leaves of its seed is the grooves' residue (an X of two groove pieces
     left a 0.22 mm "pore" at its middle, wide frame 3220041)."""
@@ -409,7 +410,7 @@ def _drop_rests_of_dropped(examined: list[ExaminedCandidate], before: set[int],
         changed = False
         for ex in examined:
             own = id(ex)
-            if own not in dropped and own in rest_of and all(p in dropped for p in rest_of[own]):
+            if own not in dropped and own in rest_of and all(id(p) in dropped for p in rest_of[own][1]):
                 dropped.add(own)
                 changed = True
     return [ex for ex in examined if id(ex) not in dropped]
@@ -435,7 +436,7 @@ def _find(img: np.ndarray, mm_per_px: float, holes: list, wall, zone: np.ndarray
     claimed_regions = np.zeros(img.shape, bool)
     pore_regions = np.zeros(img.shape, np.int32)  # the pores' regions alone, each its own label
     pore_sizes = [0]  # each label's px (label 0: none)
-    rest_of: dict[int, tuple[int, ...]] = {}  # a defect measured from a seed's rest: the seed's defects
+    rest_of: dict[int, tuple] = {}  # a defect measured from a seed's rest: (it, the seed's defects)
     candidates = find_candidates(wall, cfg)
     # (a group; None, or for a member examined on its own what its group's defects claimed)
     queue = [(group, None) for group in group_collinear(candidates)]
@@ -528,7 +529,7 @@ def _find(img: np.ndarray, mm_per_px: float, holes: list, wall, zone: np.ndarray
             examined.append(ex)
             measured.append(ex)
             if parents:
-                rest_of[id(ex)] = parents
+                rest_of[id(ex)] = (ex, parents)
         if prior is not None and measured:
             # the rest of the seed, what its defects measured taken out: a scratch its line
             # (its cover: its region may have grown over a mark on its line), another mark
@@ -543,8 +544,7 @@ def _find(img: np.ndarray, mm_per_px: float, holes: list, wall, zone: np.ndarray
             # their seeds' other rests are the grooves' residue beside them (false "pores" of
             # 0.1-0.3 mm on the wide walls broken 20 %: three on 3220000's frames)
             only = not any(ex.defect.kind == "scratch" for ex in measured)
-            ids = tuple(id(ex) for ex in measured)
-            queue.extend((_Rest(box, rest, depth + 1, prior & ~rest, only, ids), None) for rest in rests)
+            queue.extend((_Rest(box, rest, depth + 1, prior & ~rest, only, tuple(measured)), None) for rest in rests)
         if len(group) > 1 and not any(ex.defect is not None for ex in results):
             # a group is the guess that its members are pieces of one scratch; when the
             # group is no defect and one member stands out of it (its peak at least
