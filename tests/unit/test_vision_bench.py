@@ -121,26 +121,36 @@ def test_the_benches_render_their_frames_under_the_lens_spread_asked_for():
     assert json.loads(res.stdout)["psf"] == {"psf_disc_px": 2.0}
 
 
-def test_the_defect_bench_draws_pores_on_scratches_when_asked():
+def test_the_defect_bench_draws_pores_on_scratches_when_asked(monkeypatch):
     """``station bench defects --pores-on-scratches P`` reaches the twin's draw
-    (``random_defects``) and is reported; its default keeps every defect clear."""
+    (``random_defect_frame``, ``random_defects``) for the frames with defects and is
+    reported; its default asks for none (every defect clear of the others)."""
     import json
 
     from typer.testing import CliRunner
 
-    from sim.camera.defects import random_defect_frame
+    import sim.camera.defects as twin
     from station.cli import app
 
-    seed = next(s for s in range(4300000, 4300050)
-                if {"pore", "scratch"} <= {d.kind for d in random_defect_frame(s, None).defects})
+    asked = []
+    draw = twin.random_defect_frame
+
+    def recording(seed, kinds=None, **kw):
+        asked.append((kinds, kw.get("pores_on_scratches", 0.0)))
+        return draw(seed, kinds, **kw)
+
+    monkeypatch.setattr(twin, "random_defect_frame", recording)
     runner = CliRunner()
-    res = runner.invoke(app, ["bench", "defects", "--frames", "1", "--seed", str(seed), "--twin-frames", "0",
-                              "--pores-on-scratches", "1", "--json"])
-    assert res.exit_code == 0, res.output
-    r = json.loads(res.stdout)
-    assert r["pores_on_scratches"] == 1.0 and r["kinds"]["pore"]["seeded"] >= 1
-    on = random_defect_frame(seed, None, pores_on_scratches=1.0).defects
-    off = random_defect_frame(seed, None).defects
+    for flag, share in (([], 0.0), (["--pores-on-scratches", "1"], 1.0)):
+        asked.clear()
+        res = runner.invoke(app, ["bench", "defects", "--frames", "1", "--seed", "4300003", "--twin-frames", "0",
+                                  "--json", *flag])
+        assert res.exit_code == 0, res.output
+        assert json.loads(res.stdout)["pores_on_scratches"] == share
+        assert [p for kinds, p in asked if kinds is None] == [share]  # the frame with defects
+    on = twin.random_defect_frame(4300003, None, pores_on_scratches=1.0).defects
+    off = twin.random_defect_frame(4300003, None).defects
+    assert {"pore", "scratch"} <= {d.kind for d in off}
     assert [(d.kind, round(d.x_px, 3)) for d in on] != [(d.kind, round(d.x_px, 3)) for d in off]
     res = runner.invoke(app, ["bench", "defects", "--frames", "1", "--pores-on-scratches", "1.5", "--json"])
     assert res.exit_code != 0

@@ -435,6 +435,7 @@ def _find(img: np.ndarray, mm_per_px: float, holes: list, wall, zone: np.ndarray
     # rim's groove ring changed its chips: bench seed 80053)
     claimed_regions = np.zeros(img.shape, bool)
     pore_regions = np.zeros(img.shape, np.int32)  # the pores' regions alone, each its own label
+    blur = blur_hint if blur_hint is not None else BLUR_PRIOR_PX[0]  # where one blur must be had
     pore_sizes = [0]  # each label's px (label 0: none)
     rest_of: dict[int, tuple] = {}  # a defect measured from a seed's rest: (it, the seed's defects)
     candidates = find_candidates(wall, cfg)
@@ -535,9 +536,8 @@ def _find(img: np.ndarray, mm_per_px: float, holes: list, wall, zone: np.ndarray
             # (its cover: its region may have grown over a mark on its line), another mark
             # its region and its blurred skirt (a seed reaches past a pore's region, and
             # its skirt read as two more pores)
-            skirt = blur_hint if blur_hint is not None else BLUR_PRIOR_PX[0]
             for ex in measured:
-                own = ex.cover if ex.cover is not None else grow_by_skirt(ex.region.astype(np.uint8), skirt) > 0
+                own = ex.cover if ex.cover is not None else grow_by_skirt(ex.region.astype(np.uint8), blur) > 0
                 _or_over(prior, box, own, ex.box or box)
             rests = _seed_rest(seed, prior, [ex.cover for ex in measured if ex.cover is not None], mm_per_px, cfg)
             # after pores alone, a scratch through one (measured as it) is what may be left;
@@ -580,17 +580,16 @@ def _find(img: np.ndarray, mm_per_px: float, holes: list, wall, zone: np.ndarray
                     queue.append(([i], group_claim))
     examined = drop_scratch_pieces(examined)
     examined = track_scratches(img, level_full, examined, cfg, wall.angles_deg, wall.residual)
-    examined = join_scratch_pieces(img, level_full, examined, cfg)
+    examined = join_scratch_pieces(img, level_full, examined, cfg, pores=pore_regions > 0)
     before = {id(ex) for ex in examined}
     examined = _drop_hatch_like(examined, wall, claimed_regions, mm_per_px, cfg)
     examined = _drop_crossings(examined, img, level_full, zone, wall.angles_deg,
-                               blur_hint if blur_hint is not None else BLUR_PRIOR_PX[0], mm_per_px, cfg)
+                               blur, mm_per_px, cfg)
     examined = _drop_rests_of_dropped(examined, before, rest_of)
     found: list[Defect] = [ex.defect if ex.line is None else replace(ex.defect, line_px=line_points(ex.line))
                            for ex in examined if ex.defect is not None]
     others = [hole_zone(img.shape, [h for j, h in enumerate(holes) if j != i], reach_px) for i in range(len(holes))]
-    blur_rim = blur_hint if blur_hint is not None else BLUR_PRIOR_PX[0]
-    marks = marks_mask(img.shape, found, blur_rim) if holes else None
+    marks = marks_mask(img.shape, found, blur) if holes else None
     grown, labels = None, None
     if holes and claimed_regions.any():
         # a mark that reaches a rim's band, with its blurred skirt (2.5 blur + 1 px): a
@@ -598,7 +597,7 @@ def _find(img: np.ndarray, mm_per_px: float, holes: list, wall, zone: np.ndarray
         # 0.07 mm "chip" next to it (wide bench seed 82083). Only those: a pore 30 px out
         # whose skirt reached the ring that calibrates the wall cut a true chip between it
         # and the rim in two (hatch 22 deg, seed 89000)
-        grown = grow_by_skirt(claimed_regions.astype(np.uint8), blur_rim)
+        grown = grow_by_skirt(claimed_regions.astype(np.uint8), blur)
         labels = cv2.connectedComponents(grown)[1]
     for i, hole in enumerate(holes):
         own = hole_zone(img.shape, [hole], reach_px)

@@ -507,18 +507,11 @@ def _dense(line: np.ndarray, step: float = 2.0) -> np.ndarray:
 
 
 def join_scratch_pieces(img: np.ndarray, level: np.ndarray, examined: list["ExaminedCandidate"],
-                        cfg: DefectConfig) -> list["ExaminedCandidate"]:
+                        cfg: DefectConfig, pores: np.ndarray | None = None) -> list["ExaminedCandidate"]:
     """Scratches of one frame that are pieces of one furrow (``_scratch_gap``) as one:
     its centre line the pieces' and the gap's path, its length theirs along it, its
     place that line's middle, its width the pieces' length-weighted mean. A gap may run
-    through a pore (``_scratch_gap``)."""
-    pores = None
-    for ex in examined:
-        if ex.defect is not None and ex.defect.kind == "pore" and ex.box is not None:
-            if pores is None:
-                pores = np.zeros(img.shape, bool)
-            b = ex.box
-            pores[b[1]:b[3], b[0]:b[2]] |= ex.region
+    through a pore (``pores``: the frame's pores' regions, ``_scratch_gap``)."""
     while True:
         items = [ex for ex in examined if ex.defect is not None and ex.defect.kind == "scratch"
                  and ex.line is not None and len(ex.line) >= 2]
