@@ -363,6 +363,11 @@ class DefectConfig:
     #: scratches 70 -> 79 of 94, no false mark either way (docs/surface.md)
     rest_min_area_mm2: float = 0.005
     rest_max_depth: int = 2
+    #: a seed measured whole as one pore is read again as a scratch through a pore when a
+    #: thin mark's arms lie on one line through its blob and reach together at least
+    #: ``through_min_reach_mm`` beyond it (``wall.line_through_blob``): the scratch is kept
+    #: when it reads longer than the pore did, and the seed's rest then gives the pore
+    through_min_reach_mm: float = 0.1
     #: the stretches' length along the lines and the width of the core across them that
     #: is integrated, from its first row to its last (mm; at the station's 0.010 mm/px, 20
     #: px and +/- 2 px: three half-res rows), the flanks beside the core its baseline

@@ -7,7 +7,7 @@ Part of ``station.vision.defects`` (its docstring tells the method).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 import warnings
 
 import cv2
@@ -19,7 +19,7 @@ from station.vision.defects.common import (
     is_along_hatch, circ_diff_deg, confidence_of, gauss_newton, mad_sigma, near_hatch, weighted_pca,
 )
 from station.vision.defects.wall import line_band, local_patch, Patch
-from station.vision.defects.rims import darkness_reader
+from station.vision.defects.rims import darkness_reader, grow_by_skirt
 from station.vision.defects.scratches import BLUR_PRIOR_PX, measure_scratch
 from station.vision.defects.pores import measure_pore
 
@@ -86,7 +86,8 @@ class ExaminedCandidate:
 def examine_candidate(img: np.ndarray, box, seed: np.ndarray, zone: np.ndarray, angles_deg, wall_level: np.ndarray,
                       cfg: DefectConfig, blur_hint: float | None, max_width_px: float, excl: np.ndarray | None = None,
                       confine: tuple[float, float, float, float] | None = None,
-                      others: np.ndarray | None = None, keep_out: np.ndarray | None = None) -> ExaminedCandidate:
+                      others: np.ndarray | None = None, keep_out: np.ndarray | None = None,
+                      hide: np.ndarray | None = None) -> ExaminedCandidate:
     """One candidate at full resolution: the local wall model, its region, its kind,
     its measurement and the tests it must pass.
 
@@ -105,7 +106,9 @@ def examine_candidate(img: np.ndarray, box, seed: np.ndarray, zone: np.ndarray, 
     ``confine``: a line the region keeps to (one furrow of several, ``split_furrows``);
     ``others``: what the defects measured so far cover over the frame, which the wall
     model leaves out in every patch; ``keep_out``: where the region may not grow (frame
-    px: what another mark of the same seed covers, ``frame._seed_rest``)."""
+    px: what another mark of the same seed covers, ``frame._seed_rest``); ``hide``: where the
+    mark is not read at all (frame px: a pore a scratch runs through, whose darkness is
+    no scratch's; the region keeps off it and a scratch's profiles pass it by)."""
     hh, ww = img.shape
 
     def beside(b) -> np.ndarray:
@@ -116,7 +119,8 @@ def examine_candidate(img: np.ndarray, box, seed: np.ndarray, zone: np.ndarray, 
     box0 = tuple(box)
     for attempt in range(3):
         again, m, kind = _examine_once(img, box, seed, excl, zone, angles_deg, wall_level, cfg, blur_hint,
-                                       max_width_px, confine, line_out=attempt > 0, keep_out=keep_out)
+                                       max_width_px, confine, line_out=attempt > 0, keep_out=keep_out,
+                                       hide=hide)
         if ex is not None and ex.defect is not None and again.defect is None and not (
                 box0[0] == 0 or box0[1] == 0 or box0[2] == ww or box0[3] == hh):
             # the grown patch lost it (bench frames: short scratches of 0.14-0.17 mm, taken for
@@ -156,7 +160,7 @@ def examine_candidate(img: np.ndarray, box, seed: np.ndarray, zone: np.ndarray, 
 def _examine_once(img: np.ndarray, box, seed: np.ndarray, excl: np.ndarray, zone: np.ndarray, angles_deg,
                   wall_level: np.ndarray, cfg: DefectConfig, blur_hint: float | None, max_width_px: float,
                   confine: tuple[float, float, float, float] | None = None, line_out: bool = False,
-                  keep_out: np.ndarray | None = None):
+                  keep_out: np.ndarray | None = None, hide: np.ndarray | None = None):
     """``examine_candidate`` in one patch: (the examined candidate, its measurement, its kind).
     ``excl``: what the local wall model leaves out (the seed, or more); ``confine``: the
     line the region keeps to (``examine_candidate``); ``line_out``: ``excl`` holds the mark's line
@@ -167,6 +171,13 @@ def _examine_once(img: np.ndarray, box, seed: np.ndarray, excl: np.ndarray, zone
     if patch is None:
         return ExaminedCandidate(None, empty, tuple(box)), None, None
     rs = cv2.GaussianBlur(patch.residual, (0, 0), 1.0)
+    hidden = None
+    if hide is not None:
+        hidden = hide[y0:y1, x0:x1]
+        if hidden.any():
+            patch = replace(patch, residual=np.where(hidden, np.nan, patch.residual).astype(patch.residual.dtype))
+        else:
+            hidden = None
     use = ~patch.excluded
     noise_s = max(mad_sigma(rs[use]), NOISE_FLOOR)
     peak = float(rs[seed].max()) if seed.any() else 0.0
@@ -177,6 +188,8 @@ def _examine_once(img: np.ndarray, box, seed: np.ndarray, excl: np.ndarray, zone
         grow &= line_band(grow.shape, (x0, y0), confine, cfg.furrow_half_band_px)
     if keep_out is not None:
         grow &= ~keep_out[y0:y1, x0:x1]
+    if hidden is not None:
+        grow &= ~hidden
     n_lab, labels = cv2.connectedComponents(grow.astype(np.uint8), connectivity=8)
     hit = np.unique(labels[seed & grow])
     hit = hit[hit > 0]
@@ -186,6 +199,8 @@ def _examine_once(img: np.ndarray, box, seed: np.ndarray, excl: np.ndarray, zone
         # a faint scratch found by the line response may leave no pixel above the growth
         # threshold at full resolution: the seed's darker half is its region
         region = seed & (rs > 0) & ~zone[y0:y1, x0:x1]
+        if hidden is not None:
+            region &= ~hidden
         if region.sum() < 8:
             return ExaminedCandidate(None, empty, tuple(box)), None, None
     def at_border_of(reg: np.ndarray) -> bool:
@@ -217,12 +232,16 @@ def _examine_once(img: np.ndarray, box, seed: np.ndarray, excl: np.ndarray, zone
             m_line = (measure_scratch(patch, region, blur_hint, angles_deg, cfg.groove_alignment_deg)
                       if peak >= cfg.along_hatch_remeasure_k * noise_s else None)
             if m_line is None or is_along_hatch(m_line["angle"], m_line["length"], angles_deg, cfg):
+                if hidden is not None:
+                    return ExaminedCandidate(None, region, tuple(box)), None, None
                 return _core_pore(patch, rs, seed, region, zone[y0:y1, x0:x1], peak, box, at_border_of(region),
                                   angles_deg, cfg, max_width_px, blur_hint)
 
     def as_pore(reg: np.ndarray, allow_scratch: bool = True):
         # a pore is one cavity: of a region in parts, the part round the peak when it
         # passes as a pore alone (``_peak_part``); else the whole region, as it stood
+        if hidden is not None:
+            return reg, None  # only a scratch is read past what is hidden
         part, beside = _peak_part(reg, rs, seed)
         if beside is not None:
             mp = measure_pore(patch, part, cfg, blur_hint=blur_hint, beside=beside)
@@ -244,7 +263,9 @@ def _examine_once(img: np.ndarray, box, seed: np.ndarray, excl: np.ndarray, zone
         kind = "pore"
     at_border = at_border_of(region)
     if kind == "scratch" and m is not None:
-        m["along_share"] = _along_share(rs, region, m["angle"], angles_deg)
+        m["along_share"] = _along_share(rs, region, m["angle"], angles_deg,
+                                        beside=None if hidden is None else grow_by_skirt(
+                                            hidden.astype(np.uint8), m["blur"]) > 0)
         m["along_hatch"] = is_along_hatch(m["angle"], m["length"], angles_deg, cfg)
         if near_hatch(m["angle"], angles_deg, cfg) is not None:
             # near the hatch: along it, a scratch if it ends in cuts (``_accept``); one cut end
@@ -264,7 +285,7 @@ def _examine_once(img: np.ndarray, box, seed: np.ndarray, excl: np.ndarray, zone
                 res_img = np.where(patch.zone, np.nan, 1.0 - patch.residual).astype(np.float32)
                 m["square_end"] = _square_end(res_img, np.ones_like(res_img), 0, 0, m, cfg, angles_deg)[0]
     defect = _accept(m, kind, box, at_border, angles_deg, cfg, max_width_px, blur_hint)
-    if defect is None:
+    if defect is None and hidden is None:
         core = _core_pore(patch, rs, seed, region, zone[y0:y1, x0:x1], peak, box, at_border, angles_deg, cfg,
                           max_width_px, blur_hint)
         if core[0].defect is not None:
@@ -513,20 +534,23 @@ def _square_end(img: np.ndarray, level: np.ndarray, x0: int, y0: int, m: dict,
 
 
 def _along_share(rs: np.ndarray, region: np.ndarray, angle_deg: float, angles_deg, sigma_px: float = 2.0,
-                 grow_px: int = 3) -> float:
+                 grow_px: int = 3, beside: np.ndarray | None = None) -> float:
     """The share of the oriented gradient energy over ``region`` (grown by ``grow_px``, to
     take in the mark's flanks) whose local line direction is that of the scratch
     (``angle_deg``): nearer it than any groove direction (``angles_deg``) and within 10
     deg.  The local direction is the structure tensor's (the residual's gradient products
     over a Gaussian of ``sigma_px``), its weight the tensor's anisotropy (the flanks of a
     line carry it; flat noise little).  One straight furrow: ~0.9; deep grooves that
-    cross, whose residue is a V or an X along the hatch: ~0.1-0.25."""
+    cross, whose residue is a V or an X along the hatch: ~0.1-0.25. ``beside``: where
+    another mark's edges lie (a pore the scratch runs through, with its skirt), not read."""
     gx = cv2.Sobel(rs, cv2.CV_32F, 1, 0, ksize=3)
     gy = cv2.Sobel(rs, cv2.CV_32F, 0, 1, ksize=3)
     jxx = cv2.GaussianBlur(gx * gx, (0, 0), sigma_px)
     jyy = cv2.GaussianBlur(gy * gy, (0, 0), sigma_px)
     jxy = cv2.GaussianBlur(gx * gy, (0, 0), sigma_px)
     area = cv2.dilate(region.astype(np.uint8), np.ones((2 * grow_px + 1,) * 2, np.uint8)).astype(bool)
+    if beside is not None:
+        area &= ~beside
     dxy, dd = 2.0 * jxy[area], (jxx - jyy)[area]
     weight = np.sqrt(dd * dd + dxy * dxy)
     total = float(weight.sum())
