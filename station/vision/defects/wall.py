@@ -482,14 +482,16 @@ def one_furrow(seed: np.ndarray, band_px: float = 3.0, min_len_px: float = 40.0,
 
 def line_through_blob(seed: np.ndarray, band_px: float = 3.0, min_arm_px: float = 20.0, min_share: float = 0.75
                       ) -> tuple[tuple[float, float, float, float], np.ndarray] | None:
-    """The line of a thin mark that runs through a blob of a candidate's seed (a pore on a
+    """The line of a thin mark that runs through blobs of a candidate's seed (pores on a
     scratch's line: one connected seed, which measured whole reads as one elongated pore
-    and loses the scratch), as ``one_furrow``'s lines (box px), and the blob (bool over the
-    seed's box); None when the seed is no such pair. The blob is what an opening by a disc half its inscribed diameter keeps;
-    the arms are the seed beyond it. Their line is the largest arm's axis, and the arms
-    on it (``min_share`` of the half-res pixels within ``band_px`` of it, bent by 2.5 % of
-    their length) must pass through the blob and reach at least ``min_arm_px`` (full px)
-    beyond it, no wider than half the blob."""
+    and loses the scratch), as ``one_furrow``'s lines (box px), and the blobs on it (bool
+    over the seed's box); None when the seed is no such mark. The blobs are what an
+    opening by a disc half the seed's largest inscribed diameter keeps; the arms are the
+    seed beyond them. Their line is the largest arm's axis, and the arms on it
+    (``min_share`` of the half-res pixels within ``band_px`` of it, bent by 2.5 % of their
+    length) must pass through a blob (its centre within its inscribed radius of the line),
+    be no wider than half the widest such blob, and reach at least ``min_arm_px`` (full
+    px) beyond them."""
     half = seed[::2, ::2].astype(np.uint8)
     if not half.any():
         return None
@@ -498,19 +500,18 @@ def line_through_blob(seed: np.ndarray, band_px: float = 3.0, min_arm_px: float 
     if r < 3.0:
         return None  # no blob wider than a scratch's arm
     k = 2 * int(np.ceil(r / 2.0)) + 1
-    blob = cv2.morphologyEx(half, cv2.MORPH_OPEN, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k)))
-    n, lab, stats, cents = cv2.connectedComponentsWithStats(blob, connectivity=8)
+    opened = cv2.morphologyEx(half, cv2.MORPH_OPEN, cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (k, k)))
+    n, lab, stats, cents = cv2.connectedComponentsWithStats(opened, connectivity=8)
     if n < 2:
         return None
-    j = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
-    core = (lab == j).astype(np.uint8)
-    arms = half.astype(bool) & ~cv2.dilate(core, np.ones((3, 3), np.uint8), iterations=2).astype(bool)
+    arms = half.astype(bool) & ~cv2.dilate((lab > 0).astype(np.uint8), np.ones((3, 3), np.uint8),
+                                           iterations=2).astype(bool)
     yy, xx = np.nonzero(arms)
     if yy.size < min_arm_px / 2.0:
         return None
     pts = np.column_stack([xx, yy]).astype(np.float64)
     # the line: the axis of the largest arm, then of the arms' points within reach of it
-    # (the blob's ragged fringe leaves bits beside it that are no arm), three times
+    # (a blob's ragged fringe leaves bits beside it that are no arm), three times
     na, alab = cv2.connectedComponents(arms.astype(np.uint8), connectivity=8)
     big = np.bincount(alab[yy, xx], minlength=na)[1:]
     main = alab[yy, xx] == 1 + int(np.argmax(big))
@@ -518,7 +519,7 @@ def line_through_blob(seed: np.ndarray, band_px: float = 3.0, min_arm_px: float 
         return None
     centre, t_, bend, _s = _principal_line(pts[main], band_px)
     for reach in (0.5 * r, 0.0, 0.0):
-        # first loosely: a short arm's own axis may be 10-15 deg off, and the arm on the
+        # first loosely: a short arm's own axis may be 10-15 deg off, and the arm on a
         # blob's other side then lies beside it
         near = np.abs((pts - centre) @ np.array([-t_[1], t_[0]])) <= band_px + bend + reach
         if near.sum() < 3:
@@ -526,28 +527,31 @@ def line_through_blob(seed: np.ndarray, band_px: float = 3.0, min_arm_px: float 
         centre, t_, bend, share = _principal_line(pts[near], band_px)
     if share < min_share:
         return None
-    pts = pts[np.abs((pts - centre) @ np.array([-t_[1], t_[0]])) <= band_px + bend]
+    normal = np.array([-t_[1], t_[0]])
+    pts = pts[np.abs((pts - centre) @ normal) <= band_px + bend]
     if len(pts) < min_arm_px / 2.0:
         return None
-    # the arms' width across their axis (half-res px): thin beside the blob
-    across = np.abs((pts - centre) @ np.array([-t_[1], t_[0]]))
-    if 2.0 * float(np.percentile(across, 90)) > r:
+    # the blobs the line runs through: each centre within its inscribed radius of it
+    on = [(float(dt[lab == j].max()), j) for j in range(1, n)
+          if abs((cents[j] - centre) @ normal) <= float(dt[lab == j].max())]
+    if not on:
         return None
-    # through the blob: its centre within its inscribed radius of the arms' axis
-    cx, cy = cents[j]
-    if abs((cx - centre[0]) * -t_[1] + (cy - centre[1]) * t_[0]) > r:
+    r_on, j = max(on)
+    # the arms' width across their axis (half-res px): thin beside the blobs
+    if 2.0 * float(np.percentile(np.abs((pts - centre) @ normal), 90)) > r_on:
         return None
-    # the arms' reach beyond the blob along the line (full px)
-    along = (pts - np.array([cx, cy])) @ t_
+    core = np.isin(lab, [q for _r, q in on])
+    # the arms' reach beyond the blobs along the line (full px)
+    along = (pts - centre) @ t_
     cyy, cxx = np.nonzero(core)
-    blob_along = (np.column_stack([cxx, cyy]) - np.array([cx, cy])) @ t_
+    blob_along = (np.column_stack([cxx, cyy]) - centre) @ t_
     reach = max(float(along.max()) - float(blob_along.max()), 0.0) + \
         max(float(blob_along.min()) - float(along.min()), 0.0)
     if 2.0 * reach < min_arm_px:
         return None
-    # the line's point: the blob's centre projected onto the arms' axis
-    p = centre + ((np.array([cx, cy]) - centre) @ t_) * t_
-    full = np.repeat(np.repeat(core.astype(bool), 2, axis=0), 2, axis=1)[:seed.shape[0], :seed.shape[1]]
+    # the line's point: the widest blob's centre projected onto the arms' axis
+    p = centre + ((cents[j] - centre) @ t_) * t_
+    full = np.repeat(np.repeat(core, 2, axis=0), 2, axis=1)[:seed.shape[0], :seed.shape[1]]
     return (2.0 * p[0] + 0.5, 2.0 * p[1] + 0.5, float(np.arctan2(t_[1], t_[0])), 2.0 * bend), full & seed
 
 
