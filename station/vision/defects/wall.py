@@ -511,13 +511,24 @@ def line_through_blob(seed: np.ndarray, band_px: float = 3.0, min_arm_px: float 
         return None
     pts = np.column_stack([xx, yy]).astype(np.float64)
     # the line: the axis of the largest arm, then of the arms' points within reach of it
-    # (a blob's ragged fringe leaves bits beside it that are no arm), three times
+    # (a blob's ragged fringe leaves bits beside it that are no arm), three times ...
     na, alab = cv2.connectedComponents(arms.astype(np.uint8), connectivity=8)
     big = np.bincount(alab[yy, xx], minlength=na)[1:]
-    main = alab[yy, xx] == 1 + int(np.argmax(big))
-    if main.sum() < 3:
+    order = 1 + np.argsort(big)[::-1][:4]
+    if big[order[0] - 1] < 3:
         return None
-    centre, t_, bend, _s = _principal_line(pts[main], band_px)
+    # ... or, of short arms (a few px: a 4 x 3 px arm has no axis of its own), the line
+    # through two of them on the blob's opposite sides: whichever holds most of the arms
+    best = None
+    for group in [(order[0],)] + [(a, b) for i, a in enumerate(order) for b in order[i + 1:]]:
+        sel = np.isin(alab[yy, xx], group)
+        if sel.sum() < 3:
+            continue
+        c_, t0, b_, _s = _principal_line(pts[sel], band_px)
+        held = int(np.sum(np.abs((pts - c_) @ np.array([-t0[1], t0[0]])) <= band_px + b_))
+        if best is None or held > best[0]:
+            best = (held, c_, t0, b_)
+    _held, centre, t_, bend = best
     for reach in (0.5 * r, 0.0, 0.0):
         # first loosely: a short arm's own axis may be 10-15 deg off, and the arm on a
         # blob's other side then lies beside it
