@@ -1133,16 +1133,19 @@ def test_a_pore_on_a_scratchs_line_is_found_and_the_scratch_kept_whole(scratch, 
             assert _within(d.length_mm, t.length_mm), (t.kind, t.length_mm, report)
 
 
-@pytest.mark.parametrize("seed", [4300001, 4300003, 4300019])
+@pytest.mark.parametrize("seed", [4300001, 4300003, 4300019, 4300044, 4300056])
 def test_a_scratch_through_a_pore_read_as_one_mark_is_read_apart_from_it(seed):
     """Bench frames with each pore drawn on a scratch's line (``pores_on_scratches=1``)
     where the seed of the two, read whole, was one mark: a 0.39 mm pore on a 0.97 mm
     scratch read as a 0.71 x 0.47 mm pore (4300003), and a 0.46 mm pore on a 0.85 mm
     scratch 0.055 mm wide as a 0.56 mm one (4300019), the scratch lost each time; a 1.68 mm
-    scratch through two pores lost (4300001). The scratch is read on the line of its arms
-    with the pore's blob hidden (``wall.line_through_blob``), the pore from what it leaves:
-    every defect over the limit is found as its kind, and the pores' and scratches'
-    lengths are within the tolerance."""
+    scratch through two pores lost (4300001); a 0.58 mm scratch whose arms beyond a 0.33 mm
+    pore are 12 px each, too short for an axis of their own (4300044); a thin 1.91 mm
+    scratch through two 0.41 mm pores, its seed no more than the stretch between them
+    (4300056: read 1.41 mm, one pore lost). The scratch is read on the line of its arms
+    with the pores' blobs hidden (``wall.line_through_blob``), the pores from what it
+    leaves: every defect over the limit is found as its kind, and the pores' and
+    scratches' lengths are within the tolerance."""
     f = random_defect_frame(seed, None, pores_on_scratches=1.0)
     found = detect_defects(f.image, MM_PER_PX)
     pairs, false = match(f.defects, found, MM_PER_PX)

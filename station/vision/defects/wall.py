@@ -552,13 +552,18 @@ def line_through_blob(seed: np.ndarray, band_px: float = 3.0, min_arm_px: float 
     if 2.0 * float(np.percentile(np.abs((pts - centre) @ normal), 90)) > r_on:
         return None
     core = np.isin(lab, [q for _r, q in on])
-    # the arms' reach beyond the blobs along the line (full px)
-    along = (pts - centre) @ t_
+    # the arms' length along the line outside the blobs (full px): beyond them, or between
+    # two of them (a scratch whose ends lie under two pores)
     cyy, cxx = np.nonzero(core)
-    blob_along = (np.column_stack([cxx, cyy]) - centre) @ t_
-    reach = max(float(along.max()) - float(blob_along.max()), 0.0) + \
-        max(float(blob_along.min()) - float(along.min()), 0.0)
-    if 2.0 * reach < min_arm_px:
+    blob_bins = np.floor((np.column_stack([cxx, cyy]) - centre) @ t_).astype(int)
+    arm_bins = np.floor((pts - centre) @ t_).astype(int)
+    lo = min(int(blob_bins.min()), int(arm_bins.min()))
+    covered = np.zeros(max(int(blob_bins.max()), int(arm_bins.max())) - lo + 1, bool)
+    for jb in [q for _r, q in on]:
+        yb, xb = np.nonzero(lab == jb)
+        ab = (np.column_stack([xb, yb]) - centre) @ t_
+        covered[int(np.floor(ab.min())) - lo:int(np.floor(ab.max())) - lo + 1] = True
+    if 2.0 * np.count_nonzero(~covered[np.unique(arm_bins - lo)]) < min_arm_px:
         return None
     # the line's point: the widest blob's centre projected onto the arms' axis
     p = centre + ((cents[j] - centre) @ t_) * t_
