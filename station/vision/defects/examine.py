@@ -212,6 +212,12 @@ def _examine_once(img: np.ndarray, box, seed: np.ndarray, excl: np.ndarray, zone
     mx_, my_, ang, ext_l, ext_w = _extents(xx, yy, wts)
     ca, sa = np.cos(ang), np.sin(ang)
     elongated = ext_l >= cfg.scratch_elongation * ext_w and ext_l >= 12.0
+    if hidden is not None and confine is not None:
+        # a scratch read past a pore on a line its arms gave (``wall.line_through_blob``): it
+        # is measured as one, and its measured length and width judge it (``_accept``); the
+        # region's extents across a short arm in a wide band held the grooves' residue too
+        # (a 22 px arm beside a 22 px pore read 45 x 24 px)
+        elongated = True
     if elongated and is_along_hatch(float(np.rad2deg(ang) % 180.0), ext_l, angles_deg, cfg):
         # along the hatch: most such marks are the grooves' residue, and measuring each as a
         # scratch cost the twin's frames 1.26x their time; the ends' test on the region's
