@@ -1133,8 +1133,10 @@ def test_a_pore_on_a_scratchs_line_is_found_and_the_scratch_kept_whole(scratch, 
             assert _within(d.length_mm, t.length_mm), (t.kind, t.length_mm, report)
 
 
-@pytest.mark.parametrize("seed", [4300001, 4300003, 4300019, 4300044, 4300056])
-def test_a_scratch_through_a_pore_read_as_one_mark_is_read_apart_from_it(seed):
+@pytest.mark.parametrize("seed, envelope", [(4300001, "station"), (4300003, "station"), (4300019, "station"),
+                                            (4300044, "station"), (4300056, "station"), (4410002, "wide"),
+                                            (4410069, "wide")])
+def test_a_scratch_through_a_pore_read_as_one_mark_is_read_apart_from_it(seed, envelope):
     """Bench frames with each pore drawn on a scratch's line (``pores_on_scratches=1``)
     where the seed of the two, read whole, was one mark: a 0.39 mm pore on a 0.97 mm
     scratch read as a 0.71 x 0.47 mm pore (4300003), and a 0.46 mm pore on a 0.85 mm
@@ -1142,11 +1144,14 @@ def test_a_scratch_through_a_pore_read_as_one_mark_is_read_apart_from_it(seed):
     scratch through two pores lost (4300001); a 0.58 mm scratch whose arms beyond a 0.33 mm
     pore are 12 px each, too short for an axis of their own (4300044); a thin 1.91 mm
     scratch through two 0.41 mm pores, its seed no more than the stretch between them
-    (4300056: read 1.41 mm, one pore lost). The scratch is read on the line of its arms
-    with the pores' blobs hidden (``wall.line_through_blob``), the pores from what it
-    leaves: every defect over the limit is found as its kind, and the pores' and
+    (4300056: read 1.41 mm, one pore lost); on the wide envelope's walls, a 0.44 mm scratch
+    whose one 22 px arm beside a 0.23 mm pore, in a band of deep grooves' residue, read as
+    no line (4410002), and a 0.55 mm one whose arm below a 0.34 mm pore is as wide as it
+    is long, its own axis across the scratch (4410069). The scratch is read on the line of
+    its arms with the pores' blobs hidden (``wall.line_through_blob``), the pores from what
+    it leaves: every defect over the limit is found as its kind, and the pores' and
     scratches' lengths are within the tolerance."""
-    f = random_defect_frame(seed, None, pores_on_scratches=1.0)
+    f = random_defect_frame(seed, None, envelope=envelope, pores_on_scratches=1.0)
     found = detect_defects(f.image, MM_PER_PX)
     pairs, false = match(f.defects, found, MM_PER_PX)
     report = [(e.kind, round(e.x_px), round(e.y_px), round(e.length_mm, 3)) for e in found]

@@ -363,10 +363,13 @@ class DefectConfig:
     #: scratches 70 -> 79 of 94, no false mark either way (docs/surface.md)
     rest_min_area_mm2: float = 0.005
     rest_max_depth: int = 2
-    #: a seed measured whole as one pore is read again as a scratch through a pore when a
-    #: thin mark's arms lie on one line through its blob and reach together at least
-    #: ``through_min_reach_mm`` beyond it (``wall.line_through_blob``): the scratch is kept
-    #: when it reads longer than the pore did, and the seed's rest then gives the pore
+    #: a seed measured whole as one mark is read again as a scratch through pores when a
+    #: thin mark's arms lie on one line through its blobs and reach together at least
+    #: ``through_min_reach_mm`` beyond or between them (``wall.line_through_blob``): the
+    #: scratch, measured with the blobs hidden, is kept when the seed read as a pore or as
+    #: a shorter scratch, and the seed's rest then gives the pores. Session 80, pores drawn
+    #: on the scratches' lines (station envelope, 100 frames, ``--pores-on-scratches 1``):
+    #: scratches over the limit found 79 -> 91 of 94, pores 66 -> 69 of 69 (docs/surface.md)
     through_min_reach_mm: float = 0.1
     #: the stretches' length along the lines and the width of the core across them that
     #: is integrated, from its first row to its last (mm; at the station's 0.010 mm/px, 20
