@@ -487,11 +487,13 @@ def line_through_blob(seed: np.ndarray, band_px: float = 3.0, min_arm_px: float 
     and loses the scratch), as ``one_furrow``'s lines (box px), and the blobs on it (bool
     over the seed's box); None when the seed is no such mark. The blobs are what an
     opening by a disc half the seed's largest inscribed diameter keeps; the arms are the
-    seed beyond them. Their line is the largest arm's axis, and the arms on it
-    (``min_share`` of the half-res pixels within ``band_px`` of it, bent by 2.5 % of their
-    length) must pass through a blob (its centre within its inscribed radius of the line),
-    be no wider than half the widest such blob, and reach at least ``min_arm_px`` (full
-    px) beyond them."""
+    seed beyond them. The lines tried: the largest arm's axis, the axis of two arms, and
+    the line from a blob's centre through an arm. A line passes (``_through_blobs``) when
+    the arms on it (``min_share`` of the half-res pixels within ``band_px`` of it, bent by
+    2.5 % of their length) pass through a blob (its centre within its inscribed radius of
+    the line), are no wider than half the widest such blob, and hold at least
+    ``min_arm_px`` (full px) of the line beyond the blobs or between them; of those that
+    pass, the one holding most of the arms is the scratch's."""
     half = seed[::2, ::2].astype(np.uint8)
     if not half.any():
         return None
