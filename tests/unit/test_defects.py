@@ -1232,6 +1232,23 @@ def test_a_pore_or_one_bent_scratch_is_one_mark_and_an_x_is_two_furrows():
     assert {off(a, 0.0) < off(a, 57.5) for a in found} == {True, False}, found
 
 
+def test_a_scratch_ending_under_a_pore_carries_the_pores_chord_in_its_length_uncertainty():
+    """Where a scratch read past a pore ends under it, no frame shows where: its extent
+    stops at the pore's near edge or runs on to its far edge with the pore's skirt (bench
+    frame 4300083: 0.574 mm for 0.513, the true end 0.03 mm inside the far edge, the fit's
+    u 0.03 mm). That end adds the pore's chord (its RMS from an edge, chord / sqrt 3) to
+    the length's uncertainty, and the error is within 2u; a scratch whose ends lie clear
+    of the pore on it keeps the fit's own (4300019: under 0.05 mm)."""
+    for seed, wide in ((4300083, True), (4300019, False)):
+        f = random_defect_frame(seed, None, pores_on_scratches=1.0)
+        found = detect_defects(f.image, MM_PER_PX)
+        pairs, _false = match(f.defects, found, MM_PER_PX)
+        ((t, d),) = [(t, d) for t, d in pairs if t.kind == "scratch"]
+        assert d is not None and d.kind == "scratch", found
+        assert abs(d.length_mm - t.length_mm) <= 2.0 * d.size_u_mm, (seed, d.length_mm, t.length_mm, d.size_u_mm)
+        assert (d.size_u_mm > 0.05) == wide, (seed, d.size_u_mm)
+
+
 def test_a_line_through_a_blob_is_found_only_where_thin_arms_cross_it():
     """``line_through_blob``: a disc with a thin line through it, off its middle and with
     arms of unequal length, gives the line (its direction within 2 deg, through the
