@@ -1236,7 +1236,7 @@ def test_a_scratch_ending_under_a_pore_carries_the_pores_chord_in_its_length_unc
     """Where a scratch read past a pore ends under it, no frame shows where: its extent
     stops at the pore's near edge or runs on to its far edge with the pore's skirt (bench
     frame 4300083: 0.574 mm for 0.513, the true end 0.03 mm inside the far edge, the fit's
-    u 0.03 mm). That end adds the pore's chord (its RMS from an edge, chord / sqrt 3) to
+    u 0.020 mm). That end adds the pore's chord (its RMS from an edge, chord / sqrt 3) to
     the length's uncertainty, and the error is within 2u; a scratch whose ends lie clear
     of the pore on it keeps the fit's own (4300019: under 0.05 mm)."""
     for seed, wide in ((4300083, True), (4300019, False)):

@@ -271,7 +271,8 @@ def _examine_once(img: np.ndarray, box, seed: np.ndarray, excl: np.ndarray, zone
     if kind == "scratch" and m is not None:
         m["along_share"] = _along_share(rs, region, m["angle"], angles_deg,
                                         beside=None if hidden is None else cv2.dilate(
-                                            hidden.astype(np.uint8), _disc(int(np.ceil(m["blur"])))) > 0)
+                                            hidden.astype(np.uint8), cv2.getStructuringElement(
+                                                cv2.MORPH_ELLIPSE, (2 * int(np.ceil(m["blur"])) + 1,) * 2)) > 0)
         m["along_hatch"] = is_along_hatch(m["angle"], m["length"], angles_deg, cfg)
         if near_hatch(m["angle"], angles_deg, cfg) is not None:
             # near the hatch: along it, a scratch if it ends in cuts (``_accept``); one cut end
@@ -537,10 +538,6 @@ def _square_end(img: np.ndarray, level: np.ndarray, x0: int, y0: int, m: dict,
     # both ends: one the frame cuts leaves a groove's piece at the border as square as a
     # scratch's (a fresh twin frame, 2080043); the scan's overlap sees such a scratch whole
     return len(steps) == 2 and any(square) and all(ends), any(square) and any(runs_on)
-
-
-def _disc(radius: int) -> np.ndarray:
-    return cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
 
 
 def _along_share(rs: np.ndarray, region: np.ndarray, angle_deg: float, angles_deg, sigma_px: float = 2.0,

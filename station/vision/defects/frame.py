@@ -416,8 +416,8 @@ def _drop_rests_of_dropped(examined: list[ExaminedCandidate], before: set[int],
     return [ex for ex in examined if id(ex) not in dropped]
 
 
-def _end_under_blob(ex: ExaminedCandidate, hide: np.ndarray, blur: float, factor: float) -> ExaminedCandidate:
-    """A scratch read past pores (``hide``: their blobs, frame px) whose end lies at one:
+def _end_under_blob(ex: ExaminedCandidate, blob: np.ndarray, box, blur: float, factor: float) -> ExaminedCandidate:
+    """A scratch read past pores (``blob``: their blobs over ``box``) whose end lies at one:
     where it ends under the pore no frame shows, and its extent stops at the pore's near
     edge or runs on to its far edge as the pore's blurred skirt carries its profile. Each
     such end adds the pore's chord along the line, read from an edge with the truth
@@ -426,17 +426,16 @@ def _end_under_blob(ex: ExaminedCandidate, hide: np.ndarray, blur: float, factor
     term is no fit's)."""
     if ex.line is None or len(ex.line) < 2:
         return ex
-    reach = grow_by_skirt(hide.astype(np.uint8), blur) > 0
-    n_lab, labels = cv2.connectedComponents(reach.astype(np.uint8), connectivity=8)
-    hh, ww = hide.shape
-    a, b = np.asarray(ex.line[0], float), np.asarray(ex.line[-1], float)
+    labels = cv2.connectedComponents(grow_by_skirt(blob.astype(np.uint8), blur), connectivity=8)[1]
+    hh, ww = blob.shape
+    a, b = (np.asarray(ex.line[k], float) - np.array([box[0], box[1]], float) for k in (0, -1))
     t = (b - a) / max(float(np.hypot(*(b - a))), 1e-9)
     var = 0.0
     for end in (a, b):
         x, y = int(round(end[0])), int(round(end[1]))
         if not (0 <= x < ww and 0 <= y < hh) or labels[y, x] == 0:
             continue
-        ys, xs = np.nonzero((labels == labels[y, x]) & hide)
+        ys, xs = np.nonzero((labels == labels[y, x]) & blob)
         if xs.size == 0:
             continue
         along = (np.column_stack([xs, ys]) - end) @ t
@@ -552,7 +551,7 @@ def _find(img: np.ndarray, mm_per_px: float, holes: list, wall, zone: np.ndarray
                                             excl=seed, confine=line, others=claimed, keep_out=keep_out, hide=hide)
                 if through.defect is not None and through.defect.kind == "scratch" and (
                         results[0].defect.kind == "pore" or through.defect.length_px > results[0].defect.length_px):
-                    results = [_end_under_blob(through, hide, blur, cfg.uncertainty_factor)]
+                    results = [_end_under_blob(through, blob, box, blur, cfg.uncertainty_factor)]
         prior = claimed[box[1]:box[3], box[0]:box[2]].copy() if depth < cfg.rest_max_depth else None
         measured = []  # this seed's defects kept
         for ex in results:
