@@ -217,8 +217,18 @@ def _drop_hatch_like(examined: list[ExaminedCandidate], wall, claimed: np.ndarra
     return [ex for ex in examined if id(ex) not in pieces and shares.get(id(ex), np.inf) >= bar]
 
 
+class CrossingReading(NamedTuple):
+    """What the groove families' lines through a mark explain of it (``_crossing_shares``):
+    each family's share of its darkness, and how closely its darkness follows the lines'
+    (their Pearson correlation over the mark's outline; 0 where the lines lay nothing
+    there)."""
+
+    shares: tuple[float, ...]
+    follows: float
+
+
 def _crossing_shares(dark: np.ndarray, d: Defect, angles_deg, blur: float, arm_px: float,
-                     blocked: np.ndarray | None = None) -> tuple[float, ...]:
+                     blocked: np.ndarray | None = None) -> CrossingReading:
     """How much of a mark's darkness each groove family's line through it explains: the
     family's profile across its lines, read beside the mark along the line (from 2 blur +
     2 px beyond its outline over ``arm_px``, the median along the line: the other family's
@@ -227,7 +237,15 @@ def _crossing_shares(dark: np.ndarray, d: Defect, angles_deg, blur: float, arm_p
     blur, over the mark's darkness summed there. ``dark``: the frame's relative darkness
     (level out, grooves in), NaN where nothing may be read (the holes); ``blocked``: where
     the arms may not read besides (other marks). A share is 0 where neither side has 80 %
-    of its samples."""
+    of its samples.
+
+    And how the mark's darkness follows the lines' laid through it, pixel by pixel over
+    its own outline (the blur's skirt beyond it shows a pore's grooves running on outside
+    it): a crossing's darkness is the lines' (it peaks where they cross and runs out
+    along their bands), while a pore takes the wall's place, grooves and all, and its
+    floor is even across them. A pale 0.43 mm pore on a crossing of two deep grooves
+    (wide frame 4510084) was explained 0.36 and 0.21 and dropped as their crossing; its
+    darkness follows the lines' at 0.20, the crossings read as pores at 0.70-0.98."""
     h, w = dark.shape
     th = np.deg2rad(d.angle_deg)
     half_l, half_w = d.length_px / 2.0, d.width_px / 2.0
@@ -241,9 +259,10 @@ def _crossing_shares(dark: np.ndarray, d: Defect, angles_deg, blur: float, arm_p
     own = dark[yy[inside].astype(np.int64), xx[inside].astype(np.int64)]
     total = float(np.nansum(np.clip(own, 0.0, None)))
     if total <= 0.0:
-        return tuple(0.0 for _ in angles_deg)
+        return CrossingReading(tuple(0.0 for _ in angles_deg), 0.0)
     arms = dark if blocked is None else np.where(blocked, np.float32(np.nan), dark)
     shares = []
+    laid = np.zeros(own.shape, np.float64)  # the lines' darkness over the outline
     for a in angles_deg:
         ar = np.deg2rad(a)
         t, n = np.array([np.cos(ar), np.sin(ar)]), np.array([-np.sin(ar), np.cos(ar)])
@@ -266,8 +285,17 @@ def _crossing_shares(dark: np.ndarray, d: Defect, angles_deg, blur: float, arm_p
             shares.append(0.0)
             continue
         across_px = (xx[inside] - d.x_px) * n[0] + (yy[inside] - d.y_px) * n[1]
-        shares.append(float(np.interp(across_px, c, best, left=0.0, right=0.0).sum()) / total)
-    return tuple(shares)
+        line = np.interp(across_px, c, best, left=0.0, right=0.0)
+        laid += line
+        shares.append(float(line.sum()) / total)
+    # over the mark's own outline: the blur's skirt beyond it shows a pore's grooves
+    # running on outside it
+    core = (du[inside] / max(half_l, 1.0)) ** 2 + (dv[inside] / max(half_w, 1.0)) ** 2 <= 1.0
+    seen = np.isfinite(own) & core
+    follows = 0.0
+    if seen.sum() >= 3 and float(np.std(laid[seen])) > 0.0 and float(np.std(own[seen])) > 0.0:
+        follows = float(np.corrcoef(own[seen], laid[seen])[0, 1])
+    return CrossingReading(tuple(shares), follows)
 
 
 def _drop_crossings(examined: list[ExaminedCandidate], img: np.ndarray, level_full: np.ndarray, zone: np.ndarray,
@@ -276,7 +304,8 @@ def _drop_crossings(examined: list[ExaminedCandidate], img: np.ndarray, level_fu
     ``cfg.crossing_min_length_mm`` long, that are two grooves' crossing
     (``_crossing_shares``: the two lines through the mark explain
     ``cfg.crossing_min_explained`` of its darkness, each family
-    ``cfg.crossing_min_family_share`` of it)."""
+    ``cfg.crossing_min_family_share`` of it, and its darkness follows theirs at
+    ``cfg.crossing_min_follows``)."""
     pores = [ex for ex in examined if ex.defect is not None and ex.defect.kind == "pore" and not ex.defect.partial
              and ex.defect.length_px * mm_per_px >= cfg.crossing_min_length_mm]
     if not pores or len(angles_deg) < 2:
@@ -306,9 +335,10 @@ def _drop_crossings(examined: list[ExaminedCandidate], img: np.ndarray, level_fu
             dark = 1.0 - img[y0:y1, x0:x1].astype(np.float32) / np.maximum(level_full[y0:y1, x0:x1], 1.0)
         dark = cv2.GaussianBlur(dark, (0, 0), 0.7, borderType=cv2.BORDER_REPLICATE)
         dark[zone[y0:y1, x0:x1]] = np.nan
-        shares = _crossing_shares(dark, replace(d, x_px=d.x_px - x0, y_px=d.y_px - y0), angles_deg, blur, arm_px,
-                                  blocked=others > 0)
-        if sum(shares) >= cfg.crossing_min_explained and min(shares) >= cfg.crossing_min_family_share:
+        reading = _crossing_shares(dark, replace(d, x_px=d.x_px - x0, y_px=d.y_px - y0), angles_deg, blur, arm_px,
+                                   blocked=others > 0)
+        if sum(reading.shares) >= cfg.crossing_min_explained \
+                and min(reading.shares) >= cfg.crossing_min_family_share and reading.follows >= cfg.crossing_min_follows:
             drop.add(id(ex))
     return [ex for ex in examined if id(ex) not in drop]
 
