@@ -354,9 +354,9 @@ class DefectConfig:
     #: darkness peaks where the lines cross and runs out along their bands, a pore's
     #: floor is even across them. A pale 0.43 mm pore on a crossing of two deep grooves
     #: (session 81, wide frame 4510084) was explained 0.36 and 0.21, over both bars, and
-    #: lost; its darkness follows the lines' at 0.20, the nine crossings above and a tenth
-    #: (5400019) at 0.70-0.98, drawn pores as pale as the lines on crossings of broad
-    #: lines at 0.44 at most.
+    #: lost; its darkness follows the lines' at 0.20, the seven crossings session 78
+    #: dropped on 3220000's and 3230000's sets and an eighth (5400019) at 0.70-0.98, drawn
+    #: pores as pale as the lines on crossings of broad lines at 0.44 at most.
     crossing_min_length_mm: float = 0.1
     crossing_arm_mm: float = 0.2
     crossing_min_explained: float = 0.5

@@ -245,7 +245,7 @@ def _crossing_shares(dark: np.ndarray, d: Defect, angles_deg, blur: float, arm_p
     along their bands), while a pore takes the wall's place, grooves and all, and its
     floor is even across them. A pale 0.43 mm pore on a crossing of two deep grooves
     (wide frame 4510084) was explained 0.36 and 0.21 and dropped as their crossing; its
-    darkness follows the lines' at 0.20, the crossings read as pores at 0.70-0.98."""
+    darkness follows the lines' at 0.20, eight crossings read as pores at 0.70-0.98."""
     h, w = dark.shape
     th = np.deg2rad(d.angle_deg)
     half_l, half_w = d.length_px / 2.0, d.width_px / 2.0
@@ -338,7 +338,8 @@ def _drop_crossings(examined: list[ExaminedCandidate], img: np.ndarray, level_fu
         reading = _crossing_shares(dark, replace(d, x_px=d.x_px - x0, y_px=d.y_px - y0), angles_deg, blur, arm_px,
                                    blocked=others > 0)
         if sum(reading.shares) >= cfg.crossing_min_explained \
-                and min(reading.shares) >= cfg.crossing_min_family_share and reading.follows >= cfg.crossing_min_follows:
+                and min(reading.shares) >= cfg.crossing_min_family_share \
+                and reading.follows >= cfg.crossing_min_follows:
             drop.add(id(ex))
     return [ex for ex in examined if id(ex) not in drop]
 
