@@ -657,9 +657,10 @@ def test_two_grooves_crossing_explain_their_crossings_darkness_and_a_pore_on_one
 def test_a_pale_pore_on_a_crossing_of_deep_grooves_does_not_follow_their_lines():
     """A pore takes the wall's place, grooves and all, and its floor is even: a pale pore
     (0.25 dark, 30 px across) on a crossing of two deep, broad grooves (0.25 dark, a
-    Gaussian of 4 px across) is explained by their lines over both of the crossing rule's bars, as the lines
-    lay 0.5 where they cross, but its darkness does not follow theirs, as a crossing's does
-    (above); it stays a pore (``_drop_crossings``: ``crossing_min_follows``)."""
+    Gaussian of 4 px across) is explained by their lines over both of the crossing rule's
+    bars, as the lines lay 0.5 where they cross, but its darkness does not follow theirs,
+    as a crossing's does (above); it stays a pore (``_drop_crossings``:
+    ``crossing_min_follows``)."""
     from station.vision.defects.frame import _crossing_shares
 
     cfg = DefectConfig()
