@@ -759,11 +759,16 @@ class Patch:
 
 
 def local_patch(img: np.ndarray, box: tuple[int, int, int, int], seed_mask: np.ndarray, zone: np.ndarray,
-                angles_deg, wall_level: np.ndarray) -> Patch | None:
+                angles_deg, wall_level: np.ndarray, level_sigma_px: float | None = None) -> Patch | None:
     """The wall model of a patch at full resolution: the frame's level (``wall_level``,
     full res) and a robust plane for what it leaves, and the grooves as local profiles,
     all fitted outside the candidate (``seed_mask``, bool over the box, dilated here)
-    and the holes' zone."""
+    and the holes' zone.
+
+    ``level_sigma_px``: the frame level's Gaussian (full-res px). Given, the level is
+    taken again over the patch with the candidate left out, and the higher of the two
+    stands: the frame's level leaves out only what it found clearly dark, and a large
+    pale mark that it did not find so pulled the level down under itself."""
     x0, y0, x1, y1 = box
     p = img[y0:y1, x0:x1].astype(np.float32)
     if p.shape[0] < 12 or p.shape[1] < 12:
@@ -775,6 +780,11 @@ def local_patch(img: np.ndarray, box: tuple[int, int, int, int], seed_mask: np.n
     if use.sum() < 60:
         return None
     level = wall_level[y0:y1, x0:x1]
+    if level_sigma_px:
+        w = use.astype(np.float32)
+        num = cv2.GaussianBlur(p * w, (0, 0), level_sigma_px, borderType=cv2.BORDER_REFLECT)
+        den = cv2.GaussianBlur(w, (0, 0), level_sigma_px, borderType=cv2.BORDER_REFLECT)
+        level = np.where(den > 0.05, np.maximum(level, num / np.maximum(den, 1e-6)), level).astype(np.float32)
     d = 1.0 - p / np.maximum(level, 1.0)
     d -= fit_plane(d, xx - x0, yy - y0, use)
     grooves = groove_profiles(d, xx, yy, use, angles_deg)
