@@ -218,11 +218,7 @@ def measure_pore(patch: Patch, region: np.ndarray, cfg: DefectConfig, allow_scra
     if held is not None:
         c, blur, c_sd, _, fitted = _fit_contrast(r, xx, yy, fit_area, cx, cy, cov, mass,
                                                  blur_held=float(np.clip(held, 0.5, 3.5)))
-    # what the tests read (``examine._accept``), the mark against the wall as modelled, and
-    # what the uncertainty reads: the grooves put back below are a model of what the pore
-    # cut, not a measurement (with the cut's higher contrast in it, the station bench's
-    # widths within 2u fell from 98 to 95 %)
-    contrast, contrast_sd = c, c_sd
+    contrast = c  # what the tests read (``examine._accept``): the mark against the wall as modelled
     # a pore takes the wall's place, grooves and all: its floor is one level, and the
     # grooves' model subtracted over it took their darkness off it, light stripes along
     # the lines through it (a 0.45 x 0.32 mm pore where two deep grooves cross read
@@ -247,8 +243,8 @@ def measure_pore(patch: Patch, region: np.ndarray, cfg: DefectConfig, allow_scra
     r_eq = np.sqrt(max(mass / c, 1.0) / np.pi)
     length, direction, width = feret(rr * np.cos(th), rr * np.sin(th))
     u_density = u_coef * np.sqrt(2.0 * gain) / np.pi
-    u_r = u_density / (contrast * max(r_eq, 1.0))
-    u_scale = contrast_sd / (2.0 * contrast)  # the outline scales as c^-1/2
+    u_r = u_density / (c * max(r_eq, 1.0))
+    u_scale = c_sd / (2.0 * c)  # the outline scales as c^-1/2
     u_len = float(np.sqrt(2.0 * u_r**2 + (length * u_scale) ** 2))
     u_wid = float(np.sqrt(2.0 * u_r**2 + (width * u_scale) ** 2))
     return dict(x=cx, y=cy, length=length, width=width, angle=direction, u_length=u_len, u_width=u_wid,
