@@ -40,7 +40,10 @@ defect (docs/surface.md has the figures behind each choice):
    scratch, else a pore. *Pore*: its floor's contrast c from the blurred-ellipse fit; its
    outline from the darkening's angular density round its centroid, which is c r^2 / 2
    whatever the blur (a Fourier series of the pixels' angles, to the order the blur
-   resolves); its greatest Feret diameter and the extent across it from that outline.
+   resolves), the grooves it cuts put back under the fitted ellipse first (a pore takes
+   the wall's place, grooves and all); its greatest Feret diameter and the extent across
+   it from that outline. A pore whose floor reads under the bar is examined again with
+   the level taken round it (a large pale pore that the frame's level followed).
    *Scratch*: its main line (branches of groove residue left out), its centre line
    followed (a robust straight line, then a polynomial through the cross profiles' peaks
    near it), its amplitude along it (each cross profile matched-filtered by the mean one,
