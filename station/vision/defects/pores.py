@@ -218,7 +218,7 @@ def measure_pore(patch: Patch, region: np.ndarray, cfg: DefectConfig, allow_scra
     if held is not None:
         c, blur, c_sd, _, fitted = _fit_contrast(r, xx, yy, fit_area, cx, cy, cov, mass,
                                                  blur_held=float(np.clip(held, 0.5, 3.5)))
-    contrast = c  # what the tests read (``examine._accept``): the mark against the wall as modelled
+    contrast = c  # the contrast the tests read (``examine._accept``): the mark against the wall as modelled
     # a pore takes the wall's place, grooves and all: its floor is one level, and the
     # grooves' model subtracted over it took their darkness off it, light stripes along
     # the lines through it (a 0.45 x 0.32 mm pore where two deep grooves cross read
