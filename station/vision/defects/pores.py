@@ -221,8 +221,8 @@ def measure_pore(patch: Patch, region: np.ndarray, cfg: DefectConfig, allow_scra
     contrast = c  # the contrast the tests read (``examine._accept``): the mark against the wall as modelled
     # a pore takes the wall's place, grooves and all: its floor is one level, and the
     # grooves' model subtracted over it took their darkness off it, light stripes along
-    # the lines through it (a 0.45 x 0.32 mm pore where two deep grooves cross read
-    # 0.25 for its 0.35 floor, and its outline grew by ~20 %: wide bench 4540016). For
+    # the lines through it (a 0.45 x 0.32 mm pore with deep grooves running into it read
+    # 0.25 for its 0.35 floor, 9 % long and 21 % wide: wide bench 4540016). For
     # its size the grooves go back under the fitted ellipse, blurred as the pore is, and
     # it is fitted again at that blur. Not for the tests: a crossing of grooves read as
     # a mark then holds the lines' whole darkness, and is a dark, even blot
