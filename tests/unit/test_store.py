@@ -41,7 +41,7 @@ from station.store import (
     Traceability,
     upgrade_to_head,
 )
-from station.store.engine import make_engine
+from station.store.engine import _set_wal, make_engine
 from station.store.migrate import alembic_config, current_revision, head_revision
 from station.store.models import Base, Event
 
@@ -515,6 +515,40 @@ def test_texts_with_nul_find_nothing_and_json_keeps_no_nan(store):
     store.finish(iid, "aborted", machine_s=1.0,
                  cycle={"ratio": float("nan"), "parts": [float("inf"), 1.0], "lower_bound_s": 0.0})
     assert dict(store.get(iid).cycle) == {"ratio": None, "parts": [None, 1.0], "lower_bound_s": 0.0}
+
+
+class _LockedCursor:
+    """A cursor whose database answers "locked" to the first ``n`` WAL requests."""
+
+    def __init__(self, n: int, message: str = "database is locked"):
+        self.n, self.message, self.calls = n, message, []
+
+    def execute(self, sql: str):
+        self.calls.append((time.monotonic(), sql))
+        if len(self.calls) <= self.n:
+            raise sqlite3.OperationalError(self.message)
+
+
+def test_a_new_database_turned_to_wal_by_another_process_is_waited_for_not_failed():
+    """Processes opening a new file together each ask for WAL; SQLite answers the
+    losers "locked" at once (a deadlock, no busy handler). The request is made again,
+    backing off, until the timeout; other errors and a lock held too long still fail."""
+    cur = _LockedCursor(4)
+    _set_wal(cur, 5.0)
+    assert len(cur.calls) == 5 and all(sql == "PRAGMA journal_mode = WAL" for _t, sql in cur.calls)
+    gaps = np.diff([t for t, _sql in cur.calls])
+    assert gaps.min() > 0.001 and gaps.sum() < 1.0  # backed off, briefly
+
+    held = _LockedCursor(10**6)
+    t0 = time.monotonic()
+    with pytest.raises(sqlite3.OperationalError, match="locked"):
+        _set_wal(held, 0.3)
+    assert 0.1 < time.monotonic() - t0 < 1.0 and len(held.calls) > 2
+
+    other = _LockedCursor(1, "disk I/O error")
+    with pytest.raises(sqlite3.OperationalError, match="disk I/O"):
+        _set_wal(other, 5.0)
+    assert len(other.calls) == 1
 
 
 def test_stations_starting_together_migrate_an_empty_database_once(tmp_path, empty_db_url):
