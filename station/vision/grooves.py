@@ -108,10 +108,19 @@ def wall_level(image: np.ndarray, holes: list[tuple[float, float, float]]) -> Wa
     for x, y, r in holes:
         cv2.circle(mask, (int(round((x + 0.5) * sw / w - 0.5)), int(round((y + 0.5) * sh / h - 0.5))),
                    int(np.ceil((r + 6.0) * sw / w)) + 1, 0.0, -1)
-    sig = SMOOTH_SIGMA_PX * sw / w
-    num = cv2.GaussianBlur(small * mask, (0, 0), sig, borderType=cv2.BORDER_REFLECT)
-    den = cv2.GaussianBlur(mask, (0, 0), sig, borderType=cv2.BORDER_REFLECT)
-    return WallLevel((num / np.maximum(den, 1e-3)).astype(np.float32), (h, w))
+    mean, _ = weighted_gaussian_mean(small, mask, SMOOTH_SIGMA_PX * sw / w, floor=1e-3)
+    return WallLevel(mean.astype(np.float32), (h, w))
+
+
+def weighted_gaussian_mean(values: np.ndarray, weights: np.ndarray, sigma: float,
+                           floor: float = 1e-6) -> tuple[np.ndarray, np.ndarray]:
+    """The Gaussian-weighted local mean of ``values`` over ``weights`` (normalised
+    convolution: what the weights leave out does not count), and the weights' own
+    Gaussian sum (near 0 where almost nothing was averaged; divided by no less than
+    ``floor``). Borders reflected."""
+    num = cv2.GaussianBlur(values * weights, (0, 0), sigma, borderType=cv2.BORDER_REFLECT)
+    den = cv2.GaussianBlur(weights, (0, 0), sigma, borderType=cv2.BORDER_REFLECT)
+    return num / np.maximum(den, floor), den
 
 
 def frame_grooves(image: np.ndarray, holes: list[tuple[float, float, float]], angles_deg=(30.0, -30.0),

@@ -305,13 +305,12 @@ def _robust_harmonics(theta: np.ndarray, edge: np.ndarray, valid: np.ndarray, or
     c_final = 4.685 * scale  # the last passes' reach
     cands = _sector_circles(theta, y, valid)
     if cands.shape[1]:
-        u2 = np.minimum(((y[valid, None] - a[valid] @ cands) / c_final) ** 2, 1.0)
-        losses = (1.0 - (1.0 - u2) ** 3).sum(axis=0)  # Tukey's loss, 1 beyond the reach
+        losses = _tukey_loss(y[valid, None] - a[valid] @ cands, c_final)
         k = int(np.argmin(losses))
-        current = _tukey_loss(y - a @ coef, valid, c_final)
+        current = _tukey_loss((y - a @ coef)[valid], c_final)
         if losses[k] < current:
             refined = _tukey_refine(a, y, valid, cands[:, k], [c_final] * 6)
-            if _tukey_loss(y - a @ refined, valid, c_final) < current:
+            if _tukey_loss((y - a @ refined)[valid], c_final) < current:
                 coef = refined
     return a @ coef
 
@@ -328,9 +327,11 @@ def _tukey_refine(a: np.ndarray, y: np.ndarray, valid: np.ndarray, coef: np.ndar
     return coef
 
 
-def _tukey_loss(res: np.ndarray, valid: np.ndarray, c: float) -> float:
-    u = res[valid] / c
-    return float(np.where(np.abs(u) < 1, 1.0 - (1.0 - u**2) ** 3, 1.0).sum())
+def _tukey_loss(res: np.ndarray, c: float):
+    """Tukey's biweight loss of the residuals at reach ``c`` (1 beyond it), summed over
+    the first axis (one loss per column of a 2-D ``res``)."""
+    u2 = np.minimum((res / c) ** 2, 1.0)
+    return (1.0 - (1.0 - u2) ** 3).sum(axis=0)
 
 
 def _sector_circles(theta: np.ndarray, y: np.ndarray, valid: np.ndarray, sectors: int = 12) -> np.ndarray:

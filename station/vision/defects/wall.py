@@ -14,7 +14,7 @@ from typing import NamedTuple
 import cv2
 import numpy as np
 
-from station.vision.grooves import honing_directions
+from station.vision.grooves import honing_directions, weighted_gaussian_mean
 from station.vision.defects.config import DefectConfig, NOISE_FLOOR
 from station.vision.defects.common import mad_sigma, near_hatch
 
@@ -147,11 +147,9 @@ def model_wall(image: np.ndarray, holes, reach_px: float, cfg: DefectConfig,
     if dark.shape != (h, w):
         dark = cv2.copyMakeBorder(dark, 0, h - dark.shape[0], 0, w - dark.shape[1], cv2.BORDER_REPLICATE)
     weights = valid.astype(np.float32) * (1.0 - dark.astype(np.float32))
-    sig = cfg.level_sigma_half_px
-    num = cv2.GaussianBlur(small * weights, (0, 0), sig, borderType=cv2.BORDER_REFLECT)
-    den = cv2.GaussianBlur(weights, (0, 0), sig, borderType=cv2.BORDER_REFLECT)
+    mean, den = weighted_gaussian_mean(small, weights, cfg.level_sigma_half_px)
     coarse_half = cv2.resize(coarse8, (w, h), interpolation=cv2.INTER_LINEAR)
-    level = np.where(den > 0.05, num / np.maximum(den, 1e-6), coarse_half).astype(np.float32)
+    level = np.where(den > 0.05, mean, coarse_half).astype(np.float32)
     darkness = 1.0 - small / np.maximum(level, 1.0)
     darkness[~valid] = 0.0
     # where a groove family's lines hold less than a third of their window in the frame
@@ -781,10 +779,8 @@ def local_patch(img: np.ndarray, box: tuple[int, int, int, int], seed_mask: np.n
         return None
     level = wall_level[y0:y1, x0:x1]
     if level_sigma_px:
-        w = use.astype(np.float32)
-        num = cv2.GaussianBlur(p * w, (0, 0), level_sigma_px, borderType=cv2.BORDER_REFLECT)
-        den = cv2.GaussianBlur(w, (0, 0), level_sigma_px, borderType=cv2.BORDER_REFLECT)
-        level = np.where(den > 0.05, np.maximum(level, num / np.maximum(den, 1e-6)), level).astype(np.float32)
+        mean, den = weighted_gaussian_mean(p, use.astype(np.float32), level_sigma_px)
+        level = np.where(den > 0.05, np.maximum(level, mean), level).astype(np.float32)
     d = 1.0 - p / np.maximum(level, 1.0)
     d -= fit_plane(d, xx - x0, yy - y0, use)
     grooves = groove_profiles(d, xx, yy, use, angles_deg)
