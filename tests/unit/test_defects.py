@@ -2043,6 +2043,53 @@ def test_a_rims_baseline_follows_its_clean_arcs_when_defects_hold_much_of_one_si
     assert not false
 
 
+def test_a_rim_defects_arc_is_read_on_the_rims_own_circle():
+    """A hole's fit pulled off by its rim defects put their arcs out: read about that
+    centre, a burr's arc (the centre moved away from it) came out short and a chip's long
+    by the centre's offset over the radius (wide frame 4600078: 1.6 px on 34, burrs 5-10 %
+    short). The arcs are read on the baseline's circle. Here the rays come from a centre
+    1.8 px off: each arc between two of the true rim's points reads as it is."""
+    from station.vision.defects.rims import _RimCircle
+
+    class Hole:
+        x_px, y_px, diameter_px = 101.5, 199.0, 2 * 33.0  # the pulled fit: centre (1.5, -1.0) off, 1 px small
+
+    true_x, true_y, radius, blur, crossing = 100.0, 200.0, 34.0, 1.5, 0.75
+    n = 720
+    theta = 2 * np.pi * np.arange(n) / n
+    # the share's crossing along each ray: a circle 0.674 blur inside the rim, about the true centre
+    dx, dy = true_x - Hole.x_px, true_y - Hole.y_px
+    p, q = dx * np.cos(theta) + dy * np.sin(theta), -dx * np.sin(theta) + dy * np.cos(theta)
+    r_cross = radius - 0.6745 * blur
+    base = p + np.sqrt(r_cross**2 - q**2)
+    circle = _RimCircle.of(Hole, theta, base, blur, crossing)
+    assert np.hypot(circle.x - true_x, circle.y - true_y) < 0.1 and abs(circle.radius - radius) < 0.1
+
+    def ray_of(phi):  # the fractional ray index from the hole's fit towards the true rim's point at phi
+        x, y = true_x + radius * np.cos(phi) - Hole.x_px, true_y + radius * np.sin(phi) - Hole.y_px
+        return (np.arctan2(y, x) % (2 * np.pi)) / (2 * np.pi) * n
+
+    old_errors = []
+    for start, span in ((250.0, 0.8), (20.0, 0.3), (120.0, 0.5), (340.0, 0.6)):  # the last across 0: the index runs on
+        i1, i2 = ray_of(np.deg2rad(start)), ray_of(np.deg2rad(start) + span)
+        i2 += n if i2 < i1 else 0
+        new = circle.arc(i2) - circle.arc(i1)
+        assert abs(new - radius * span) < 0.05 + 0.002 * radius * span, (start, new, radius * span)
+        old_errors.append((i2 - i1) * 2 * np.pi * Hole.diameter_px / 2 / n / (radius * span) - 1)  # about the fit
+    assert max(np.abs(old_errors)) > 0.05, old_errors  # where the fit's arc was 5 % off
+    # where the baseline is the fit's own circle, the arc is the fit's
+    same = _RimCircle.of(Hole, theta, np.full(n, 33.0 - 0.6745 * blur), blur, crossing)
+    assert abs(same.arc(300.0) - same.arc(100.0) - 200 * 2 * np.pi * 33.0 / n) < 1e-3
+
+    # the frame: two burrs and a chip pulled the hole's fit 1.6 px off; its 0.160 mm burr,
+    # 11 px high, read 0.023 mm short
+    f = random_defect_frame(4600078, mm_per_px=MM_PER_PX, envelope="wide")
+    pairs, false = match(f.defects, detect_defects(f.image, MM_PER_PX), MM_PER_PX)
+    (t, d), = [(t, d) for t, d in pairs if t.kind == "burr" and abs(t.length_mm - 0.160) < 0.001]
+    assert d is not None and d.kind == "burr" and _within(d.length_mm, t.length_mm), d
+    assert not false
+
+
 def test_a_square_ended_burr_is_as_long_as_it_is(monkeypatch):
     """A burr's ends are read on its area-true profile at half the height read 1.2 blur
     inside them, where the end's blurred step (the camera's blur and the profile's 1 px
