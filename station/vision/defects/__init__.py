@@ -60,7 +60,8 @@ defect (docs/surface.md has the figures behind each choice):
    fitted robustly and taken off; an edge moved into the hole is a burr (bright metal in
    the dark disc), moved out a chip (a dark notch in the wall). Heights are area-true
    (the share integrated across each ray's own band: blur moves light along a ray, not
-   out of it), ends at half the local height along the rim.
+   out of it), ends at half the local height along the rim. Lengths and places are read
+   on the baseline's circle, not the hole's fit, which large rim defects pull.
 
 Sizes are never pixel counts of a thresholded blob: they come from integrated darkening
 and fitted edges, sub-pixel. ``length`` is the largest dimension (a pore's greatest Feret
