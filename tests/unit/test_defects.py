@@ -2090,6 +2090,22 @@ def test_a_rim_defects_arc_is_read_on_the_rims_own_circle():
     assert not false
 
 
+def test_a_burr_whose_run_ends_on_a_low_shelf_is_not_turned_inside_out():
+    """A rim defect's ends are first guessed where its rays' edges cross half the run's
+    median height, interpolated between the run's last ray and the next. Where the run
+    (found on the share smoothed along the rim) ends on a low shelf, its last ray is
+    already under half the height, and the interpolation ran back into the run by as much
+    as the shelf is flat: a 0.30 mm burr (3 px high, a 1-1.7 px shelf over its last 10
+    deg) had its stop guessed 35 px before its start, its length came out negative, and
+    it was lost (wide frame 4620099, a 65 deg hatch). The run's end stands there now."""
+    f = random_defect_frame(4620099, mm_per_px=MM_PER_PX, envelope="wide", hatch_deg=65.0)
+    pairs, false = match(f.defects, detect_defects(f.image, MM_PER_PX), MM_PER_PX)
+    burrs = [(t, d) for t, d in pairs if t.kind == "burr"]
+    assert len(burrs) == 2 and all(d is not None and d.kind == "burr" for _, d in burrs), burrs
+    assert all(_within(d.length_mm, t.length_mm) for t, d in burrs), [(t.length_mm, d.length_mm) for t, d in burrs]
+    assert not false
+
+
 def test_a_square_ended_burr_is_as_long_as_it_is(monkeypatch):
     """A burr's ends are read on its area-true profile at half the height read 1.2 blur
     inside them, where the end's blurred step (the camera's blur and the profile's 1 px

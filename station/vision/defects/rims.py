@@ -540,7 +540,12 @@ def rim_defects(img: np.ndarray, hole, index: int, zone_others: np.ndarray, wall
             v_hi_in, v_hi_out = sd[hi % n], sd[(hi + 1) % n]
             f_lo = (v_lo_in - 0.5 * h_ref) / max(v_lo_in - v_lo_out, 1e-9)
             f_hi = (v_hi_in - 0.5 * h_ref) / max(v_hi_in - v_hi_out, 1e-9)
-            start, stop = lo - min(f_lo, 1.0), hi + min(f_hi, 1.0)
+            # where the run's own last ray is under half its height (a low shelf the
+            # smoothed share found and the edges' walk did not), the interpolation runs
+            # back into the run, by as much as the shelf is flat: a 0.30 mm burr's stop
+            # came out 35 px before its start and the burr was lost (wide frame 4620099,
+            # a 65 deg hatch). The run's end stands there; ``fit_end`` reads it
+            start, stop = lo - min(max(f_lo, 0.0), 1.0), hi + min(max(f_hi, 0.0), 1.0)
             pad = int(np.ceil((3.0 * blur + 3.0) / step_arc))
             win = np.arange(int(np.floor(start)) - pad, int(np.ceil(stop)) + pad + 1)
             ok = valid[win % n]
