@@ -2096,7 +2096,7 @@ def test_a_burr_whose_run_ends_on_a_low_shelf_is_not_turned_inside_out():
     (found on the share smoothed along the rim) ends on a low shelf, its last ray is
     already under half the height, and the interpolation ran back into the run by as much
     as the shelf is flat: a 0.30 mm burr (3 px high, a 1-1.7 px shelf over its last 10
-    deg) had its stop guessed 35 px before its start, its length came out negative, and
+    deg) had its stop guessed 6 px before its start, its length came out negative, and
     it was lost (wide frame 4620099, a 65 deg hatch). The run's end stands there now."""
     f = random_defect_frame(4620099, mm_per_px=MM_PER_PX, envelope="wide", hatch_deg=65.0)
     pairs, false = match(f.defects, detect_defects(f.image, MM_PER_PX), MM_PER_PX)

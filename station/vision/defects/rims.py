@@ -543,7 +543,7 @@ def rim_defects(img: np.ndarray, hole, index: int, zone_others: np.ndarray, wall
             # where the run's own last ray is under half its height (a low shelf the
             # smoothed share found and the edges' walk did not), the interpolation runs
             # back into the run, by as much as the shelf is flat: a 0.30 mm burr's stop
-            # came out 35 px before its start and the burr was lost (wide frame 4620099,
+            # came out 6 px before its start and the burr was lost (wide frame 4620099,
             # a 65 deg hatch). The run's end stands there; ``fit_end`` reads it
             start, stop = lo - min(max(f_lo, 0.0), 1.0), hi + min(max(f_hi, 0.0), 1.0)
             pad = int(np.ceil((3.0 * blur + 3.0) / step_arc))
