@@ -2049,7 +2049,7 @@ def test_a_rim_defects_arc_is_read_on_the_rims_own_circle():
     by the centre's offset over the radius (wide frame 4600078: 1.6 px on 34, burrs 5-10 %
     short). The arcs are read on the baseline's circle. Here the rays come from a centre
     1.8 px off: each arc between two of the true rim's points reads as it is."""
-    from station.vision.defects.rims import _RimCircle
+    from station.vision.defects.rims import _RimCircle, _robust_harmonic_coefs
 
     class Hole:
         x_px, y_px, diameter_px = 101.5, 199.0, 2 * 33.0  # the pulled fit: centre (1.5, -1.0) off, 1 px small
@@ -2062,7 +2062,7 @@ def test_a_rim_defects_arc_is_read_on_the_rims_own_circle():
     p, q = dx * np.cos(theta) + dy * np.sin(theta), -dx * np.sin(theta) + dy * np.cos(theta)
     r_cross = radius - 0.6745 * blur
     base = p + np.sqrt(r_cross**2 - q**2)
-    circle = _RimCircle.of(Hole, theta, base, blur, crossing)
+    circle = _RimCircle.of(Hole, _robust_harmonic_coefs(theta, base, np.ones(n, bool), 1), n, blur, crossing)
     assert np.hypot(circle.x - true_x, circle.y - true_y) < 0.1 and abs(circle.radius - radius) < 0.1
 
     def ray_of(phi):  # the fractional ray index from the hole's fit towards the true rim's point at phi
@@ -2078,7 +2078,7 @@ def test_a_rim_defects_arc_is_read_on_the_rims_own_circle():
         old_errors.append((i2 - i1) * 2 * np.pi * Hole.diameter_px / 2 / n / (radius * span) - 1)  # about the fit
     assert max(np.abs(old_errors)) > 0.05, old_errors  # where the fit's arc was 5 % off
     # where the baseline is the fit's own circle, the arc is the fit's
-    same = _RimCircle.of(Hole, theta, np.full(n, 33.0 - 0.6745 * blur), blur, crossing)
+    same = _RimCircle.of(Hole, np.array([33.0 - 0.6745 * blur, 0.0, 0.0]), n, blur, crossing)
     assert abs(same.arc(300.0) - same.arc(100.0) - 200 * 2 * np.pi * 33.0 / n) < 1e-3
 
     # the frame: two burrs and a chip pulled the hole's fit 1.6 px off; its 0.160 mm burr,

@@ -264,19 +264,30 @@ def _band_sum(rr: np.ndarray, values: np.ndarray, lower: np.ndarray, upper: np.n
     return at(upper) - at(lower)
 
 
+def _harmonic_basis(theta: np.ndarray, order: int) -> np.ndarray:
+    """Columns 1, cos k theta, sin k theta for k = 1 .. ``order``."""
+    cols = [np.ones_like(theta)]
+    for k in range(1, order + 1):
+        cols += [np.cos(k * theta), np.sin(k * theta)]
+    return np.column_stack(cols)
+
+
 def _robust_harmonics(theta: np.ndarray, edge: np.ndarray, valid: np.ndarray, order: int) -> np.ndarray:
+    """The rim's low harmonics at each ray (``_robust_harmonic_coefs``)."""
+    return _harmonic_basis(theta, order) @ _robust_harmonic_coefs(theta, edge, valid, order)
+
+
+def _robust_harmonic_coefs(theta: np.ndarray, edge: np.ndarray, valid: np.ndarray, order: int) -> np.ndarray:
     """The rim's low harmonics (centre offset, ovality) fitted with Tukey weights, so a
-    defect on part of the rim does not move them.
+    defect on part of the rim does not move them: their coefficients on
+    ``_harmonic_basis`` (mean, cos theta, sin theta, ...).
 
     The weights' scale comes from the profile's own small-scale noise (differences over
     4 px of arc), not from the residuals of a first least-squares fit: defects on a
     quarter of the rim (two long burrs of a bench frame) pulled that fit, inflated its
     residuals' spread and with it the scale, and were then fitted away (dev frames).
     The fit starts from the median radius, so the defects begin as outliers."""
-    cols = [np.ones_like(theta)]
-    for k in range(1, order + 1):
-        cols += [np.cos(k * theta), np.sin(k * theta)]
-    a = np.column_stack(cols)
+    a = _harmonic_basis(theta, order)
     y = np.nan_to_num(edge)
     lag = max(int(round(4.0 / (2 * np.pi * max(float(np.nanmean(edge)), 1.0) / theta.size))), 1)
     both = valid & np.roll(valid, -lag)
@@ -293,7 +304,7 @@ def _robust_harmonics(theta: np.ndarray, edge: np.ndarray, valid: np.ndarray, or
     coef = _tukey_refine(a, y, valid, coef, [4.685 * max(scale, reach[it] if it < len(reach) else 0.0)
                                              for it in range(10)])
     if order != 1:
-        return a @ coef
+        return coef
     # ... but where defects take a large share of one side of the rim and the measured
     # centre is off, the fit can settle between the defects and the clean arc beside
     # them: two long burrs and a chip on 140 deg of a rim pulled the hole's fit 1.9 px off
@@ -312,7 +323,7 @@ def _robust_harmonics(theta: np.ndarray, edge: np.ndarray, valid: np.ndarray, or
             refined = _tukey_refine(a, y, valid, cands[:, k], [c_final] * 6)
             if _tukey_loss((y - a @ refined)[valid], c_final) < current:
                 coef = refined
-    return a @ coef
+    return coef
 
 
 @dataclass(frozen=True)
@@ -336,13 +347,13 @@ class _RimCircle:
     n: int
 
     @classmethod
-    def of(cls, hole, theta: np.ndarray, base: np.ndarray, blur: float, crossing: float) -> "_RimCircle":
-        a = np.column_stack([np.ones_like(theta), np.cos(theta), np.sin(theta)])
-        r0, ox, oy = (float(v) for v in np.linalg.lstsq(a, base, rcond=None)[0])
+    def of(cls, hole, coef: np.ndarray, n: int, blur: float, crossing: float) -> "_RimCircle":
+        """``coef``: the baseline's first harmonic (``_robust_harmonic_coefs``) over ``n`` rays."""
+        r0, ox, oy = (float(v) for v in coef[:3])
         radius = r0 + float(ndtri(crossing)) * blur
         if not (np.isfinite(radius) and radius > 0 and np.hypot(ox, oy) < 0.25 * radius):
             r0, ox, oy, radius = hole.diameter_px / 2.0, 0.0, 0.0, hole.diameter_px / 2.0
-        return cls(hole.x_px + ox, hole.y_px + oy, radius, (r0, ox, oy), theta.size)
+        return cls(hole.x_px + ox, hole.y_px + oy, radius, (r0, ox, oy), n)
 
     def arc(self, i: float) -> float:
         """Arc length along the circle (px, from angle 0 about its centre, running on past
@@ -472,9 +483,10 @@ def rim_defects(img: np.ndarray, hole, index: int, zone_others: np.ndarray, wall
     # a second harmonic (ovality) bent round the arcs the defects take out of the fit
     # and read the clean rim between two burrs as a 3 px "chip" (dev: a quarter of a rim
     # under two burrs); a compensating hole's ovality on the bore is well under 1 px
-    base = _robust_harmonics(theta, prof.edge, valid, 1)
+    coef = _robust_harmonic_coefs(theta, prof.edge, valid, 1)
+    base = _harmonic_basis(theta, 1) @ coef
     dev = np.where(valid, prof.edge - base, 0.0)
-    circle = _RimCircle.of(hole, theta, base, blur, cfg.rim_crossing)
+    circle = _RimCircle.of(hole, coef, theta.size, blur, cfg.rim_crossing)
     step_arc = 2 * np.pi * rad / n  # px of arc per ray
     # smoothed over ~1 px of arc: the rays are 0.5 px apart and the blur correlates them
     dev_s = gaussian_filter1d(dev, 1.0 / step_arc, mode="wrap" if whole else "nearest")
