@@ -78,7 +78,8 @@ postgres:
 #     server);
 #  2. beside it, one after another: the store, API and reliability tests again with every
 #     store on PostgreSQL; the plant test (three station processes on one PostgreSQL
-#     database, SIGKILLs); the campaigns (production runs in real time, ~12 min); the
+#     database, SIGKILLs); the campaigns (production runs in real time, ~12 min); the scans'
+#     end-to-end tests (the surface scan and the scan logs, ~5 min; session 85); the
 #     computation-only tests at nice 10 with one BLAS/OpenMP thread, so that they take only
 #     what the real-time tests leave of the CPU.
 # Session 43 (2-core machine), clean runs: stream 1 47 min, stream 2 39 min (PostgreSQL 18,
@@ -91,15 +92,17 @@ postgres:
 # ``pytest -n 2 --dist loadfile``: the slowest files first, tests/conftest.py) starved the
 # station's event loop past a drive's 1 s watchdog (session 42: one failure in 3,040 tests
 # of a clean run; docs/reliability.md): here real-time tests have another stream of them
-# beside them for stream 2's first ~35 min (the PostgreSQL run, the plant test, the
-# campaigns; the layout before: 18 min), and then computation at a lower priority. Each
+# beside them for stream 2's first ~40 min (the PostgreSQL run, the plant test, the
+# campaigns, the scans; the layout before: 18 min), and then computation at a lower priority. Each
 # run has its own temporary folder and log; stream 2's logs follow stream 1's output; make
 # fails when any run fails. Stream 1 lists its 25 slowest tests (CI must stay well under
-# an hour).
+# an hour). Session 84's clean run: stream 1 55.5 min, stream 2 41 (PostgreSQL 17, plant 7,
+# campaigns 9.5, computation 7); the scans' tests then moved to stream 2.
 PG_TESTS := tests/unit/test_store.py tests/unit/test_store_surface.py tests/unit/test_record_cache.py tests/api tests/reliability
 PG_SELECT := not test_cell or storing or store_ or vision_error
 TEST_TMP ?= $(or $(TMPDIR),/tmp)/bore-station-tests
 CAMPAIGN_TESTS := tests/e2e/test_campaign.py
+SCAN_TESTS := tests/e2e/test_surface.py tests/e2e/test_scanlog.py
 ONE_THREAD := OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 NUMBA_NUM_THREADS=1
 test: $(STAMP) chromium postgres
 	@mkdir -p $(TEST_TMP); rm -f $(TEST_TMP)/*.rc; \
@@ -109,19 +112,24 @@ test: $(STAMP) chromium postgres
 	  echo $$? > $(TEST_TMP)/plant.rc; \
 	  $(BIN)/python -m pytest -q --durations=5 --basetemp=$(TEST_TMP)/campaign $(CAMPAIGN_TESTS) > $(TEST_TMP)/campaign.log 2>&1; \
 	  echo $$? > $(TEST_TMP)/campaign.rc; \
+	  $(BIN)/python -m pytest -q --durations=5 --basetemp=$(TEST_TMP)/scans $(SCAN_TESTS) > $(TEST_TMP)/scans.log 2>&1; \
+	  echo $$? > $(TEST_TMP)/scans.rc; \
 	  $(ONE_THREAD) nice -n 10 $(BIN)/python -m pytest -q -m compute --durations=10 --basetemp=$(TEST_TMP)/compute \
 	    > $(TEST_TMP)/compute.log 2>&1; echo $$? > $(TEST_TMP)/compute.rc; } & second=$$!; \
 	echo "== the real-time tests on SQLite (beside them, one after another: the PostgreSQL run, the plant test, the"; \
-	echo "   campaigns and the computation-only tests, logged in $(TEST_TMP)/{postgresql,plant,campaign,compute}.log)"; \
+	echo "   campaigns, the scans' end-to-end tests and the computation-only tests, logged in"; \
+	echo "   $(TEST_TMP)/{postgresql,plant,campaign,scans,compute}.log)"; \
 	$(BIN)/python -m pytest -q --durations=25 -m "not compute" --ignore=tests/plant --ignore=$(CAMPAIGN_TESTS) \
+	  $(addprefix --ignore=,$(SCAN_TESTS)) \
 	  --basetemp=$(TEST_TMP)/sqlite; \
 	echo $$? > $(TEST_TMP)/sqlite.rc; \
 	wait $$second; \
 	echo; echo "== the store, API and reliability tests on PostgreSQL"; cat $(TEST_TMP)/postgresql.log; \
 	echo; echo "== the plant test (three stations, one PostgreSQL database)"; cat $(TEST_TMP)/plant.log; \
 	echo; echo "== the campaigns"; cat $(TEST_TMP)/campaign.log; \
+	echo; echo "== the scans' end-to-end tests (the surface scan, the scan logs)"; cat $(TEST_TMP)/scans.log; \
 	echo; echo "== the computation-only tests (nice 10, one BLAS thread)"; cat $(TEST_TMP)/compute.log; \
-	echo; ok=0; for run in sqlite postgresql plant campaign compute; do \
+	echo; ok=0; for run in sqlite postgresql plant campaign scans compute; do \
 	  rc=$$(cat $(TEST_TMP)/$$run.rc 2>/dev/null || echo missing); echo "== $$run run: exit $$rc"; \
 	  [ "$$rc" = 0 ] || ok=1; done; exit $$ok
 
