@@ -23,6 +23,7 @@ from sim.camera.render import (FrameParams, HoleSpec, psf_kernel, random_frame, 
 from station.bench.defects import above_limit, match
 from station.cli import app
 from station.vision.defects import detect_defects
+from station.vision.defects.common import on_groove_line
 from station.vision.defects.config import Defect, DefectConfig
 from station.vision.defects.rims import groove_cover
 from station.vision.defects.wall import groove_profiles
@@ -2103,6 +2104,37 @@ def test_a_burr_whose_run_ends_on_a_low_shelf_is_not_turned_inside_out():
     burrs = [(t, d) for t, d in pairs if t.kind == "burr"]
     assert len(burrs) == 2 and all(d is not None and d.kind == "burr" for _, d in burrs), burrs
     assert all(_within(d.length_mm, t.length_mm) for t, d in burrs), [(t.length_mm, d.length_mm) for t, d in burrs]
+    assert not false
+
+
+def test_a_deep_groove_meeting_a_rim_obliquely_is_no_chip():
+    """A deep groove that meets a rim obliquely darkens the wedge between it and the rim,
+    which reads as a notch (a 0.11 mm, 7.6 px deep "chip" on a clean wide frame, 5700027).
+    Its darkness runs on along the groove: 0.377 of the hole's (the upper quartile of the
+    lines through the notch's mouth), where 290 true chips on six sets read 0.30 at most.
+    The bar is 0.35 (0.4 before)."""
+    f = random_defect_frame(5700027, {}, mm_per_px=MM_PER_PX, envelope="wide")
+    assert f.holes and not f.defects
+    assert detect_defects(f.image, MM_PER_PX) == []
+
+
+def test_a_short_wide_scratch_well_off_the_hatch_keeps_to_no_groove_line():
+    """A mark keeps to a groove family's line when its chord crosses few of the family's
+    lines beyond its own width (``on_groove_line``), and is then a piece of a groove if
+    that line runs on as one. A short wide scratch crosses few lines at any angle: a
+    0.216 x 0.043 mm scratch 30.6 deg off the hatch, plain to see, kept to a line by the
+    width allowance, a groove ran on along the line through its middle, and it was lost
+    (station frame 4710086). Groove pieces read 16.2 deg off at most (48 on four sets);
+    a mark more than ``groove_line_max_off_deg`` (20) off keeps to no line."""
+    cfg = DefectConfig()
+    assert on_groove_line(119.4, 21.9, 4.3, (30.0, 150.0), cfg) is None  # 30.6 deg off, crossing 11.1 px
+    assert on_groove_line(162.0, 30.0, 4.0, (30.0, 150.0), cfg) == 150.0  # 12 deg off: a piece's reading
+    f = random_defect_frame(4710086, mm_per_px=MM_PER_PX, envelope="station")
+    pairs, false = match(f.defects, detect_defects(f.image, MM_PER_PX), MM_PER_PX)
+    scratches = [(t, d) for t, d in pairs if t.kind == "scratch"]
+    assert len(scratches) == 2 and all(d is not None and d.kind == "scratch" for _, d in scratches), scratches
+    assert all(_within(d.length_mm, t.length_mm) and _within(d.width_mm, t.width_mm) for t, d in scratches), \
+        [(t.length_mm, d.length_mm, t.width_mm, d.width_mm) for t, d in scratches]
     assert not false
 
 

@@ -189,6 +189,16 @@ class DefectConfig:
     #: off the hatch crosses the lines (a 2 mm scratch 4.7 deg off: 16 px). A mark that
     #: crosses more is judged as any scratch is (session 49)
     hatch_cross_px: float = 8.0
+    #: ... and a mark further off a family than this (deg) keeps to none of its lines,
+    #: however short and wide: the width allowance (``on_groove_line``: two pieces side by
+    #: side read as one mark as wide as their offset, its axis turned by it) let a short
+    #: wide scratch 30.6 deg off pass as keeping to a line, and a groove on that line
+    #: through its middle ran on (station 4710086: a 0.216 x 0.043 mm scratch, plain to
+    #: see, lost). Session 85, every scratch measurement that keeps to a line on four sets
+    #: (station 4710000, wide 4700000, grooves 30 % broken 650000 and clean 1650000): the
+    #: 48 groove pieces read 16.2 deg off at most; true scratches 17-28 deg off keep to a
+    #: line by the chord alone, and two at 25.9 and 30.6 deg were lost to a groove's run-on
+    groove_line_max_off_deg: float = 20.0
     #: ... but only when the two families read are mirrored about the bore's axis within
     #: this (deg), as a hatch is: a long dark scratch a few degrees off the hatch can draw
     #: the frame's reading of a family to itself (a 640 x 512 frame: 24.3 and 150.0 deg
@@ -457,7 +467,12 @@ class DefectConfig:
     #: lines start where each leaves the notch: 153 true chips (wide seeds 82000-82059,
     #: 74000-74059, 78000-78059 at 22 deg, station 60000-60059) at most 0.22 (0.29 before),
     #: a deep groove meeting the rim obliquely 1.0 (0.11), two in a V 0.45 (0.19)
-    chip_groove_share: float = 0.4
+    #: Session 85, every chip candidate that reached this test on six sets (wide 4700000,
+    #: 4720000 at 22 deg, 4620000 at 65 deg; station 4710000, 4630000 at 20 deg; 100 clean
+    #: wide 5700000): 290 true chips at most 0.30 (0.294 and 0.299 at the 20 and 65 deg
+    #: hatches); a deep groove meeting the rim obliquely on a clean frame 0.377 (5700027,
+    #: a 0.11 mm "chip", under the old 0.4), the other deep grooves 0.41-1.9
+    chip_groove_share: float = 0.35
     #: a chip is a notch, and beyond its ends the rim's wall comes back.  A dark band that
     #: runs on past both its ends along a groove's line through it or just outside it
     #: (``_groove_along_rim``) at more than this share of the hole's darkness, the share at
