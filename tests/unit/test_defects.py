@@ -2124,8 +2124,8 @@ def test_a_short_wide_scratch_well_off_the_hatch_keeps_to_no_groove_line():
     that line runs on as one. A short wide scratch crosses few lines at any angle: a
     0.216 x 0.043 mm scratch 30.6 deg off the hatch, plain to see, kept to a line by the
     width allowance, a groove ran on along the line through its middle, and it was lost
-    (station frame 4710086). Groove pieces read 16.2 deg off at most (48 on four sets);
-    a mark more than ``groove_line_max_off_deg`` (20) off keeps to no line."""
+    (station frame 4710086). Groove pieces read 19.3 deg off at most (207 on six sets);
+    a mark more than ``groove_line_max_off_deg`` (20.5) off keeps to no line."""
     cfg = DefectConfig()
     assert on_groove_line(119.4, 21.9, 4.3, (30.0, 150.0), cfg) is None  # 30.6 deg off, crossing 11.1 px
     assert on_groove_line(162.0, 30.0, 4.0, (30.0, 150.0), cfg) == 150.0  # 12 deg off: a piece's reading
