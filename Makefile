@@ -93,9 +93,9 @@ postgres:
 # station's event loop past a drive's 1 s watchdog (session 42: one failure in 3,040 tests
 # of a clean run; docs/reliability.md): here real-time tests have another stream of them
 # beside them for stream 2's first ~40 min (the PostgreSQL run, the plant test, the
-# campaigns, the scans; the layout before: 18 min), and then computation at a lower priority. Each
-# run has its own temporary folder and log; stream 2's logs follow stream 1's output; make
-# fails when any run fails. Stream 1 lists its 25 slowest tests (CI must stay well under
+# campaigns, the scans; the layout before: 18 min), and then computation at a lower
+# priority. Each run has its own temporary folder and log; stream 2's logs follow stream
+# 1's output; make fails when any run fails. Stream 1 lists its 25 slowest tests (CI must stay well under
 # an hour). Session 84's clean run: stream 1 55.5 min, stream 2 41 (PostgreSQL 17, plant 7,
 # campaigns 9.5, computation 7); the scans' tests then moved to stream 2.
 PG_TESTS := tests/unit/test_store.py tests/unit/test_store_surface.py tests/unit/test_record_cache.py tests/api tests/reliability

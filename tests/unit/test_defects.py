@@ -2112,10 +2112,16 @@ def test_a_deep_groove_meeting_a_rim_obliquely_is_no_chip():
     which reads as a notch (a 0.11 mm, 7.6 px deep "chip" on a clean wide frame, 5700027).
     Its darkness runs on along the groove: 0.377 of the hole's (the upper quartile of the
     lines through the notch's mouth), where 290 true chips on six sets read 0.30 at most.
-    The bar is 0.35 (0.4 before)."""
+    The bar is 0.35 (0.4 before). A true chip that a groove runs on from stays a chip:
+    station frame 4710065's 0.127 mm chip reads 0.275."""
     f = random_defect_frame(5700027, {}, mm_per_px=MM_PER_PX, envelope="wide")
     assert f.holes and not f.defects
     assert detect_defects(f.image, MM_PER_PX) == []
+    f = random_defect_frame(4710065, mm_per_px=MM_PER_PX, envelope="station")
+    pairs, false = match(f.defects, detect_defects(f.image, MM_PER_PX), MM_PER_PX)
+    chips = [(t, d) for t, d in pairs if t.kind == "chip"]
+    assert len(chips) == 2 and all(d is not None and d.kind == "chip" for _, d in chips), chips
+    assert not false
 
 
 def test_a_short_wide_scratch_well_off_the_hatch_keeps_to_no_groove_line():
