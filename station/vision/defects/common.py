@@ -67,10 +67,10 @@ def on_groove_line(angle_deg: float, length_px: float, width_px: float, angles_d
     1650000: 10 of its 18 false scratches read 5-14 deg off), and two pieces side by side
     read as one mark as wide as their offset, its axis turned by it. No further off than
     ``cfg.groove_line_max_off_deg``: a short wide mark crosses few lines at any angle."""
-    fits = [g for g in angles_deg
-            if length_px * np.sin(np.deg2rad(circ_diff_deg(angle_deg, g))) <= cfg.hatch_cross_px + width_px
-            and circ_diff_deg(angle_deg, g) <= cfg.groove_line_max_off_deg]
-    return min(fits, key=lambda g: circ_diff_deg(angle_deg, g)) if fits else None
+    off = {g: circ_diff_deg(angle_deg, g) for g in angles_deg}
+    fits = [g for g, d in off.items()
+            if d <= cfg.groove_line_max_off_deg and length_px * np.sin(np.deg2rad(d)) <= cfg.hatch_cross_px + width_px]
+    return min(fits, key=off.get) if fits else None
 
 
 @dataclass
