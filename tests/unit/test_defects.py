@@ -2167,6 +2167,49 @@ def test_a_square_ended_burr_is_as_long_as_it_is(monkeypatch):
     assert abs(np.median(errors)) <= 0.3 and max(np.abs(errors)) <= 0.8, np.round(errors, 2)
 
 
+def test_an_ends_uncertainty_holds_the_smoothed_profiles_own_noise():
+    """An end's crossing moves by the profile's noise over its slope. A rim defect's
+    area-true profile is smoothed over 1 px of arc (2 of its 0.5 px samples), and its
+    sample-to-sample differences hold about a quarter of its spread: ``fit_end``'s u
+    from them was a fifth of the ends' scatter (Monte Carlo below), and a 1.2 px high burr
+    whose ends read 1.2-1.5 px in on a textured wall had a length u of 1.04 px (the model
+    term's), |error| / u 2.6-2.9 (station 4800001, 4800045). Given the profile's own
+    spread where no defect is and the blur of a step in it, the u is the scatter's."""
+    from scipy.ndimage import gaussian_filter1d
+    from scipy.special import ndtr
+
+    from station.vision.defects.common import fit_end
+
+    rng = np.random.default_rng(7)
+    s = np.arange(-20.0, 20.0, 0.5)
+    blur, height, white = 1.5, 1.2, 0.3
+    step_blur = float(np.hypot(blur, 1.0))
+    ends, u_diff, u_given = [], [], []
+    for _ in range(300):
+        noisy = height * ndtr(s / blur) + white * rng.standard_normal(s.size)
+        data = gaussian_filter1d(noisy, 2.0)  # 1 px of smoothing over 0.5 px samples
+        clean = gaussian_filter1d(white * rng.standard_normal(400), 2.0)  # the profile where no defect is
+        end, u0 = fit_end(s, data, 0.0, blur, rising=True)
+        _, u1 = fit_end(s, data, 0.0, blur, rising=True, noise=(float(np.std(clean)), step_blur))
+        ends.append(end)
+        u_diff.append(u0)
+        u_given.append(u1)
+    scatter = float(np.std(ends))
+    # (seeds 7-9: the differences' u 0.17-0.21 of the scatter, the profile's 0.73-0.87: the
+    # local height the half is taken of is read with the same noise)
+    assert np.median(u_diff) < 0.3 * scatter, (np.median(u_diff), scatter)
+    assert 0.65 * scatter < np.median(u_given) < 1.35 * scatter, (np.median(u_given), scatter)
+
+    # on the frames: two shallow burrs read short, now within 2 u
+    for seed, length_mm in ((4800001, 0.2703), (4800045, 0.2849)):
+        f = random_defect_frame(seed, mm_per_px=MM_PER_PX)
+        pairs, _ = match(f.defects, detect_defects(f.image, MM_PER_PX), MM_PER_PX)
+        (t, d), = [(t, d) for t, d in pairs if t.kind == "burr" and abs(t.length_mm - length_mm) < 0.0005]
+        assert d is not None and d.kind == "burr", (seed, d)
+        assert d.length_mm < t.length_mm - 0.02 and abs(d.length_mm - t.length_mm) <= 2.0 * d.size_u_mm, \
+            (seed, t.length_mm, d.length_mm, d.size_u_mm)
+
+
 def test_a_rim_defects_end_is_read_on_its_own_side():
     """``fit_end`` reads the crossing of the local half height that steps the way the
     end does: up at a defect's start, down at its end. A ragged chip's area-true profile

@@ -173,7 +173,8 @@ def true_runs(mask: np.ndarray, wrap: bool) -> list[tuple[int, int]]:
 
 
 def fit_end(s: np.ndarray, data: np.ndarray, guess: float, blur: float, rising: bool,
-            step_blur: float | None = None, height: float | None = None) -> tuple[float, float]:
+            step_blur: float | None = None, height: float | None = None,
+            noise: tuple[float, float] | None = None) -> tuple[float, float]:
     """Where a profile steps up (``rising``) or down near ``guess``: the crossing of half
     its *local* height, the height read 1.2 blur to 1.2 blur + 1 px inside the end
     (where a blurred step has reached 88-97 %), iterated from ``guess``. A ragged defect
@@ -191,7 +192,13 @@ def fit_end(s: np.ndarray, data: np.ndarray, guess: float, blur: float, rising: 
     what the step reaches where it was read.
 
     ``height``: the profile's height at the end if known (a square-ended scratch's own
-    level): its half is the crossing, not a local height's."""
+    level): its half is the crossing, not a local height's.
+
+    ``noise``: for the crossing's u, the profile's standard deviation where no defect is
+    and the blur of a step in it, both as smoothed (a pair). Without it the noise
+    is read from the profile's sample-to-sample differences, which a profile smoothed
+    over a few samples hides (at 1 px over 0.5 px samples the differences hold a quarter
+    of its standard deviation), and which does not hold the texture's slow part."""
     order = np.argsort(s)
     s, data = s[order], data[order]
     inward = 1.0 if rising else -1.0
@@ -226,6 +233,6 @@ def fit_end(s: np.ndarray, data: np.ndarray, guess: float, blur: float, rising: 
         end = new
     # the crossing moves by noise / slope; a blurred step of height 2 half has slope
     # 2 half / (sqrt(2 pi) blur) at its middle
-    resid = mad_sigma(np.diff(data)) / np.sqrt(2.0)
-    slope = 2.0 * half / (np.sqrt(2 * np.pi) * blur)
+    resid, slope_blur = (mad_sigma(np.diff(data)) / np.sqrt(2.0), blur) if noise is None else noise
+    slope = 2.0 * half / (np.sqrt(2 * np.pi) * slope_blur)
     return end, float(resid / slope)
