@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from dataclasses import asdict, replace
 from typing import NamedTuple
+import warnings
 
 import cv2
 import numpy as np
@@ -278,7 +279,9 @@ def _crossing_shares(dark: np.ndarray, d: Defect, angles_deg, blur: float, arm_p
             v = cv2.remap(arms, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=np.nan)
             if np.isfinite(v).mean() < 0.8:
                 continue
-            prof = np.clip(np.nan_to_num(np.nanmedian(v, axis=1)), 0.0, None)
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", RuntimeWarning)  # a row wholly blocked: NaN, read as 0
+                prof = np.clip(np.nan_to_num(np.nanmedian(v, axis=1)), 0.0, None)
             if best is None or prof.sum() > best.sum():
                 best = prof
         if best is None:
