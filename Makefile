@@ -95,10 +95,11 @@ postgres:
 # beside them for stream 2's first ~40 min (the PostgreSQL run, the plant test, the
 # campaigns, the scans; the layout before: 18 min), and then computation at a lower
 # priority. Each run has its own temporary folder and log; stream 2's logs follow stream
-# 1's output; make fails when any run fails. Stream 1 lists its 25 slowest tests (CI must stay well under
-# an hour). Session 84's clean run: stream 1 55.5 min, stream 2 41 (PostgreSQL 17, plant 7,
-# campaigns 9.5, computation 7); the scans' tests then moved to stream 2, and session 85's
-# clean run took stream 1 48.7 min, stream 2 42.2 (scans 3.3), CI 49.6 min.
+# 1's output; make fails when any run fails. Stream 1 lists its 25 slowest tests (CI must
+# stay well under an hour). Session 84's clean run: stream 1 55.5 min, stream 2 41
+# (PostgreSQL 17, plant 7, campaigns 9.5, computation 7); the scans' tests then moved to
+# stream 2, and session 85's clean run took stream 1 48.7 min, stream 2 42.2 (scans 3.3),
+# CI 49.6 min (session 86's, on an idle machine: 35.3).
 PG_TESTS := tests/unit/test_store.py tests/unit/test_store_surface.py tests/unit/test_record_cache.py tests/api tests/reliability
 PG_SELECT := not test_cell or storing or store_ or vision_error
 TEST_TMP ?= $(or $(TMPDIR),/tmp)/bore-station-tests

@@ -522,7 +522,8 @@ def rim_defects(img: np.ndarray, hole, index: int, zone_others: np.ndarray, wall
     # differences (``fit_end``'s default) hold a quarter of it: a 1.2 px high burr's ends
     # read 1.2-1.5 px in at a u of 0.13 px (station 4800001, 4800045), burrs' lengths
     # within 2 u 90 % on station 4800000
-    end_noise = (mad_sigma(dev_int_s[clean]), float(np.hypot(blur, 1.0))) if clean.sum() > 10 else None
+    smoothed_blur = float(np.hypot(blur, 1.0))  # a step's blur in ``dev_int_s``
+    end_noise = (mad_sigma(dev_int_s[clean]), smoothed_blur) if clean.sum() > 10 else None
     # out to 1.5 blur + 1 px past the floor's crossing (0.2, already ~0.8-1.5 blur past a
     # notch's end: 99.5 % of the blurred step; each px further only added noise, and a
     # shallow chip lost 0.3 px), the deepest within the blur's spill along the rim (its
@@ -579,7 +580,7 @@ def rim_defects(img: np.ndarray, hole, index: int, zone_others: np.ndarray, wall
             # median; the benches' ragged burrs 0.4-0.5 px: wide 4540000, 620000, station
             # 60000 -> -0.1 to -0.2 px, lengths in tolerance 183 / 196 -> 190 / 198). A chip's
             # ends are read as they were: its medians sat at -0.2 to +0.3 px already
-            step_blur = float(np.hypot(blur, 1.0)) if kind == "burr" else None
+            step_blur = smoothed_blur if kind == "burr" else None
             s1, u1 = fit_end(s_arc, sign * dev_int_s[win[ok] % n], start * step_arc, blur, rising=True,
                              step_blur=step_blur, noise=end_noise)
             s2, u2 = fit_end(s_arc, sign * dev_int_s[win[ok] % n], stop * step_arc, blur, rising=False,
