@@ -3027,6 +3027,36 @@ def test_a_dim_holes_noisy_or_cut_rim_is_still_measured_for_its_rims(seed, rim):
     assert not false, [(found[k].kind, round(found[k].length_mm, 3)) for k in false]
 
 
+def test_a_large_pore_its_rays_read_as_a_holes_circle_is_no_hole_and_stays_a_pore():
+    """The rim analysis measures by their rays alone the dark discs the hole measurement
+    drops, and a large elongated pore gave one: wide frame 4920063's 0.47 x 0.31 mm pore
+    read as a 0.56 mm circle (over the 0.55 mm that parts a pore from a hole) that it
+    fills half of. Its outline was read as two chips and the pore was lost. What such a
+    circle holds must be dark (``rim_hole_min_dark_share``); the holes measured so keep
+    their rims' defects (wide frame 4920007: a 0.91 mm hole with two burrs and a chip)."""
+    from station.vision.defects.frame import _dark_disc_share, _measure_holes_for_rims
+
+    f = random_defect_frame(4920063, None, mm_per_px=MM_PER_PX, envelope="wide")
+    assert not f.holes
+    (pore,) = [t for t in f.defects if t.kind == "pore" and t.length_mm > 0.4]
+    found = detect_defects(f.image, MM_PER_PX)
+    pairs, false = match(f.defects, found, MM_PER_PX)
+    assert not false, [(found[k].kind, round(found[k].length_mm, 3)) for k in false]
+    (d,) = [d for t, d in pairs if t is pore]
+    assert d is not None and d.kind == "pore" and _within(d.length_mm, pore.length_mm), d
+    # the rays' circle is read, and what it holds is judged
+    cfg = DefectConfig()
+    assert _measure_holes_for_rims(f.image, MM_PER_PX, replace(cfg, rim_hole_min_dark_share=0.0))
+    assert _measure_holes_for_rims(f.image, MM_PER_PX, cfg) == []
+    g = random_defect_frame(4920007, None, mm_per_px=MM_PER_PX, envelope="wide")
+    holes = _measure_holes_for_rims(g.image, MM_PER_PX, cfg)
+    assert len(holes) == len(g.holes) and all(_dark_disc_share(g.image, h) > 0.9 for h in holes)
+    pairs, false = match(g.defects, detect_defects(g.image, MM_PER_PX), MM_PER_PX)
+    rim = [(t, d) for t, d in pairs if t.kind in ("burr", "chip")]
+    assert len(rim) == 3 and all(d is not None and d.kind == t.kind for t, d in rim), rim
+    assert not false
+
+
 def test_a_scratch_end_read_at_half_its_local_height_does_not_walk_out_over_a_shelf():
     """A square end is read where the profile falls through half its local height, and
     read again from there; where the scratch ends on a deep groove crossing it, the wall

@@ -67,6 +67,15 @@ class DefectConfig:
     #: 270027: 70 px) as a 44 px blob, under the 0.8 taken before; its rays then measure it
     #: whole, and only a disc of a hole's size is kept
     rim_hole_coarse_share: float = 0.5
+    #: ... and what its circle holds must be dark: the share of the disc inside its rim's
+    #: blur (radius R - 2 blur - 1 px) darker than midway between the ring beyond the rim
+    #: and the disc's own darkest tenth. A 0.47 x 0.31 mm pore, by its rays a 0.56 mm
+    #: circle that it fills half of (0.55), was taken for a hole, its outline for two
+    #: chips, and the pore was lost (wide bench frame 4920063). A hole's burrs take its
+    #: disc at its rim: the holes measured so (4 in 600 fresh wide and station frames)
+    #: read 0.97-0.99; two of the twin's largest burrs (0.3 x 0.08 mm) on its least hole
+    #: (0.6 mm) take about a tenth of it
+    rim_hole_min_dark_share: float = 0.75
     #: the honing cross-hatch's line directions (deg, image sense); None: estimated per
     #: frame from its power spectrum (``honing_directions``), falling back to +/-30 deg
     #: (the renderer's and the Sunnen/Nagel guides' typical cross-hatch half-angle)

@@ -50,9 +50,35 @@ def _measure_holes_for_rims(img: np.ndarray, mm_per_px: float, cfg: DefectConfig
         if any(np.hypot(cand.x_px - h.x_px, cand.y_px - h.y_px) < h.diameter_px / 2 for h in holes):
             continue
         m = measure_candidate(img, cand, rays_only)
-        if m is not None and m.diameter_px * mm_per_px >= cfg.min_hole_diameter_mm:
+        if m is None or m.diameter_px * mm_per_px < cfg.min_hole_diameter_mm:
+            continue
+        if _dark_disc_share(img, m) >= cfg.rim_hole_min_dark_share:
             holes.append(m)
     return holes
+
+
+def _dark_disc_share(img: np.ndarray, hole) -> float:
+    """The share of ``hole``'s disc inside its rim's blur (radius R - 2 blur - 1 px) that
+    is darker than midway between the ring beyond its rim (3 blur + 1 px to 3 blur + 9
+    px out, its median) and the disc's darkest tenth; the frame's pixels only. 1 for a
+    hole that is all dark inside; a dark blob that fills a part of the circle its rays
+    agree on reads that part."""
+    r_hole = hole.diameter_px / 2.0
+    blur = float(hole.edge_sigma_px) if getattr(hole, "edge_sigma_px", None) else 1.5
+    reach = r_hole + 3.0 * blur + 9.0
+    x0, x1 = max(int(np.floor(hole.x_px - reach)), 0), min(int(np.ceil(hole.x_px + reach)) + 1, img.shape[1])
+    y0, y1 = max(int(np.floor(hole.y_px - reach)), 0), min(int(np.ceil(hole.y_px + reach)) + 1, img.shape[0])
+    if x1 <= x0 or y1 <= y0:
+        return 0.0
+    yy, xx = np.mgrid[y0:y1, x0:x1]
+    r = np.hypot(xx - hole.x_px, yy - hole.y_px)
+    patch = img[y0:y1, x0:x1].astype(np.float64)
+    disc = patch[r < r_hole - 2.0 * blur - 1.0]
+    ring = patch[(r > r_hole + 3.0 * blur + 1.0) & (r < reach)]
+    if disc.size < 20 or ring.size < 20:
+        return 1.0  # too little seen to judge: the circle's rays decide alone
+    mid = 0.5 * (float(np.median(ring)) + float(np.percentile(disc, 10.0)))
+    return float(np.mean(disc < mid))
 
 
 def detect_defects(image: np.ndarray, mm_per_px: float, *, holes=None, blur_px: float | None = None,
