@@ -2124,6 +2124,30 @@ def test_a_deep_groove_meeting_a_rim_obliquely_is_no_chip():
     assert not false
 
 
+def test_a_notch_lit_as_a_grooves_bottom_is_no_chip():
+    """A chip's broken face slopes into the hole in shadow. Where a deep groove grazes a
+    rim or meets it with another, the edge moves out as at a notch, and the floor read in
+    it stands at a groove's darkness: clean wide frames 5910054 (a groove tangent to the
+    rim, darker on one side of the tangent than on the other: 0.41 mm "chip", its floor
+    0.44 of the wall-to-hole step) and 5910051 (two grooves meeting at the rim: 0.11 mm,
+    0.36). Their darkness runs on beyond them under the groove tests' bars. A notch whose
+    floor reads under half the step (``chip_min_floor``) is no chip; a true chip whose
+    floor reads low (wide frame 129081 at a 26 deg hatch: a 0.082 x 0.042 mm chip, 0.54)
+    is found."""
+    for seed in (5910051, 5910054):
+        f = random_defect_frame(seed, {}, mm_per_px=MM_PER_PX, envelope="wide")
+        assert f.holes and not f.defects
+        found = detect_defects(f.image, MM_PER_PX)
+        assert found == [], (seed, [(d.kind, round(d.length_mm, 3)) for d in found])
+        # the groove tests alone pass it
+        found = detect_defects(f.image, MM_PER_PX, cfg=replace(DefectConfig(), chip_min_floor=0.0))
+        assert [d.kind for d in found] == ["chip"], (seed, found)
+    f = random_defect_frame(129081, None, mm_per_px=MM_PER_PX, envelope="wide", hatch_deg=26.0)
+    pairs, _ = match(f.defects, detect_defects(f.image, MM_PER_PX), MM_PER_PX)
+    ((t, d),) = [(t, d) for t, d in pairs if t.kind == "chip" and abs(t.length_mm - 0.082) < 0.005]
+    assert d is not None and d.kind == "chip", d
+
+
 def test_a_short_wide_scratch_well_off_the_hatch_keeps_to_no_groove_line():
     """A mark keeps to a groove family's line when its chord crosses few of the family's
     lines beyond its own width (``on_groove_line``), and is then a piece of a groove if

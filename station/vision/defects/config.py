@@ -497,6 +497,23 @@ class DefectConfig:
     #: rim (wide clean frame 1094030, a 0.44 mm "chip") and the rendered grazing grooves
     #: of the unit test 1.14-1.33 (1094030: 1.78)
     chip_groove_along_share: float = 0.75
+    #: a chip's broken face slopes into the hole in shadow: its floor, read where the notch
+    #: is deep enough to hold one (``_chip_floor``), stands near the hole's level. A notch
+    #: whose floor stands under this share of the wall-to-hole step is lit as the bottom
+    #: of a groove is (a deep groove grazing or meeting the rim, two in a V), and a chip
+    #: lit so is under the edge's crossing (``rim_crossing``) and not found as one (a 10 x
+    #: 7 px chip lit to 0.5 of the step is lost under 1 px of blur). Session 87, every chip
+    #: candidate that reached the groove tests on 14 sets with defects and 4 clean ones
+    #: (1,800 frames: wide 4910000, 4920000, 4810000, 4700000, 94000, 95000, 4720000 at 22
+    #: deg, 4620000 at 65 deg, 129000 at 26 deg; station 4800000, 4900000, 4710000, 4630000
+    #: at 20 deg, 4820000 at 65 deg with 30 % of the grooves broken; clean wide 5910000,
+    #: 5700000, 1082000, clean station 5820000): the 698 true chips over the limit read
+    #: 0.538 at least (wide 129081, a 0.082 x 0.042 mm chip) but for one that the run-on
+    #: test drops (0.435); the six false chips that passed the groove tests
+    #: 0.355-0.477 (grooves grazing or meeting rims). Six true chips under the limit, 0.014-
+    #: 0.018 mm deep and read 3.9-10.6 px for it (the floor read beside them is a groove's
+    #: and their depth was divided by it), read 0.367-0.401 and are no longer reported
+    chip_min_floor: float = 0.5
     #: standard uncertainties from the fits' and integrals' noise are multiplied by this,
     #: the factor the hole measurement's white-noise u took until round 12 of the vision
     #: stage (docs/vision-history.md): the texture is correlated noise the formulas do not

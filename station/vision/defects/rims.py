@@ -594,6 +594,8 @@ def rim_defects(img: np.ndarray, hole, index: int, zone_others: np.ndarray, wall
             prof_h = area if kind == "chip" else dev_int
             height = float(np.sum(sign * prof_h[win[ok] % n][inside]) * step_arc) / length
             floor = _chip_floor(prof, win[ok] % n, s_arc, s1, s2, base, edge_out, blur) if kind == "chip" else 1.0
+            if floor < cfg.chip_min_floor:
+                continue  # lit as a groove's bottom, not a broken face in shadow
             # the area counts a chip's floor at the hole's level; it may be lit
             height /= floor
             if height < cfg.rim_min_height_px:
