@@ -72,7 +72,7 @@ class DefectConfig:
     #: and the disc's own darkest tenth. A 0.47 x 0.31 mm pore, by its rays a 0.56 mm
     #: circle that it fills half of (0.55), was taken for a hole, its outline for two
     #: chips, and the pore was lost (wide bench frame 4920063). A hole's burrs take its
-    #: disc at its rim: the holes measured so (4 in 600 fresh wide and station frames)
+    #: disc at its rim: the three holes measured so in 600 fresh wide and station frames
     #: read 0.97-0.99; two of the twin's largest burrs (0.3 x 0.08 mm) on its least hole
     #: (0.6 mm) take about a tenth of it
     rim_hole_min_dark_share: float = 0.75
