@@ -70,10 +70,10 @@ class DefectConfig:
     #: ... and what its circle holds must be dark: the share of the disc inside its rim's
     #: blur (radius R - 2 blur - 1 px) darker than midway between the ring beyond the rim
     #: and the disc's own darkest tenth. A 0.47 x 0.31 mm pore, by its rays a 0.56 mm
-    #: circle that it fills half of (0.55), was taken for a hole, its outline for two
+    #: circle that it half fills (0.46), was taken for a hole, its outline for two
     #: chips, and the pore was lost (wide bench frame 4920063). A hole's burrs take its
     #: disc at its rim: the three holes measured so in 600 fresh wide and station frames
-    #: read 0.97-0.99; two of the twin's largest burrs (0.3 x 0.08 mm) on its least hole
+    #: read 0.96-0.99; two of the twin's largest burrs (0.3 x 0.08 mm) on its least hole
     #: (0.6 mm) take about a tenth of it
     rim_hole_min_dark_share: float = 0.75
     #: the honing cross-hatch's line directions (deg, image sense); None: estimated per

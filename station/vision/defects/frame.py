@@ -21,7 +21,7 @@ from station.vision.defects.wall import (
     line_band, find_candidates, split_furrows, group_collinear, groove_stretches, hole_zone, line_runs_on, model_wall,
     line_through_blob, one_furrow, seed_in_box, stretch_darkness,
 )
-from station.vision.defects.rims import grow_by_skirt, hole_blur, marks_mask, rim_defects
+from station.vision.defects.rims import grow_by_skirt, hole_blur, marks_mask, rim_blur, rim_defects
 from station.vision.defects.scratches import BLUR_PRIOR_PX
 from station.vision.defects.examine import examine_candidate, ExaminedCandidate, KnownBlur, shared_blur
 from station.vision.defects.tracking import (
@@ -64,7 +64,7 @@ def _dark_disc_share(img: np.ndarray, hole) -> float:
     hole that is all dark inside; a dark blob that fills a part of the circle its rays
     agree on reads that part."""
     r_hole = hole.diameter_px / 2.0
-    blur = float(hole.edge_sigma_px) if getattr(hole, "edge_sigma_px", None) else 1.5
+    blur = rim_blur(hole)
     reach = r_hole + 3.0 * blur + 9.0
     x0, x1 = max(int(np.floor(hole.x_px - reach)), 0), min(int(np.ceil(hole.x_px + reach)) + 1, img.shape[1])
     y0, y1 = max(int(np.floor(hole.y_px - reach)), 0), min(int(np.ceil(hole.y_px + reach)) + 1, img.shape[0])

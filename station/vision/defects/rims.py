@@ -425,6 +425,12 @@ def hole_blur(hole) -> float:
     return camera_blur_from_edge(hole.edge_sigma_px)
 
 
+def rim_blur(hole) -> float:
+    """The blur a hole's rim is read with (px): :func:`hole_blur` where its edge was
+    measured, else 1.3 px (the station's camera)."""
+    return hole_blur(hole) if getattr(hole, "edge_sigma_px", None) else 1.3
+
+
 def marks_mask(shape: tuple[int, int], found, blur: float) -> np.ndarray:
     """The frame's pores and scratches found, each as its measured ellipse (length by
     width along its direction) grown by its blurred skirt (3 blur + 2 px): whole, where
@@ -465,7 +471,7 @@ def rim_defects(img: np.ndarray, hole, index: int, zone_others: np.ndarray, wall
     """Burrs and chips on one hole's rim: where the rim's edge stands out of its own
     low harmonics, inwards (burr) or outwards (chip). ``marks``: the frame's pores and
     scratches found (``marks_mask``), which a chip's run-on test does not read."""
-    blur = hole_blur(hole) if getattr(hole, "edge_sigma_px", None) else 1.3
+    blur = rim_blur(hole)
     reach = cfg.rim_reach_mm / mm_per_px + 2.5 * blur + 2.0
     prof = _rim_profile(img, hole, zone_others, reach, wall_level, angles_deg, blur, cfg.rim_crossing,
                         cfg.rim_find_smooth_px, cfg.rim_groove_sides)
