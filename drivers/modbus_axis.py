@@ -13,8 +13,15 @@ Uses pymodbus 3.x's current async client API (checked against 3.16):
 ``write_registers(address, values, device_id=)`` (``device_id`` replaced ``slave``).
 
 Error policy: every request is bounded by ``timeout_s``; after a timeout or a
-malformed reply the link is closed, so that a late or corrupt answer cannot be taken
-for the next one, and the next call reconnects.  pymodbus' own background
+malformed reply the link is closed, and the next call reconnects.  Closing a serial
+port does not stop a late answer, though: the drive's reply to a request that timed
+out still comes down the line (RTU has no transaction id), and would be taken for the
+reply to the next request.  So a reply must answer its request (function, address,
+count); one that answers an earlier request is dropped, the line is let go quiet (this
+request's own reply then falls on no request and is dropped too), and a read, or a
+write of values, is sent once more; a command (a self-clearing bit) is not, since it
+may have acted.  Requests, the heartbeat's too, take the link one at a time, so no
+request is sent on a link another is about to close.  pymodbus' own background
 reconnection is switched off (``reconnect_delay=0``) so that the driver alone
 decides when to reconnect.  Repeating a lost connect is the caller's: the sequencer's
 retries while it runs, ``Station.connect`` at start.
@@ -89,6 +96,12 @@ RESTING_SHORT_POLLS = 10
 LINK_WATCH_S = 0.005
 #: bytes came back but no valid reply was made of them this long after: corrupt
 CORRUPT_REPLY_GRACE_S = 0.05
+#: after a late reply to an earlier request: the line counts as quiet once no byte came
+#: for this long (over 3.5 characters, the RTU frame gap, down to 2400 baud)
+QUIET_GAP_S = 0.02
+#: the Modbus functions the driver uses, as a reply names them
+FC_READ_HOLDING = 3
+FC_WRITE_MULTIPLE = 16
 
 
 class _CorruptReply(Exception):
@@ -127,6 +140,10 @@ class ModbusServoAxis(ServoAxis):
         self._client_factory = client_factory
         self._client: AsyncModbusTcpClient | AsyncModbusSerialClient | None = None
         self._rx_since_send: float | None = None
+        self._last_rx = 0.0  # when bytes last came in (the quiet wait after a stale reply)
+        self._link_lock = asyncio.Lock()
+        #: replies that answered an earlier request (late ones), dropped
+        self.stale_replies = 0
         self.name = name
         self.device_id = int(device_id)
         self.unit_per_count = float(unit_per_count)
@@ -218,8 +235,10 @@ class ModbusServoAxis(ServoAxis):
         leaves it waiting for its timeout; the watch in :meth:`_await_reply` does not)."""
         if sending:
             self._rx_since_send = None
-        elif data and self._rx_since_send is None:
-            self._rx_since_send = time.monotonic()
+        elif data:
+            self._last_rx = time.monotonic()
+            if self._rx_since_send is None:
+                self._rx_since_send = self._last_rx
         return data
 
     async def _await_reply(self, client, call: Callable[[object], Awaitable]):
@@ -257,8 +276,44 @@ class ModbusServoAxis(ServoAxis):
         if self._client is target:
             self._client = None
 
-    async def _request(self, what: str, call: Callable[[object], Awaitable]):
-        """Run one Modbus request with the driver's timeout and error mapping."""
+    async def _request(self, what: str, call: Callable[[object], Awaitable],
+                       answers: Callable[[object], bool] | None = None, repeatable: bool = True):
+        """Run one Modbus request with the driver's timeout and error mapping, holding
+        the link.  ``answers`` tells whether a reply answers this request; one that does
+        not is a late reply to an earlier request (see the module's error policy)."""
+        async with self._link_lock:
+            response = await self._exchange(what, call)
+            if answers is None or answers(response):
+                return response
+            self.stale_replies += 1
+            log.warning("%s: %s: dropped a reply to an earlier request (it came late)", self.name, what)
+            await self._quiet()
+            if not repeatable:
+                raise ProtocolError(
+                    f"{what}: the reply answered an earlier request; not sent again, as it may have acted",
+                    self.name,
+                )
+            response = await self._exchange(what, call)
+            if answers(response):
+                return response
+            self._drop_client()
+            raise ProtocolError(f"{what}: the replies answer other requests (is another master on the line?)",
+                                self.name)
+
+    async def _quiet(self) -> None:
+        """Wait until this request's own reply has come and gone (it falls on no request
+        and is dropped): bytes in after the stale reply, then a gap of ``QUIET_GAP_S``;
+        at most ``timeout_s``."""
+        loop = asyncio.get_running_loop()
+        start = time.monotonic()
+        deadline = loop.time() + self.timeout_s
+        while loop.time() < deadline:
+            await asyncio.sleep(QUIET_GAP_S / 2)
+            now = time.monotonic()
+            if self._last_rx > start and now - self._last_rx >= QUIET_GAP_S:
+                return
+
+    async def _exchange(self, what: str, call: Callable[[object], Awaitable]):
         client = await self._ensure_connected()
         try:
             # a small margin over pymodbus' own timeout, so its error (more precise) wins
@@ -299,16 +354,22 @@ class ModbusServoAxis(ServoAxis):
         r = await self._request(
             f"read {count} @ {address}",
             lambda c: c.read_holding_registers(address, count=count, device_id=self.device_id),
+            answers=lambda r: r.function_code == FC_READ_HOLDING and len(r.registers) == count,
         )
         regs = list(r.registers)
         if len(regs) != count:
             raise ProtocolError(f"asked for {count} registers, got {len(regs)}", self.name)
         return regs
 
-    async def write_registers(self, address: int, values: list[int]) -> None:
+    async def write_registers(self, address: int, values: list[int], command: bool = False) -> None:
+        """Write ``values`` from ``address``; ``command``: the write sets a self-clearing
+        command bit, so it is not sent twice (see the error policy)."""
         await self._request(
             f"write {len(values)} @ {address}",
             lambda c: c.write_registers(address, values, device_id=self.device_id),
+            answers=lambda r: (r.function_code == FC_WRITE_MULTIPLE
+                               and (r.address, r.count) == (address, len(values))),
+            repeatable=not command,
         )
 
     # ------------------------------------------------------------------ lifecycle
@@ -354,7 +415,7 @@ class ModbusServoAxis(ServoAxis):
 
     async def _command(self, bit: rm.ControlBit) -> None:
         # command bits are self-clearing in the drive: one write per command
-        await self.write_registers(rm.CONTROL_WORD, [self._control | int(bit)])
+        await self.write_registers(rm.CONTROL_WORD, [self._control | int(bit)], command=True)
 
     async def enable(self, on: bool = True) -> None:
         self._control = (self._control | rm.ControlBit.ENABLE) if on else (self._control & ~rm.ControlBit.ENABLE)
@@ -394,7 +455,7 @@ class ModbusServoAxis(ServoAxis):
     async def reset_fault(self) -> None:
         # a fault leaves the axis disabled; the caller must enable it again deliberately
         self._control &= ~rm.ControlBit.ENABLE
-        await self.write_registers(rm.CONTROL_WORD, [int(rm.ControlBit.FAULT_RESET)])
+        await self.write_registers(rm.CONTROL_WORD, [int(rm.ControlBit.FAULT_RESET)], command=True)
 
     # ------------------------------------------------------------------ reading
 

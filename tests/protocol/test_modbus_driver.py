@@ -237,6 +237,61 @@ async def test_rtu_over_a_pty_null_modem_moves_and_survives_crc_errors():
         await station.stop()
 
 
+async def test_rtu_a_late_reply_to_an_earlier_request_is_not_taken_for_the_next_ones():
+    """RTU has no transaction id, and closing the port does not stop the drive's reply to a
+    request that timed out: it comes down the line after the next request went out.  The
+    driver must see that it answers another request, drop it, and not take it as data."""
+    import dataclasses
+
+    from drivers.interfaces import register_map as rm
+    from drivers.modbus_axis import ModbusLinearAxis
+    from sim.twins import TwinStation
+
+    from .conftest import fast_scenario
+
+    sc = fast_scenario()
+    sc.axes["Z"] = dataclasses.replace(sc.axes["Z"], rtu=True)
+    station = TwinStation(sc)
+    await station.start()
+    ep = station.endpoints()["Z"]
+    axis = ModbusLinearAxis.rtu(
+        ep["rtu_path"], ep["rtu_baudrate"], name="Z", device_id=1, unit_per_count=1e-4,
+        default_velocity=20.0, default_acceleration=200.0, timeout_s=0.3, watchdog_timeout_ms=0,
+    )
+    faults = station.drives["Z"].faults
+    try:
+        await axis.connect()
+        await axis.enable()
+        await axis.move_to(3.25)
+        assert (await axis.wait_in_position(5.0)).position == pytest.approx(3.25)
+        # a write answered after the driver gave up on it (0.5 s > 0.3 s) ...
+        faults.activate(FaultKind.DELAY, delay_s=0.5)
+        with pytest.raises(DeviceTimeout):
+            await axis.write_registers(rm.MOVE_BLOCK.start, [0, 0])
+        # ... lands while the next read waits for its own (0.25 s): it is no status
+        faults.activate(FaultKind.DELAY, delay_s=0.25)
+        assert (await axis.status()).position == pytest.approx(3.25)
+        assert axis.stale_replies == 1
+        # a read answered late, then a command: its reply is the read's, and a command
+        # (a self-clearing bit) is not sent twice, since the first one may have acted
+        faults.activate(FaultKind.DELAY, delay_s=0.5)
+        with pytest.raises(DeviceTimeout):
+            await axis.status()
+        faults.activate(FaultKind.DELAY, delay_s=0.25)
+        with pytest.raises(ProtocolError, match="earlier request"):
+            await axis.stop()
+        assert axis.stale_replies == 2
+        faults.clear()
+        # the line is in step again: values written and read back are the axis' own
+        assert (await axis.status()).position == pytest.approx(3.25)
+        await axis.move_to(1.5)
+        assert (await axis.wait_in_position(5.0)).position == pytest.approx(1.5)
+        assert axis.stale_replies == 2
+    finally:
+        await axis.close()
+        await station.stop()
+
+
 async def test_move_stopped_short_is_move_interrupted_and_reissue_completes(z_axis, twins):
     """A stop that arrives late (delayed on the link) halts a later move: the driver
     reports it as MoveInterrupted, not as a 60 s timeout, and re-issuing the move works."""
