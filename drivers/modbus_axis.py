@@ -354,7 +354,8 @@ class ModbusServoAxis(ServoAxis):
         r = await self._request(
             f"read {count} @ {address}",
             lambda c: c.read_holding_registers(address, count=count, device_id=self.device_id),
-            answers=lambda r: r.function_code == FC_READ_HOLDING and len(r.registers) == count,
+            answers=lambda r: (getattr(r, "function_code", None) == FC_READ_HOLDING
+                               and len(getattr(r, "registers", ())) == count),
         )
         regs = list(r.registers)
         if len(regs) != count:
@@ -367,8 +368,8 @@ class ModbusServoAxis(ServoAxis):
         await self._request(
             f"write {len(values)} @ {address}",
             lambda c: c.write_registers(address, values, device_id=self.device_id),
-            answers=lambda r: (r.function_code == FC_WRITE_MULTIPLE
-                               and (r.address, r.count) == (address, len(values))),
+            answers=lambda r: (getattr(r, "function_code", None) == FC_WRITE_MULTIPLE
+                               and (getattr(r, "address", None), getattr(r, "count", None)) == (address, len(values))),
             repeatable=not command,
         )
 

@@ -36,11 +36,15 @@ class ByteTransport:
 
 
 class FakeResponse:
-    """A pymodbus response: registers, or an exception response (``isError``)."""
+    """A pymodbus response: the function it answers, a read's registers, the address and
+    count a write echoes, or an exception response (``isError``)."""
 
-    def __init__(self, registers, error):
+    def __init__(self, registers, error, function_code=3, address=0, count=0):
         self.registers = registers
         self._error = error
+        self.function_code = function_code | (0x80 if error else 0)
+        self.address = address
+        self.count = count
         #: Modbus exception code 2, "illegal data address" (Modbus application protocol 1.1b3, 7)
         self.exception_code = 2
 
@@ -50,7 +54,8 @@ class FakeResponse:
 
 class FakeModbusClient:
     """pymodbus' client face, answering from a script: register lists of any length and
-    value, error responses, pymodbus exceptions, None."""
+    value, error responses, replies to another request (a late one: a write's to a read,
+    a read's to a write), pymodbus exceptions, None."""
 
     def __init__(self, script: list):
         self.script = list(script)
@@ -62,15 +67,18 @@ class FakeModbusClient:
     def close(self):
         pass
 
-    def _next(self, count):
+    def _next(self, function_code, address, count):
         from pymodbus.exceptions import ConnectionException, ModbusIOException
 
         item = self.script.pop(0) if self.script else ("regs", [0] * count)
         kind, value = item
         if kind == "regs":
-            return FakeResponse(value, False)
+            return FakeResponse(value, False, function_code, address, count)
+        if kind == "stale":
+            other = 16 if function_code == 3 else 3
+            return FakeResponse(value, False, other, address + 1, len(value))
         if kind == "error":
-            return FakeResponse([], True)
+            return FakeResponse([], True, function_code)
         if kind == "none":
             return None
         if kind == "io":
@@ -78,7 +86,7 @@ class FakeModbusClient:
         raise ConnectionException(str(value))
 
     async def read_holding_registers(self, address, count=1, device_id=1):
-        return self._next(count)
+        return self._next(3, address, count)
 
     async def write_registers(self, address, values, device_id=1):
-        return self._next(0)
+        return self._next(16, address, len(values))

@@ -229,7 +229,8 @@ def modbus_scripts():
     from hypothesis import strategies as hs
 
     regs = hs.lists(hs.integers(0, 0xFFFF), max_size=10)
-    item = hs.one_of(hs.tuples(hs.just("regs"), regs), hs.tuples(hs.just("error"), hs.none()),
+    item = hs.one_of(hs.tuples(hs.just("regs"), regs), hs.tuples(hs.just("stale"), regs),
+                     hs.tuples(hs.just("error"), hs.none()),
                      hs.tuples(hs.just("none"), hs.none()), hs.tuples(hs.just("io"), hs.text(max_size=20)),
                      hs.tuples(hs.just("lost"), hs.text(max_size=20)))
     return hs.lists(item, max_size=12)

@@ -6,8 +6,8 @@ unbalanced quotes and brackets -- duplicated and swapped lines) and plain random
 the recording parser, the compensation readers (table CSV, segments CSV, JSON,
 LinuxCNC), the part spec loader, the axis model and station model readers (from TOML
 text), the encoder's frame finder and its driver on a fake serial port, and the Modbus
-driver on a fake pymodbus client answering random registers, error responses,
-exceptions and nothing. Each input must either be accepted or fail with the documented
+driver on a fake pymodbus client answering random registers, error responses, replies
+to another request (a late one), exceptions and nothing. Each input must either be accepted or fail with the documented
 typed error carrying a message: any other exception, or no answer within 5 s (SIGALRM),
 fails the test. ``station bench reliability`` runs many more examples.
 """
