@@ -104,6 +104,15 @@ FC_READ_HOLDING = 3
 FC_WRITE_MULTIPLE = 16
 
 
+def _describe_reply(response) -> str:
+    """What a reply answers, for an error's message: its function and its registers'
+    count, or the address and count a write echoes."""
+    fc = getattr(response, "function_code", None)
+    if fc == FC_WRITE_MULTIPLE:
+        return f"function 16, a write of {getattr(response, 'count', '?')} @ {getattr(response, 'address', '?')}"
+    return f"function {fc}, {len(getattr(response, 'registers', ()) or ())} registers"
+
+
 class _CorruptReply(Exception):
     """Bytes arrived for the request in flight, but pymodbus made no reply of them."""
 
@@ -290,15 +299,16 @@ class ModbusServoAxis(ServoAxis):
             await self._quiet()
             if not repeatable:
                 raise ProtocolError(
-                    f"{what}: the reply answered an earlier request; not sent again, as it may have acted",
+                    f"{what}: the reply answered an earlier request ({_describe_reply(response)}); "
+                    "not sent again, as it may have acted",
                     self.name,
                 )
             response = await self._exchange(what, call)
             if answers(response):
                 return response
             self._drop_client()
-            raise ProtocolError(f"{what}: the replies answer other requests (is another master on the line?)",
-                                self.name)
+            raise ProtocolError(f"{what}: two replies running answered other requests (the last: "
+                                f"{_describe_reply(response)})", self.name)
 
     async def _quiet(self) -> None:
         """Wait until this request's own reply has come and gone (it falls on no request
@@ -357,10 +367,7 @@ class ModbusServoAxis(ServoAxis):
             answers=lambda r: (getattr(r, "function_code", None) == FC_READ_HOLDING
                                and len(getattr(r, "registers", ())) == count),
         )
-        regs = list(r.registers)
-        if len(regs) != count:
-            raise ProtocolError(f"asked for {count} registers, got {len(regs)}", self.name)
-        return regs
+        return list(r.registers)
 
     async def write_registers(self, address: int, values: list[int], command: bool = False) -> None:
         """Write ``values`` from ``address``; ``command``: the write sets a self-clearing
