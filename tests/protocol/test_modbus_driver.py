@@ -256,28 +256,31 @@ async def test_rtu_a_late_reply_to_an_earlier_request_is_not_taken_for_the_next_
     ep = station.endpoints()["Z"]
     axis = ModbusLinearAxis.rtu(
         ep["rtu_path"], ep["rtu_baudrate"], name="Z", device_id=1, unit_per_count=1e-4,
-        default_velocity=20.0, default_acceleration=200.0, timeout_s=0.3, watchdog_timeout_ms=0,
+        default_velocity=20.0, default_acceleration=200.0, timeout_s=1.0, watchdog_timeout_ms=0,
     )
     faults = station.drives["Z"].faults
+    # the late reply (1.4 s) must come while the next request waits for its own (0.6 s):
+    # that request may go out up to 0.4 s after the timeout (a loaded machine), and the
+    # request sent again after the late reply has 0.4 s to spare within its timeout
     try:
         await axis.connect()
         await axis.enable()
         await axis.move_to(3.25)
         assert (await axis.wait_in_position(5.0)).position == pytest.approx(3.25)
-        # a write answered after the driver gave up on it (0.5 s > 0.3 s) ...
-        faults.activate(FaultKind.DELAY, delay_s=0.5)
+        # a write answered after the driver gave up on it (1.4 s > 1 s) ...
+        faults.activate(FaultKind.DELAY, delay_s=1.4)
         with pytest.raises(DeviceTimeout):
             await axis.write_registers(rm.MOVE_BLOCK.start, [0, 0])
-        # ... lands while the next read waits for its own (0.25 s): it is no status
-        faults.activate(FaultKind.DELAY, delay_s=0.25)
+        # ... lands while the next read waits for its own (0.6 s): it is no status
+        faults.activate(FaultKind.DELAY, delay_s=0.6)
         assert (await axis.status()).position == pytest.approx(3.25)
         assert axis.stale_replies == 1
         # a read answered late, then a command: its reply is the read's, and a command
         # (a self-clearing bit) is not sent twice, since the first one may have acted
-        faults.activate(FaultKind.DELAY, delay_s=0.5)
+        faults.activate(FaultKind.DELAY, delay_s=1.4)
         with pytest.raises(DeviceTimeout):
             await axis.status()
-        faults.activate(FaultKind.DELAY, delay_s=0.25)
+        faults.activate(FaultKind.DELAY, delay_s=0.6)
         with pytest.raises(ProtocolError, match="earlier request"):
             await axis.stop()
         assert axis.stale_replies == 2
