@@ -314,13 +314,10 @@ class ModbusServoAxis(ServoAxis):
         """Wait until this request's own reply has come and gone (it falls on no request
         and is dropped): bytes in after the stale reply, then a gap of ``QUIET_GAP_S``;
         at most ``timeout_s``."""
-        loop = asyncio.get_running_loop()
         start = time.monotonic()
-        deadline = loop.time() + self.timeout_s
-        while loop.time() < deadline:
+        while time.monotonic() - start < self.timeout_s:
             await asyncio.sleep(QUIET_GAP_S / 2)
-            now = time.monotonic()
-            if self._last_rx > start and now - self._last_rx >= QUIET_GAP_S:
+            if self._last_rx > start and time.monotonic() - self._last_rx >= QUIET_GAP_S:
                 return
 
     async def _exchange(self, what: str, call: Callable[[object], Awaitable]):

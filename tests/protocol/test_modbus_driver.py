@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import contextlib
 
 import pytest
 
@@ -205,7 +206,10 @@ async def test_heartbeat_period_must_fit_the_watchdog():
         ModbusLinearAxis.tcp("127.0.0.1", 1, watchdog_timeout_ms=100, heartbeat_period_s=0.1, **make_axis_args)
 
 
-async def test_rtu_over_a_pty_null_modem_moves_and_survives_crc_errors():
+@contextlib.asynccontextmanager
+async def rtu_axis(**kw):
+    """The Z drive's twin on Modbus RTU over a pty null modem, and the driver on its other
+    end (connected, enabled, at 3.25 mm); both stopped after."""
     import dataclasses
 
     from drivers.modbus_axis import ModbusLinearAxis
@@ -220,53 +224,39 @@ async def test_rtu_over_a_pty_null_modem_moves_and_survives_crc_errors():
     ep = station.endpoints()["Z"]
     axis = ModbusLinearAxis.rtu(
         ep["rtu_path"], ep["rtu_baudrate"], name="Z", device_id=1, unit_per_count=1e-4,
-        default_velocity=20.0, default_acceleration=200.0, timeout_s=0.3,
+        default_velocity=20.0, default_acceleration=200.0, **kw,
     )
     try:
         await axis.connect()
         await axis.enable()
         await axis.move_to(3.25)
         assert (await axis.wait_in_position(5.0)).position == pytest.approx(3.25)
+        yield station, axis
+    finally:
+        await axis.close()
+        await station.stop()
+
+
+async def test_rtu_over_a_pty_null_modem_moves_and_survives_crc_errors():
+    async with rtu_axis(timeout_s=0.3) as (station, axis):
         station.drives["Z"].faults.activate(FaultKind.CHECKSUM)
         with pytest.raises((DeviceTimeout, ProtocolError)):  # a frame with a bad CRC is dropped
             await axis.status()
         station.drives["Z"].faults.clear()
         assert (await axis.status()).position == pytest.approx(3.25)
-    finally:
-        await axis.close()
-        await station.stop()
 
 
 async def test_rtu_a_late_reply_to_an_earlier_request_is_not_taken_for_the_next_ones():
     """RTU has no transaction id, and closing the port does not stop the drive's reply to a
     request that timed out: it comes down the line after the next request went out.  The
     driver must see that it answers another request, drop it, and not take it as data."""
-    import dataclasses
-
     from drivers.interfaces import register_map as rm
-    from drivers.modbus_axis import ModbusLinearAxis
-    from sim.twins import TwinStation
 
-    from .conftest import fast_scenario
-
-    sc = fast_scenario()
-    sc.axes["Z"] = dataclasses.replace(sc.axes["Z"], rtu=True)
-    station = TwinStation(sc)
-    await station.start()
-    ep = station.endpoints()["Z"]
-    axis = ModbusLinearAxis.rtu(
-        ep["rtu_path"], ep["rtu_baudrate"], name="Z", device_id=1, unit_per_count=1e-4,
-        default_velocity=20.0, default_acceleration=200.0, timeout_s=1.0, watchdog_timeout_ms=0,
-    )
-    faults = station.drives["Z"].faults
     # the late reply (1.4 s) must come while the next request waits for its own (0.6 s):
     # that request may go out up to 0.4 s after the timeout (a loaded machine), and the
     # request sent again after the late reply has 0.4 s to spare within its timeout
-    try:
-        await axis.connect()
-        await axis.enable()
-        await axis.move_to(3.25)
-        assert (await axis.wait_in_position(5.0)).position == pytest.approx(3.25)
+    async with rtu_axis(timeout_s=1.0, watchdog_timeout_ms=0) as (station, axis):
+        faults = station.drives["Z"].faults
         # a write answered after the driver gave up on it (1.4 s > 1 s) ...
         faults.activate(FaultKind.DELAY, delay_s=1.4)
         with pytest.raises(DeviceTimeout):
@@ -290,9 +280,6 @@ async def test_rtu_a_late_reply_to_an_earlier_request_is_not_taken_for_the_next_
         await axis.move_to(1.5)
         assert (await axis.wait_in_position(5.0)).position == pytest.approx(1.5)
         assert axis.stale_replies == 2
-    finally:
-        await axis.close()
-        await station.stop()
 
 
 async def test_move_stopped_short_is_move_interrupted_and_reissue_completes(z_axis, twins):
