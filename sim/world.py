@@ -140,6 +140,9 @@ class World:
     temperature: Temperature = field(default_factory=Temperature)
     repeatability: Repeatability = field(default_factory=Repeatability)
     drift: Drift = field(default_factory=Drift)
+    #: the camera's sensor flaws (``sim.camera.sensor.SensorFlaws``: hot and dim pixels,
+    #: a trap in a column); None: a flawless sensor
+    camera_sensor: Any = None
 
     def __post_init__(self):
         self._rng = np.random.default_rng(self.repeatability.seed)
@@ -309,7 +312,8 @@ def world_from_dict(data: dict[str, Any], source: str = "<dict>", base: Path | N
     (``[world.screw_heating]``, ``[world.ambient]``, ``[world.wear]``,
     ``[world.collision]``: sim.drift), ``[[world.holes]]`` (name, axial_mm,
     angle_deg, diameter_mm), ``[[world.defects]]`` (``SurfaceDefect``'s fields) and
-    ``texture_seed`` and ``hatch_deg`` (``PartTruth``'s)."""
+    ``texture_seed`` and ``hatch_deg`` (``PartTruth``'s), ``[world.camera_sensor]``
+    (``sim.camera.sensor.SensorFlaws``'s fields: the camera's flawed pixels)."""
     model_path = data.get("model")
     if model_path is not None:
         p = Path(model_path)
@@ -372,11 +376,24 @@ def world_from_dict(data: dict[str, Any], source: str = "<dict>", base: Path | N
     if isinstance(hatch, bool) or not isinstance(hatch, (int, float)) or not 0.0 < hatch < 90.0:
         raise ValueError(f"{source}: world.hatch_deg must be a half-angle in degrees between 0 and 90 (exclusive), "
                          f"not {hatch!r}")
+    sensor = None
+    if "camera_sensor" in data:
+        from sim.camera.sensor import SensorFlaws
+
+        table = data["camera_sensor"]
+        known = {f.name for f in fields(SensorFlaws)}
+        if not isinstance(table, dict) or set(table) - known:
+            raise ValueError(f"{source}: [world.camera_sensor] takes only {sorted(known)}, not "
+                             f"{sorted(set(table) - known) if isinstance(table, dict) else table!r}")
+        try:
+            sensor = SensorFlaws(**table)
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"{source}: [world.camera_sensor]: {exc}") from None
     part = PartTruth(str(data.get("part_number", STANDARD_SAMPLE.part_number)),
                      float(data.get("bore_diameter_mm", STANDARD_SAMPLE.bore_diameter_mm)), holes, tuple(defects),
                      texture_seed, float(hatch))
     try:
-        return World(model, part, temperature, repeatability, drift_from_dict(data, source))
+        return World(model, part, temperature, repeatability, drift_from_dict(data, source), sensor)
     except ValueError as exc:
         msg = str(exc)
         raise ValueError(msg if msg.startswith(source) else f"{source}: {msg}") from None

@@ -52,6 +52,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import dataclasses
 import hashlib
 import logging
 import tomllib
@@ -123,6 +124,9 @@ class Station:
     #: lens's distortion, for what the station measures off the frame's centre (the
     #: surface scan's defects and picture); None: not calibrated (everything re-centred)
     camera_calibration: Any = None
+    #: the camera's flawed pixels (``station.vision.pixelmap.PixelMap``, from ``station
+    #: vision pixel-map``), mended in every frame before it is measured; None: none known
+    pixel_map: Any = None
 
     @contextlib.contextmanager
     def master_on_table(self, cert, *, bore_diameter_mm: float, seed: int = 0):
@@ -278,7 +282,7 @@ async def open_session(config: str | Path | None = None, *, scenario: str | Path
         # limits solved) done in threads before the drives connect: once connected,
         # their heartbeats ride this loop, and a drive's watchdog trips on a stall of 1 s
         settings = settings or ScanSettings()
-        measure = await asyncio.to_thread(vision_measure, station.mm_per_px)
+        measure = await asyncio.to_thread(vision_measure, station.mm_per_px, station.pixel_map)
         watch = await asyncio.to_thread(StationWatch, gate_um=settings.model_u_um)
         # the heap built so far (kernels, store, app) is left out of the collections the
         # session's life brings: a full one over it held the loop for 0.4-0.75 s. Its
@@ -286,7 +290,7 @@ async def open_session(config: str | Path | None = None, *, scenario: str | Path
         with heap_frozen():
             await station.connect()
             devices = Devices(station.z, station.c, station.encoder, station.camera, measure=measure,
-                              surface=vision_defects(station.mm_per_px))
+                              surface=vision_defects(station.mm_per_px, station.pixel_map))
             session = Session(station, store, Engine(devices), settings, watch=watch)
             annotator = station.truth_annotator()
             if annotator is not None:
@@ -407,6 +411,26 @@ def build_station(config_path: str | Path | None = None, *, scenario: str | Path
         except (OSError, ValueError, KeyError, TypeError) as exc:
             raise ConfigError(f"{source}: {where} calibration: {path}: {exc}") from None
 
+    def pixel_map(table: dict, where: str, size: tuple[int, int]):
+        """The camera's pixel map named by ``table["pixel_map"]``, loaded and checked
+        against the frame's ``size``; None when not named."""
+        from station.vision.pixelmap import PixelMap
+
+        given = table.get("pixel_map")
+        if given is None:
+            return None
+        path = resolve(str(given))
+        try:
+            pmap = PixelMap.load(path)
+        except OSError as exc:
+            raise ConfigError(f"{source}: {where} pixel_map: {path}: {exc.strerror or exc}") from None
+        except ValueError as exc:
+            raise ConfigError(f"{source}: {where} pixel_map: {exc}") from None
+        if (pmap.width, pmap.height) != tuple(size):
+            raise ConfigError(f"{source}: {where} pixel_map: {path} is for {pmap.width} x {pmap.height} frames, "
+                              f"the camera's are {size[0]} x {size[1]}")
+        return pmap
+
     if mode == "hardware":
         hw = data.get("hardware", {})
         for key in ("Z", "C"):
@@ -419,7 +443,7 @@ def build_station(config_path: str | Path | None = None, *, scenario: str | Path
             e = hw["encoder"]
             enc = SerialGratingEncoder(str(e["serial_port"]), baudrate=int(e.get("baudrate", 115200)),
                                        resolution_um=float(e.get("resolution_um", 0.05)))
-        cam, scale, size, cal = None, 0.010, (1280, 1024), None
+        cam, scale, size, cal, pmap = None, 0.010, (1280, 1024), None, None
         if "camera" in hw:
             from drivers.camera import OpenCVCamera
 
@@ -443,8 +467,9 @@ def build_station(config_path: str | Path | None = None, *, scenario: str | Path
                     raise ConfigError(f"{source}: [hardware.camera] exposure_s / readout_s: {exc}") from None
             scale = float(k["mm_per_px"])
             cal = camera_calibration(k, "[hardware.camera]")
+            pmap = pixel_map(k, "[hardware.camera]", size)
         return Station(z, c, enc, model, mode, chash, camera=cam, mm_per_px=scale, frame_size_px=size,
-                       station_id=config_station_id(data, source), camera_calibration=cal)
+                       station_id=config_station_id(data, source), camera_calibration=cal, pixel_map=pmap)
 
     if mode != "simulated":
         raise ConfigError(f"{source}: [station] mode must be 'simulated' or 'hardware', not {mode!r}")
@@ -484,6 +509,10 @@ def build_station(config_path: str | Path | None = None, *, scenario: str | Path
         from sim.camera.twin import CameraOptics, CameraTwin
 
         optics = CameraOptics()
+        if world.camera_sensor is not None:
+            # the world's camera has flawed pixels: the twin renders them, the station
+            # knows of them only through its pixel map ([simulation] pixel_map)
+            optics = dataclasses.replace(optics, params=dataclasses.replace(optics.params, sensor=world.camera_sensor))
         cam = CameraTwin(world, twins.station.physics["Z"], twins.station.physics["C"], optics, render_process=True)
     except BaseException:
         twins.stop()
@@ -491,7 +520,12 @@ def build_station(config_path: str | Path | None = None, *, scenario: str | Path
     # the twin's endoscope as the station knows it: a calibration from chessboard views
     # rendered through its lens (`station sim camera-calibration`), never the lens itself
     cal = camera_calibration(sim_cfg, "[simulation]", SIM_CAMERA_CALIBRATION)
+    try:
+        pmap = pixel_map(sim_cfg, "[simulation]", (optics.params.width_px, optics.params.height_px))
+    except BaseException:
+        twins.stop()
+        raise
     return Station(axes["Z"], axes["C"], enc, model, mode, chash, camera=cam, mm_per_px=optics.mm_per_px,
                    frame_size_px=(optics.params.width_px, optics.params.height_px), time_scale=scen.time_scale,
                    twins=twins, world=world, endpoints=endpoints, station_id=config_station_id(data, source),
-                   camera_calibration=cal)
+                   camera_calibration=cal, pixel_map=pmap)

@@ -85,11 +85,15 @@ async def apply_model(rt: StationRuntime, text: str, source: str) -> None:
 
 
 def _set_scale(rt: StationRuntime, mm_per_px: float) -> None:
-    """On the station loop: the vision scale and the engine's measure stage together."""
-    from station.inspection.session import vision_measure
+    """On the station loop: the vision scale and the engine's measure and surface stages
+    together (the camera's pixel map kept)."""
+    from station.inspection.session import vision_defects, vision_measure
 
     rt.station.mm_per_px = mm_per_px
-    rt.engine.devices.measure = vision_measure(mm_per_px)
+    pmap = getattr(rt.station, "pixel_map", None)
+    rt.engine.devices.measure = vision_measure(mm_per_px, pmap)
+    if rt.engine.devices.surface is not None:
+        rt.engine.devices.surface = vision_defects(mm_per_px, pmap)
 
 
 async def apply_calibration(rt: StationRuntime, text: str, source: str) -> None:

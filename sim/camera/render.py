@@ -38,6 +38,9 @@ import numpy as np
 from scipy.ndimage import gaussian_filter1d
 
 from sim.camera.lens import BrownLens, ideal_pixel_grid
+from sim.camera.sensor import SensorFlaws
+from sim.camera.sensor import collect as sensor_collect
+from sim.camera.sensor import transfer as sensor_transfer
 
 #: supersampling per axis for hole-edge pixels: 48 x 48 samples, 12 x 12 per sub-pixel
 #: of ``EDGE_FINE`` (before round 17: 16 x 16, 0.09 s per station frame against 0.13 s)
@@ -127,6 +130,10 @@ class FrameParams:
     psf_disc_px: float = 0.0
     psf_smear_px: float = 0.0
     psf_smear_deg: float = 0.0
+    #: the sensor's flawed pixels (``sim.camera.sensor``: hot and dim pixels, a trap in a
+    #: column), the same in every frame; None: a flawless sensor, and every frame is what
+    #: it was before flaws existed
+    sensor: SensorFlaws | None = None
 
 
 @dataclass
@@ -489,9 +496,16 @@ def render_frame(params: FrameParams, holes: list[HoleSpec], seed: int | None = 
         cy = params.lens.cy_px if params.lens else (h - 1) / 2
         radiance *= vignetting_gain(w, h, float(cx), float(cy), float(params.vignetting))
     signal = np.clip(radiance, 0, None)
+    if params.sensor is not None:
+        signal = sensor_collect(signal, params.sensor)  # dim pixels' share, hot pixels' dark signal
     noise = np.sqrt(signal / params.gain_e_per_dn) * rng.standard_normal((h, w), dtype=np.float32)
-    noise += params.read_noise_dn * rng.standard_normal((h, w), dtype=np.float32)
-    image = np.clip(np.rint(signal + noise), 0, 255).astype(np.uint8)
+    read = params.read_noise_dn * rng.standard_normal((h, w), dtype=np.float32)
+    if params.sensor is not None:
+        # the traps take charge on its way to the readout: after the shot noise, before the read's
+        image = np.clip(np.rint(sensor_transfer(signal + noise, params.sensor) + read), 0, 255).astype(np.uint8)
+    else:
+        noise += read
+        image = np.clip(np.rint(signal + noise), 0, 255).astype(np.uint8)
     return Frame(image=image, holes=truths, params=params, defects=defect_truths,
                  grooves=parts.get("grooves") if parts else None)
 

@@ -12,7 +12,7 @@ import typer
 bench_app = typer.Typer(help="Benchmarks: speed and accuracy, medians over repeats.", no_args_is_help=True)
 
 _BENCHES = ("kinematics", "vision", "vision_bound", "drivers", "discovery", "inspect", "reliability", "api", "soak",
-            "calibration", "defects", "surface")
+            "calibration", "defects", "surface", "pixelmap")
 
 
 def register(app: typer.Typer) -> None:

@@ -38,6 +38,35 @@ def _read_linear(image: Path, gamma: float):
         fail(f"{image}: --gamma: {exc} (1: a linear camera)")
 
 
+def _pixel_map(path: Optional[Path]):
+    """The camera's pixel map from ``path`` (``station vision pixel-map``), or None; a bad
+    file ends the command naming it."""
+    if path is None:
+        return None
+    from station.vision.pixelmap import PixelMap
+
+    try:
+        return PixelMap.load(path)
+    except OSError as exc:
+        fail(f"{path}: cannot read the pixel map ({exc.strerror or exc})")
+    except ValueError as exc:
+        fail(str(exc))
+
+
+def _mended(frame, pixel_map, image: Path):
+    """``frame`` with the camera's flawed pixels mended (``PixelMap.repair``); a frame of
+    another size than the map's ends the command."""
+    if pixel_map is None:
+        return frame
+    try:
+        return pixel_map.repair(frame)
+    except ValueError as exc:
+        fail(f"{image}: {exc}")
+
+
+PIXEL_MAP_HELP = "the camera's flawed pixels (JSON from `station vision pixel-map`), mended before measuring"
+
+
 @vision_app.command("measure")
 def measure(
     image: Path = typer.Argument(..., help="frame to measure (any format OpenCV reads)"),
@@ -45,6 +74,7 @@ def measure(
     calibration: Optional[Path] = typer.Option(None, "--calibration", help="JSON from `station vision calibrate`"),
     gamma: float = typer.Option(1.0, "--gamma", help="the camera's response gamma (pixel = full x light^gamma: "
                                 "sRGB-like cameras 0.45, 1 linear); frames are made linear first"),
+    pixel_map: Optional[Path] = typer.Option(None, "--pixel-map", help=PIXEL_MAP_HELP),
     as_json: bool = typer.Option(False, "--json", help="one JSON object on stdout"),
 ) -> None:
     """Find the compensating holes in IMAGE and measure them sub-pixel."""
@@ -61,7 +91,8 @@ def measure(
             cal = CameraCalibration.load(calibration)
         except (OSError, ValueError, KeyError, TypeError) as exc:
             fail(f"{calibration}: not a usable calibration file ({exc})")
-    frame = _read_linear(image, gamma)
+    pmap = _pixel_map(pixel_map)
+    frame = _mended(_read_linear(image, gamma), pmap, image)
     if cal is not None and tuple(cal.image_size) != (frame.shape[1], frame.shape[0]):
         fail(f"calibration is for {cal.image_size[0]}x{cal.image_size[1]} px, the image is {frame.shape[1]}x{frame.shape[0]}")
     holes = measure_holes(frame, mm_per_px=mm_per_px, calibration=cal)
@@ -103,6 +134,7 @@ def defects_cmd(
                                                                     "known; else read from the frame"),
     gamma: float = typer.Option(1.0, "--gamma", help="the camera's response gamma (pixel = full x light^gamma: "
                                 "sRGB-like cameras 0.45, 1 linear); frames are made linear first"),
+    pixel_map: Optional[Path] = typer.Option(None, "--pixel-map", help=PIXEL_MAP_HELP),
     as_json: bool = typer.Option(False, "--json", help="one JSON object on stdout"),
 ) -> None:
     """Find and measure surface defects in IMAGE: pores, scratches, and burrs and chips at
@@ -113,7 +145,8 @@ def defects_cmd(
         fail(f"{image}: --mm-per-px must be positive, not {mm_per_px}")
     if blur_px is not None and not blur_px > 0:
         fail(f"{image}: --blur-px must be positive, not {blur_px}")
-    frame = _read_linear(image, gamma)
+    pmap = _pixel_map(pixel_map)
+    frame = _mended(_read_linear(image, gamma), pmap, image)
     if min(frame.shape) < 64:
         fail(f"{image}: {frame.shape[1]} x {frame.shape[0]} px is too small to model the wall (at least 64 x 64)")
     found = detect_defects(frame, mm_per_px, blur_px=blur_px)
@@ -128,6 +161,54 @@ def defects_cmd(
                       f"{d.width_mm:.3f}", f"{d.width_u_mm:.3f}", f"{d.angle_deg:.0f}",
                       "-" if d.hole is None else str(d.hole), f"{d.confidence:.2f}")
     out_console.print(table)
+
+
+@vision_app.command("pixel-map")
+def pixel_map_cmd(
+    images: list[Path] = typer.Argument(..., help="frames of the bore wall moving under the camera (a coverage "
+                                                  "scan's, or the table turning between frames): at least 12"),
+    out: Path = typer.Option(..., "--out", "-o", help="the map's JSON file (for --pixel-map and the station's "
+                                                     "[hardware.camera] pixel_map)"),
+    gamma: float = typer.Option(1.0, "--gamma", help="the camera's response gamma; frames are made linear first"),
+    as_json: bool = typer.Option(False, "--json", help="a JSON summary on stdout"),
+) -> None:
+    """Find the camera's flawed pixels (hot, dim, a column short below a trap) from frames
+    of a moving wall: the pixels that stand out of their neighbourhood the same way in
+    most frames (docs/vision.md, "The camera's flawed pixels")."""
+    from rich.progress import Progress
+
+    from station.vision.pixelmap import MIN_FRAMES, PixelMapBuilder
+
+    if len(images) < MIN_FRAMES:
+        fail(f"a pixel map needs at least {MIN_FRAMES} frames of a moving wall, got {len(images)}")
+    builder = PixelMapBuilder()
+    with Progress(console=err_console, transient=True) as bar:
+        task = bar.add_task("reading frames", total=len(images))
+        for image in images:
+            try:
+                builder.add(_read_linear(image, gamma))
+            except ValueError as exc:
+                fail(f"{image}: {exc}")
+            bar.advance(task)
+    pmap = builder.result(source=f"{len(images)} frames, first {images[0]}")
+    try:
+        pmap.save(out)
+    except OSError as exc:
+        fail(f"{out}: cannot write the pixel map ({exc.strerror or exc})")
+    hot = sum(1 for p in pmap.pixels if p[2] == "hot")
+    summary = {"map": str(out), "frames": pmap.frames, "width": pmap.width, "height": pmap.height,
+               "hot": hot, "dim": len(pmap.pixels) - hot,
+               "columns": [{"col": c, "first_row": a, "last_row": b, "offset_dn": round(o, 2)}
+                           for c, a, b, o in pmap.columns]}
+    if as_json:
+        print_json(summary)
+        return
+    out_console.print(f"{out}: {hot} hot and {len(pmap.pixels) - hot} dim pixel(s), {len(pmap.columns)} flawed "
+                      f"column stretch(es), from {pmap.frames} frames of {pmap.width} x {pmap.height} px",
+                      highlight=False)
+    for c in summary["columns"]:
+        out_console.print(f"  column {c['col']}: rows {c['first_row']}-{c['last_row']}, {c['offset_dn']:+.1f} DN",
+                          highlight=False)
 
 
 @vision_app.command("calibrate")

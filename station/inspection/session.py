@@ -27,29 +27,41 @@ from station.parts.spec import PartSpec
 from station.sequencer.engine import Engine
 
 
-def vision_measure(mm_per_px: float):
+def vision_measure(mm_per_px: float, pixel_map=None):
     """The vision stage as the engine calls it: image -> hole measurements.  Its compiled
-    kernels are loaded here, before any inspection (``warm_up``)."""
+    kernels are loaded here, before any inspection (``warm_up``). ``pixel_map``: the
+    camera's flawed pixels (``station.vision.pixelmap.PixelMap``), mended in each frame
+    first; None: none known."""
     from station.vision.measure import measure_holes, warm_up
 
     warm_up()
 
     def measure(image):
-        return measure_holes(image, mm_per_px=mm_per_px)
+        return measure_holes(_mended(image, pixel_map), mm_per_px=mm_per_px)
 
     return measure
 
 
-def vision_defects(mm_per_px: float):
+def _mended(image, pixel_map):
+    """``image`` with the camera's flawed pixels mended (grey frames; a colour frame is
+    made grey first, as the vision stage would)."""
+    if pixel_map is None:
+        return image
+    from drivers.interfaces.pixels import to_grey
+
+    return pixel_map.repair(to_grey(image))
+
+
+def vision_defects(mm_per_px: float, pixel_map=None):
     """The surface inspection as the engine calls it: image -> defects
     (``station.vision.defects.detect_defects``: pores, scratches, and burrs and chips at
     the frame's holes, which it measures itself). ``blur_px``: the camera's blur as the
     bore scan read it at the holes' edges (``MeasureSurface.blur_px``); None: read in
-    the frame itself."""
+    the frame itself. ``pixel_map``: as ``vision_measure``'s."""
     from station.vision.defects import detect_defects
 
     def surface(image, blur_px: float | None = None):
-        return detect_defects(image, mm_per_px, blur_px=blur_px)
+        return detect_defects(_mended(image, pixel_map), mm_per_px, blur_px=blur_px)
 
     return surface
 

@@ -61,6 +61,44 @@ def test_config_errors_name_file_and_key(tmp_path):
         build_station(p)
 
 
+def test_the_cameras_pixel_map_is_loaded_and_checked_against_its_frames(tmp_path):
+    """``[hardware.camera] pixel_map``: the camera's flawed pixels (station vision
+    pixel-map), loaded with the station and mended in every frame; a map of another frame
+    size or a bad file is a configuration error naming both."""
+    from station.vision.pixelmap import PixelMap
+
+    PixelMap(1280, 1024, [(5, 7, "hot")], [(41, 0, 400, -12.0)], frames=16).save(tmp_path / "map.json")
+    PixelMap(640, 480).save(tmp_path / "small.json")
+    (tmp_path / "bad.json").write_text("{")
+    head = '[station]\nmode = "hardware"\n[hardware.Z]\nhost = "z"\n[hardware.C]\nhost = "c"\n'
+    cam = '[hardware.camera]\ndevice = "x.avi"\nmm_per_px = 0.01\n'
+    p = tmp_path / "station.toml"
+    p.write_text(head + cam + 'pixel_map = "map.json"\n')
+    st = build_station(p)
+    assert st.pixel_map.pixels == [(5, 7, "hot")] and st.pixel_map.columns[0][:3] == (41, 0, 400)
+    p.write_text(head + cam + 'pixel_map = "small.json"\n')
+    with pytest.raises(ConfigError, match=r"pixel_map: .*small.json is for 640 x 480 frames, the camera's are 1280 x"):
+        build_station(p)
+    p.write_text(head + cam + 'pixel_map = "bad.json"\n')
+    with pytest.raises(ConfigError, match=r"\[hardware.camera\] pixel_map: .*bad.json: line 1"):
+        build_station(p)
+    p.write_text(head + cam)
+    assert build_station(p).pixel_map is None
+
+
+def test_a_worlds_camera_sensor_is_read_and_bad_keys_named(tmp_path):
+    from sim.camera.sensor import SensorFlaws
+    from sim.world import world_from_dict
+
+    w = world_from_dict({"camera_sensor": {"seed": 3, "traps": 2}}, "s.toml")
+    assert w.camera_sensor == SensorFlaws(seed=3, traps=2)
+    assert world_from_dict({}, "s.toml").camera_sensor is None
+    with pytest.raises(ValueError, match=r"s.toml: \[world.camera_sensor\] takes only .*not \['hot'\]"):
+        world_from_dict({"camera_sensor": {"hot": 1}}, "s.toml")
+    with pytest.raises(ValueError, match=r"s.toml: \[world.camera_sensor\]: sensor flaws: hot_share"):
+        world_from_dict({"camera_sensor": {"hot_share": 0.5}}, "s.toml")
+
+
 def test_example_hardware_config_builds_drivers_without_connecting(tmp_path):
     from pathlib import Path
 
