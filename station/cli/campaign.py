@@ -180,3 +180,55 @@ def register(app: typer.Typer) -> None:
                                   f"with station model approve {res.proposal.id} --who NAME)")
             out_console.print(f"[dim]files in {res.out_dir}/[/]")
         raise typer.Exit(2 if res.report is None else (0 if res.verdict == "no-mismatch" else 1))
+
+    @check_app.command("camera")
+    def check_camera(
+        frames: int = typer.Option(16, "--frames", help="frames of the bore wall, the table turned between them"),
+        axial: Optional[float] = typer.Option(None, "--axial-mm", help="where along the bore (default: the part's "
+                                                                      "first compensating hole)"),
+        part: str = typer.Option("ZDZG-22.2-12.3851", "--part", help="the part family on the table (built-in part "
+                                                                    "number or spec file)"),
+        out: Optional[Path] = typer.Option(None, "--out", help="folder for pixel_map.json and check.json (default "
+                                                               "<data>/checks/camera/<time>)"),
+        config: Optional[Path] = typer.Option(None, "--config", help="station config TOML (default: simulated)"),
+        scenario: Optional[Path] = typer.Option(None, "--scenario", help="twin scenario TOML (simulation only)"),
+        data: Path = typer.Option(Path("var"), "--data", help="data folder: database, checks"),
+        time_scale: float = typer.Option(20.0, "--time-scale", help="simulation: moves this much faster"),
+        json: bool = typer.Option(False, "--json", help="one JSON object on stdout"),
+    ) -> None:
+        """The camera's flawed pixels (hot, dim, a trapped column) found in frames of the bore
+        wall turning under it, against the station's pixel map (docs/vision.md). Exit 0 when
+        the map holds them all, 1 when the sensor has flaws the map lacks, 2 error."""
+        import asyncio
+
+        from drivers.interfaces import DriverError
+        from station.checks.camera import CameraCheckSettings
+        from station.parts import load_part
+        from station.runtime import ConfigError, open_session
+        from station.store.errors import StoreError
+
+        if scenario is not None and not scenario.is_file():
+            fail(f"{scenario}: no such scenario file", 2)
+        try:
+            settings = CameraCheckSettings(frames=frames, axial_mm=axial)
+            family = load_part(part)
+        except ValueError as exc:
+            fail(str(exc), 2)
+
+        async def go():
+            async with open_session(config, scenario=scenario, time_scale=time_scale, data_dir=data) as s:
+                return await s.check_camera(family, settings=settings, out_dir=out)
+
+        try:
+            res = asyncio.run(go())
+        except (ConfigError, StoreError, DriverError, OSError, ValueError) as exc:
+            fail(str(exc), 2)
+        if json:
+            print_json(res.to_json())
+        else:
+            out_console.print(res.summary(), highlight=False)
+            for c, a, b, o in res.new_columns:
+                out_console.print(f"  new: column {c}, rows {a}-{b}, {o:+.1f} DN", highlight=False)
+            if res.out_dir is not None:
+                out_console.print(f"[dim]files in {res.out_dir}/[/]")
+        raise typer.Exit(2 if res.state != "complete" else (0 if res.up_to_date else 1))

@@ -323,3 +323,13 @@ class Session:
 
         return await run_axis_check(self, family, settings=settings, out_dir=out_dir, propose=propose, plots=plots,
                                     holes_mm=holes_mm)
+
+    async def check_camera(self, family: PartSpec, *, settings=None, out_dir: str | Path | None = None):
+        """The station's own check of its camera's sensor on the part in place
+        (``station.checks.camera``; ``settings``: a ``CameraCheckSettings``): the flawed
+        pixels found in frames of the turning wall against the station's pixel map, the
+        map in ``out_dir`` (default ``<data>/checks/camera/<time>``). Returns a
+        ``CameraCheckOutcome``."""
+        from station.checks.camera import run_camera_check
+
+        return await run_camera_check(self, family, settings=settings, out_dir=out_dir)
