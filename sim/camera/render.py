@@ -40,6 +40,7 @@ from scipy.ndimage import gaussian_filter1d
 from sim.camera.lens import BrownLens, ideal_pixel_grid
 from sim.camera.sensor import SensorFlaws
 from sim.camera.sensor import collect as sensor_collect
+from sim.camera.sensor import through_window as sensor_window
 from sim.camera.sensor import transfer as sensor_transfer
 
 #: supersampling per axis for hole-edge pixels: 48 x 48 samples, 12 x 12 per sub-pixel
@@ -491,6 +492,8 @@ def render_frame(params: FrameParams, holes: list[HoleSpec], seed: int | None = 
         # after the edges' correction: the convolutions are linear, so the exact edge
         # under the Gaussian is what the extra spread is applied to
         radiance = cv2.filter2D(radiance, -1, extra, borderType=cv2.BORDER_REFLECT)
+    if params.sensor is not None:
+        radiance = sensor_window(radiance, params.sensor)  # specks on the window, out of focus
     if params.vignetting:
         cx = params.lens.cx_px if params.lens else (w - 1) / 2
         cy = params.lens.cy_px if params.lens else (h - 1) / 2

@@ -16,6 +16,13 @@ appear as it ages (cosmic-ray damage, heat):
   to the trap's) reads that much less, a dark partial column in every frame. It takes
   charge after it was collected, so before the read noise and after the shot noise.
 
+And on the lens's front, where the endoscope looks out:
+
+* **specks**: dust or a dried drop of coolant on the endoscope's window, far out of
+  focus: a soft dark blob (a Gaussian of ``speck_px`` px, taking ``speck_depth`` of
+  the light at its middle) at the same place in every frame, over whatever the wall
+  shows there.
+
 The flaws are drawn once from ``seed`` and the frame's size (``pattern``): a sensor is
 the same sensor in every frame. Without a ``SensorFlaws`` in ``FrameParams.sensor``
 every frame is what it was before this existed.
@@ -44,17 +51,25 @@ class SensorFlaws:
     #: charge traps in the vertical register: how many columns, and the charge each takes
     traps: int = 1
     trap_dn: float = 12.0
+    #: specks on the window: how many, their size (Gaussian sigma, px) and the share of
+    #: the light each takes at its middle
+    specks: int = 0
+    speck_px: float = 8.0
+    speck_depth: float = 0.3
 
     def __post_init__(self):
         for name in ("hot_share", "dead_share"):
             v = getattr(self, name)
             if not 0.0 <= v <= 0.05:
                 raise ValueError(f"sensor flaws: {name} must be a share within 0-0.05, not {v}")
-        for name in ("hot_median_dn", "hot_spread", "trap_dn"):
+        if not 0.0 <= self.speck_depth <= 1.0:
+            raise ValueError(f"sensor flaws: speck_depth must be a share within 0-1, not {self.speck_depth}")
+        for name in ("hot_median_dn", "hot_spread", "trap_dn", "speck_px"):
             if getattr(self, name) < 0:
                 raise ValueError(f"sensor flaws: {name} must be >= 0, not {getattr(self, name)}")
-        if self.traps < 0:
-            raise ValueError(f"sensor flaws: traps must be >= 0, not {self.traps}")
+        for name in ("traps", "specks"):
+            if not isinstance(getattr(self, name), int) or getattr(self, name) < 0:
+                raise ValueError(f"sensor flaws: {name} must be a whole number >= 0, not {getattr(self, name)!r}")
 
 
 @dataclass(frozen=True)
@@ -69,6 +84,8 @@ class FlawPattern:
     dead_gain: np.ndarray
     #: (column, row of the trap, DN taken): rows 0..row of that column are short
     traps: tuple[tuple[int, int, float], ...]
+    #: (x px, y px): the specks' middles on the frame
+    specks: tuple[tuple[float, float], ...] = ()
 
 
 @lru_cache(maxsize=8)
@@ -86,11 +103,37 @@ def pattern(flaws: SensorFlaws, width_px: int, height_px: int) -> FlawPattern:
     cols = rng.choice(width_px, size=min(flaws.traps, width_px), replace=False)
     # a trap somewhere in the lower three quarters: the column is short above it
     traps = tuple((int(c), int(rng.integers(height_px // 4, height_px)), float(flaws.trap_dn)) for c in cols)
+    # specks last, so that a sensor's other flaws do not change with their number
+    specks = tuple((float(rng.uniform(0.1, 0.9) * width_px), float(rng.uniform(0.1, 0.9) * height_px))
+                   for _ in range(flaws.specks))
     arrays = [hot // width_px, hot % width_px, hot_dn.astype(np.float32), dead // width_px, dead % width_px,
               dead_gain.astype(np.float32)]
     for a in arrays:
         a.setflags(write=False)
-    return FlawPattern(*arrays, traps)
+    return FlawPattern(*arrays, traps, specks)
+
+
+@lru_cache(maxsize=4)
+def window(flaws: SensorFlaws, width_px: int, height_px: int) -> np.ndarray | None:
+    """The window's transmission over the frame (float32), None without specks."""
+    p = pattern(flaws, width_px, height_px)
+    if not p.specks:
+        return None
+    y, x = np.mgrid[0:height_px, 0:width_px].astype(np.float32)
+    t = np.ones((height_px, width_px), np.float32)
+    s2 = 2.0 * flaws.speck_px**2
+    for sx, sy in p.specks:
+        t *= 1.0 - np.float32(flaws.speck_depth) * np.exp(-((x - sx) ** 2 + (y - sy) ** 2) / s2)
+    t.setflags(write=False)
+    return t
+
+
+def through_window(radiance: np.ndarray, flaws: SensorFlaws) -> np.ndarray:
+    """The light past the window's specks (in place when there are any)."""
+    t = window(flaws, radiance.shape[1], radiance.shape[0])
+    if t is not None:
+        radiance *= t
+    return radiance
 
 
 def collect(signal: np.ndarray, flaws: SensorFlaws) -> np.ndarray:

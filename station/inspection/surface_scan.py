@@ -79,6 +79,16 @@ class SurfaceSettings:
     #: (whole-surface seed 24405), while a long scratch's end that a frame's border cuts
     #: reads as a small pore on its line (seed 24402; session 49)
     merge_mm: float = 0.35
+    #: a mark seen at one place of the *image* in this many coverage frames, each at
+    #: another place of the part, moves with the camera, not the part: a flaw of its
+    #: sensor or a speck on its window (``camera_marks``). Two frames never look at one
+    #: place from the same pose, so a part's defect lands on one image place in one
+    #: frame at most; three is a margin against chance
+    camera_mark_frames: int = 3
+    #: ... "one place": centres within this (px) plus, along a scratch's line, their
+    #: half lengths' difference, directions within ``camera_mark_deg``
+    camera_mark_px: float = 4.0
+    camera_mark_deg: float = 8.0
     #: pieces of one scratch longer than a frame, each cut by a frame's border, are
     #: joined when they overlap along the furrow or are apart by at most
     #: ``join_gap_mm``, their directions agree within ``join_angle_deg``, and each one's
@@ -169,6 +179,44 @@ class _Sighting:
     frame: int
     #: where the frame was centred on the part (grating included)
     centre: tuple[float, float] | None = None
+
+
+def camera_marks(sightings: list[_Sighting], cfg: SurfaceSettings) -> tuple[list[list[_Sighting]], list[_Sighting]]:
+    """(marks, the rest): the sightings that sit at one place of the image in
+    ``cfg.camera_mark_frames`` or more coverage frames (one kind; a scratch's line and
+    extent alike), grouped per mark. The coverage frames look at the part from distinct
+    poses, so only what moves with the camera (its sensor's flawed pixels, a speck on
+    its window) stays put in the image while the part moves under it."""
+    n = len(sightings)
+    parent = list(range(n))
+
+    def same_place(a, b) -> bool:
+        if a.kind != b.kind:
+            return False
+        dx, dy = b.x_px - a.x_px, b.y_px - a.y_px
+        if a.kind != "scratch":
+            return math.hypot(dx, dy) <= cfg.camera_mark_px
+        turn = abs((a.angle_deg - b.angle_deg + 90.0) % 180.0 - 90.0)
+        if turn > cfg.camera_mark_deg:
+            return False
+        t = math.radians(a.angle_deg)
+        along, across = dx * math.cos(t) + dy * math.sin(t), -dx * math.sin(t) + dy * math.cos(t)
+        return (abs(across) <= cfg.camera_mark_px
+                and abs(along) <= cfg.camera_mark_px + abs(a.length_px - b.length_px) / 2.0)
+
+    for i in range(n):
+        for j in range(i + 1, n):
+            if sightings[i].frame != sightings[j].frame and same_place(sightings[i].defect, sightings[j].defect):
+                parent[_root(parent, i)] = _root(parent, j)
+    groups: dict[int, list[int]] = {}
+    for i in range(n):
+        groups.setdefault(_root(parent, i), []).append(i)
+    marks, drop = [], set()
+    for members in groups.values():
+        if len({sightings[i].frame for i in members}) >= cfg.camera_mark_frames:
+            marks.append([sightings[i] for i in members])
+            drop.update(members)
+    return marks, [s for i, s in enumerate(sightings) if i not in drop]
 
 
 def _root(parent: list[int], i: int) -> int:
@@ -411,6 +459,17 @@ class _SurfaceScan:
         if pending is not None:
             defects = yield m.MeasureSurface(pending[2], blur_px=self.blur_px)
             analysed(pending[0], pending[1], list(defects or []))
+        marks, sightings = camera_marks(sightings, self.cfg)
+        for mark in marks:
+            kind = mark[0].defect.kind
+            length = float(np.median([s.defect.length_px for s in mark])) * self.geo.mm_per_px
+            x, y = (float(np.median([getattr(s.defect, k) for s in mark])) for k in ("x_px", "y_px"))
+            note = (f"surface: a {kind} about {length:.2f} mm long at image px ({x:.0f}, {y:.0f}) in "
+                    f"{len({s.frame for s in mark})} frames at other places of the part moves "
+                    f"with the camera, not the part (a flaw of its sensor or a speck on its window): not reported; "
+                    f"`station check camera` maps the sensor's flaws")
+            self.notes.append(note)
+            yield m.Note(note)
         sightings += yield from self.follow_scratches(sightings)
         chains, rest = self.join_scratches(sightings)
         groups = self.merge(rest)

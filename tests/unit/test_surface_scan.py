@@ -12,8 +12,8 @@ import pytest
 from station.inspection.scan import CameraGeometry, FrameObservation, HoleResult, ScanSettings
 from station.inspection.service import judge_surface, wants_surface
 from station.inspection.surface import SurfaceDefect, SurfaceResult
-from station.inspection.surface_scan import (SurfaceSettings, _Picture, coverage_plan, physical_limit,
-                                             surface_scan)
+from station.inspection.surface_scan import (SurfaceSettings, _Picture, _Sighting, camera_marks, coverage_plan,
+                                             physical_limit, surface_scan)
 from station.motion import AxisLimits
 from station.parts import load_part
 from station.parts.loader import PartSpecError, parse_part
@@ -674,3 +674,27 @@ def test_a_scratch_a_frame_lost_is_followed_from_its_cut_ends_and_joined_whole()
     assert abs(d.length_mm - arc) <= max(0.005 * arc, 0.03), (d.length_mm, arc)
     err = math.hypot(d.axial_mm - axial, math.radians((d.angle_deg - angle + 180) % 360 - 180) * r)
     assert err <= 0.05, err
+
+
+def _sighting(frame: int, kind: str, x: float, y: float, length: float = 10.0, angle: float = 0.0):
+    d = SimpleNamespace(kind=kind, x_px=x, y_px=y, length_px=length, angle_deg=angle)
+    return _Sighting(d, axial_mm=frame * 3.0, angle_deg=frame * 20.0, r_px=0.0, frame=frame)
+
+
+def test_a_mark_at_one_place_of_the_image_in_many_frames_moves_with_the_camera_and_is_set_aside():
+    """A speck on the window reads as a pore at one image place in every frame, a trapped
+    column as a scratch along it whose measured length varies; the part's own defects
+    land anywhere in the image, two of them by chance near each other in two frames."""
+    cfg = SurfaceSettings()
+    speck = [_sighting(k, "pore", 655.0 + 0.8 * (k % 3), 336.0 - 0.5 * (k % 2), 13.0) for k in range(0, 40, 3)]
+    column = [_sighting(k, "scratch", 22.0 + 0.3 * (k % 2), 120.0 + 0.5 * (270 - L) / 2.0, L, 90.0 + 0.4 * (k % 3))
+              for k, L in ((1, 270.0), (4, 240.0), (7, 30.0), (10, 265.0))]
+    part = [_sighting(2, "pore", 100.0, 100.0), _sighting(5, "pore", 102.0, 101.0),  # two frames: chance
+            _sighting(8, "scratch", 500.0, 500.0, 200.0, 30.0), _sighting(11, "scratch", 503.0, 502.0, 190.0, 75.0),
+            _sighting(14, "burr", 655.0, 336.0), _sighting(17, "pore", 900.0, 200.0)]
+    marks, rest = camera_marks(speck + column + part, cfg)
+    assert sorted(len(g) for g in marks) == [len(column), len(speck)]
+    assert {g[0].defect.kind for g in marks} == {"pore", "scratch"}
+    assert rest == part
+    # a second frame's sighting of one defect is not a mark (the frames look from other poses)
+    assert camera_marks(part + [_sighting(2, "pore", 100.5, 100.0)], cfg)[0] == []
