@@ -181,12 +181,16 @@ class _Sighting:
     centre: tuple[float, float] | None = None
 
 
-def camera_marks(sightings: list[_Sighting], cfg: SurfaceSettings) -> tuple[list[list[_Sighting]], list[_Sighting]]:
+def camera_marks(sightings: list[_Sighting], cfg: SurfaceSettings,
+                 radius_mm: float) -> tuple[list[list[_Sighting]], list[_Sighting]]:
     """(marks, the rest): the sightings that sit at one place of the image in
     ``cfg.camera_mark_frames`` or more coverage frames (one kind; a scratch's line and
     extent alike), grouped per mark. The coverage frames look at the part from distinct
     poses, so only what moves with the camera (its sensor's flawed pixels, a speck on
-    its window) stays put in the image while the part moves under it."""
+    its window) stays put in the image while the part moves under it; but a scratch
+    longer than several frames crosses each of a row of them at one image place, and
+    whose places on the part lie along it is kept (``_one_scratch_on_the_part``;
+    ``radius_mm``: the bore's)."""
     n = len(sightings)
     parent = list(range(n))
 
@@ -213,10 +217,38 @@ def camera_marks(sightings: list[_Sighting], cfg: SurfaceSettings) -> tuple[list
         groups.setdefault(_root(parent, i), []).append(i)
     marks, drop = [], set()
     for members in groups.values():
-        if len({sightings[i].frame for i in members}) >= cfg.camera_mark_frames:
-            marks.append([sightings[i] for i in members])
-            drop.update(members)
+        group = [sightings[i] for i in members]
+        if len({s.frame for s in group}) < cfg.camera_mark_frames:
+            continue
+        if group[0].defect.kind == "scratch" and _one_scratch_on_the_part(group, radius_mm, cfg):
+            continue
+        marks.append(group)
+        drop.update(members)
     return marks, [s for i, s in enumerate(sightings) if i not in drop]
+
+
+def _one_scratch_on_the_part(group: list[_Sighting], radius_mm: float, cfg: SurfaceSettings) -> bool:
+    """Whether a scratch's sightings at one image place could be one long scratch of the
+    part: a furrow along the bore's axis seen by the frames of consecutive rings at one
+    angle, or round it by the frames of one ring, crosses each frame at the same image
+    place. They could when their places on the part lie on one line (within
+    ``join_offset_mm`` plus the lens's ``join_lens_mm``) along the scratch's own direction
+    there (within ``camera_mark_deg``): then the scratch is the part's, and the joining
+    of pieces measures it."""
+    a0 = group[0].angle_deg
+    pts = np.array([(s.axial_mm, math.radians(wrap_deg(s.angle_deg - a0)) * radius_mm) for s in group])
+    pts -= pts.mean(axis=0)
+    _, sv, vt = np.linalg.svd(pts, full_matrices=False)
+    spread = sv[1] / math.sqrt(len(group)) if len(sv) > 1 else 0.0
+    if spread > cfg.join_offset_mm + cfg.join_lens_mm:
+        return False
+    # the line's direction on the part against the scratch's: image x runs round the
+    # bore, image y against its axis (``_SurfaceScan.place``)
+    d_axial, d_round = vt[0]
+    t = math.radians(float(np.median([s.defect.angle_deg for s in group])))
+    along = math.degrees(math.atan2(-math.sin(t), math.cos(t)))  # (round, axial) of the scratch
+    line = math.degrees(math.atan2(d_axial, d_round))
+    return abs((line - along + 90.0) % 180.0 - 90.0) <= cfg.camera_mark_deg
 
 
 def _root(parent: list[int], i: int) -> int:
@@ -459,7 +491,7 @@ class _SurfaceScan:
         if pending is not None:
             defects = yield m.MeasureSurface(pending[2], blur_px=self.blur_px)
             analysed(pending[0], pending[1], list(defects or []))
-        marks, sightings = camera_marks(sightings, self.cfg)
+        marks, sightings = camera_marks(sightings, self.cfg, self.radius)
         for mark in marks:
             kind = mark[0].defect.kind
             length = float(np.median([s.defect.length_px for s in mark])) * self.geo.mm_per_px

@@ -676,9 +676,11 @@ def test_a_scratch_a_frame_lost_is_followed_from_its_cut_ends_and_joined_whole()
     assert err <= 0.05, err
 
 
-def _sighting(frame: int, kind: str, x: float, y: float, length: float = 10.0, angle: float = 0.0):
+def _sighting(frame: int, kind: str, x: float, y: float, length: float = 10.0, angle: float = 0.0,
+              place: tuple[float, float] | None = None):
     d = SimpleNamespace(kind=kind, x_px=x, y_px=y, length_px=length, angle_deg=angle)
-    return _Sighting(d, axial_mm=frame * 3.0, angle_deg=frame * 20.0, r_px=0.0, frame=frame)
+    axial, around = place if place is not None else (frame * 3.0, frame * 20.0)
+    return _Sighting(d, axial_mm=axial, angle_deg=around, r_px=0.0, frame=frame)
 
 
 def test_a_mark_at_one_place_of_the_image_in_many_frames_moves_with_the_camera_and_is_set_aside():
@@ -692,9 +694,26 @@ def test_a_mark_at_one_place_of_the_image_in_many_frames_moves_with_the_camera_a
     part = [_sighting(2, "pore", 100.0, 100.0), _sighting(5, "pore", 102.0, 101.0),  # two frames: chance
             _sighting(8, "scratch", 500.0, 500.0, 200.0, 30.0), _sighting(11, "scratch", 503.0, 502.0, 190.0, 75.0),
             _sighting(14, "burr", 655.0, 336.0), _sighting(17, "pore", 900.0, 200.0)]
-    marks, rest = camera_marks(speck + column + part, cfg)
+    marks, rest = camera_marks(speck + column + part, cfg, 11.1)
     assert sorted(len(g) for g in marks) == [len(column), len(speck)]
     assert {g[0].defect.kind for g in marks} == {"pore", "scratch"}
     assert rest == part
     # a second frame's sighting of one defect is not a mark (the frames look from other poses)
-    assert camera_marks(part + [_sighting(2, "pore", 100.5, 100.0)], cfg)[0] == []
+    assert camera_marks(part + [_sighting(2, "pore", 100.5, 100.0)], cfg, 11.1)[0] == []
+
+
+def test_a_scratch_longer_than_several_frames_crosses_them_at_one_image_place_and_stays_the_parts():
+    """A furrow along the bore's axis crosses the frames of consecutive rings at one angle
+    at the same image place (cut by the top and bottom borders), one round the bore the
+    frames of one ring; their places on the part lie along the scratch: the part's."""
+    cfg = SurfaceSettings()
+    axial = [_sighting(k, "scratch", 640.0, 512.0, 1024.0, 90.0, place=(5.0 + 9.2 * k, 47.0)) for k in range(4)]
+    step = math.degrees(11.5 / 11.1)  # 11.5 mm round the bore between frames
+    around = [_sighting(10 + k, "scratch", 640.0, 300.0, 1280.0, 0.5, place=(60.0, (350.0 + k * step) % 360.0))
+              for k in range(4)]
+    marks, rest = camera_marks(axial + around, cfg, 11.1)
+    assert marks == [] and rest == axial + around
+    # the same image place at places of the part that do not lie along it: the camera's
+    scattered = [_sighting(k, "scratch", 640.0, 512.0, 1024.0, 90.0, place=(5.0 + 9.2 * k, 47.0 + 30.0 * k))
+                 for k in range(4)]
+    assert [len(g) for g in camera_marks(scattered, cfg, 11.1)[0]] == [4]
