@@ -73,23 +73,9 @@ class PixelMap:
     created: str = ""
     source: str = ""
 
-    def __post_init__(self):
-        self._mask: np.ndarray | None = None
-
     @property
     def shape(self) -> tuple[int, int]:
         return (self.height, self.width)
-
-    def mask(self) -> np.ndarray:
-        """Every pixel the map mends (bool, frame-shaped)."""
-        if self._mask is None:
-            m = np.zeros(self.shape, bool)
-            for r, c, _ in self.pixels:
-                m[r, c] = True
-            for c, r0, r1, _ in self.columns:
-                m[r0:r1 + 1, c] = True
-            self._mask = m
-        return self._mask
 
     def repair(self, image: np.ndarray) -> np.ndarray:
         """``image`` with its flawed pixels mended (a copy, the same type; grey frames of
