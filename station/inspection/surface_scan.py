@@ -245,7 +245,7 @@ def _one_scratch_on_the_part(group: list[_Sighting], radius_mm: float, cfg: Surf
     # the line's direction on the part against the scratch's: image x runs round the
     # bore, image y against its axis (``_SurfaceScan.place``)
     d_axial, d_round = vt[0]
-    t = math.radians(float(np.median([s.defect.angle_deg for s in group])))
+    t = math.radians(group[0].defect.angle_deg)  # the group's lie within camera_mark_deg of it (mod 180)
     along = math.degrees(math.atan2(-math.sin(t), math.cos(t)))  # (round, axial) of the scratch
     line = math.degrees(math.atan2(d_axial, d_round))
     return abs((line - along + 90.0) % 180.0 - 90.0) <= cfg.camera_mark_deg

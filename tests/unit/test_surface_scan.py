@@ -709,8 +709,9 @@ def test_a_scratch_longer_than_several_frames_crosses_them_at_one_image_place_an
     cfg = SurfaceSettings()
     axial = [_sighting(k, "scratch", 640.0, 512.0, 1024.0, 90.0, place=(5.0 + 9.2 * k, 47.0)) for k in range(4)]
     step = math.degrees(11.5 / 11.1)  # 11.5 mm round the bore between frames
-    around = [_sighting(10 + k, "scratch", 640.0, 300.0, 1280.0, 0.5, place=(60.0, (350.0 + k * step) % 360.0))
-              for k in range(4)]
+    # its pieces read 0.5 and 179.7 deg alike: one direction
+    around = [_sighting(10 + k, "scratch", 640.0, 300.0, 1280.0, (0.5, 179.7)[k % 2],
+                        place=(60.0, (350.0 + k * step) % 360.0)) for k in range(4)]
     marks, rest = camera_marks(axial + around, cfg, 11.1)
     assert marks == [] and rest == axial + around
     # the same image place at places of the part that do not lie along it: the camera's
