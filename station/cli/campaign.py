@@ -1,6 +1,7 @@
-"""``station campaign``, ``station check master`` and ``station check axis``: the station
-judged over a production run on a scenario's world, on its certified master, and by its
-own check of Z against its grating (docs/monitor.md)."""
+"""``station campaign``, ``station check master``, ``station check axis`` and ``station
+check camera``: the station judged over a production run on a scenario's world, on its
+certified master, by its own check of Z against its grating (docs/monitor.md), and its
+camera's sensor against its pixel map (docs/vision.md)."""
 
 from __future__ import annotations
 
@@ -11,6 +12,36 @@ import typer
 from rich.table import Table
 
 from station.cli.common import err_console, fail, out_console, print_json
+
+
+def _station_check(config, scenario, time_scale: float, data: Path, part: str, settings_of, check):
+    """Run one of the station's own checks in a session: the scenario file, the check's
+    settings (``settings_of()``) and the part family ``part`` made first, then
+    ``await check(session, family, settings)``; a bad input or a fault ends the command
+    with exit 2, naming it. Returns the check's outcome."""
+    import asyncio
+
+    from drivers.interfaces import DriverError
+    from station.parts import load_part
+    from station.runtime import ConfigError, open_session
+    from station.store.errors import StoreError
+
+    if scenario is not None and not scenario.is_file():
+        fail(f"{scenario}: no such scenario file", 2)
+    try:
+        settings = settings_of()
+        family = load_part(part)
+    except ValueError as exc:
+        fail(str(exc), 2)
+
+    async def go():
+        async with open_session(config, scenario=scenario, time_scale=time_scale, data_dir=data) as s:
+            return await check(s, family, settings)
+
+    try:
+        return asyncio.run(go())
+    except (ConfigError, StoreError, DriverError, OSError, ValueError) as exc:
+        fail(str(exc), 2)
 
 
 def register(app: typer.Typer) -> None:
@@ -130,31 +161,12 @@ def register(app: typer.Typer) -> None:
         """The station's own short ISO 230-2 check of Z against its grating, and discovery
         on it (docs/monitor.md). Exit 0 when the model agrees (no-mismatch), 1 when
         discovery finds a mismatch, 2 error."""
-        import asyncio
-
-        from drivers.interfaces import DriverError
         from station.checks.axis import AxisCheckSettings
-        from station.runtime import open_session
-        from station.parts import load_part
-        from station.runtime import ConfigError
-        from station.store.errors import StoreError
 
-        if scenario is not None and not scenario.is_file():
-            fail(f"{scenario}: no such scenario file", 2)
-        try:
-            settings = AxisCheckSettings(targets=targets, runs=runs)
-            family = load_part(part)
-        except ValueError as exc:
-            fail(str(exc), 2)
-
-        async def go():
-            async with open_session(config, scenario=scenario, time_scale=time_scale, data_dir=data) as s:
-                return await s.check_axis(family, settings=settings, out_dir=out, propose=propose, plots=plots)
-
-        try:
-            res = asyncio.run(go())
-        except (ConfigError, StoreError, DriverError, OSError, ValueError) as exc:
-            fail(str(exc), 2)
+        res = _station_check(config, scenario, time_scale, data, part,
+                             lambda: AxisCheckSettings(targets=targets, runs=runs),
+                             lambda s, family, settings: s.check_axis(family, settings=settings, out_dir=out,
+                                                                      propose=propose, plots=plots))
         if json:
             print_json(res.to_json())
         elif res.report is None:
@@ -199,30 +211,11 @@ def register(app: typer.Typer) -> None:
         """The camera's flawed pixels (hot, dim, a trapped column) found in frames of the bore
         wall turning under it, against the station's pixel map (docs/vision.md). Exit 0 when
         the map holds them all, 1 when the sensor has flaws the map lacks, 2 error."""
-        import asyncio
-
-        from drivers.interfaces import DriverError
         from station.checks.camera import CameraCheckSettings
-        from station.parts import load_part
-        from station.runtime import ConfigError, open_session
-        from station.store.errors import StoreError
 
-        if scenario is not None and not scenario.is_file():
-            fail(f"{scenario}: no such scenario file", 2)
-        try:
-            settings = CameraCheckSettings(frames=frames, axial_mm=axial)
-            family = load_part(part)
-        except ValueError as exc:
-            fail(str(exc), 2)
-
-        async def go():
-            async with open_session(config, scenario=scenario, time_scale=time_scale, data_dir=data) as s:
-                return await s.check_camera(family, settings=settings, out_dir=out)
-
-        try:
-            res = asyncio.run(go())
-        except (ConfigError, StoreError, DriverError, OSError, ValueError) as exc:
-            fail(str(exc), 2)
+        res = _station_check(config, scenario, time_scale, data, part,
+                             lambda: CameraCheckSettings(frames=frames, axial_mm=axial),
+                             lambda s, family, settings: s.check_camera(family, settings=settings, out_dir=out))
         if json:
             print_json(res.to_json())
         else:
