@@ -1321,6 +1321,44 @@ def test_a_scratch_bent_along_the_hatch_in_its_middle_is_one_scratch_of_its_leng
     assert "line_px" not in d.to_dict()
 
 
+@pytest.mark.parametrize("angle, gap_at, gap_px, frame_seed", [(44.0, 80.0, 30.0, 80), (136.0, -120.0, 40.0, 78),
+                                                              (75.0, 150.0, 25.0, 79)])
+def test_a_thin_scratch_that_fades_for_a_stretch_is_one_scratch(angle, gap_at, gap_px, frame_seed):
+    """A 1.5 px scratch fades to nothing for a stretch (its width varies by half along it;
+    beside a groove that darkens its flanks it leaves no furrow of its own): the
+    whole-surface bench read a 12.9 mm scratch in one frame as a 7.5 mm scratch and a
+    5.1 mm "false" one, 0.3 mm apart, in line within 1.4 deg and 1.4 px. Two pieces in
+    line to their core across a gap a fifth of their length or less are one scratch
+    (``tracking._in_line``). The faded stretch here: the frame rendered again without the
+    scratch, its pixels taken there."""
+    spec = DefectSpec("scratch", 640, 512, 930.0, 1.5, angle, 0.6, None, 5)
+    f = render_frame(FrameParams(), [], seed=frame_seed, defects=[spec])
+    clean = render_frame(FrameParams(), [], seed=frame_seed).image
+    yy, xx = np.mgrid[0:f.image.shape[0], 0:f.image.shape[1]]
+    along = (xx - 640) * np.cos(np.radians(angle)) + (yy - 512) * np.sin(np.radians(angle))
+    image = np.where((along >= gap_at) & (along < gap_at + gap_px), clean, f.image)
+    truth = f.defects[0].with_scale(MM_PER_PX)
+    found = detect_defects(image, MM_PER_PX)
+    report = [(e.kind, round(e.x_px), round(e.y_px), round(e.length_px)) for e in found]
+    scratches = [d for d in found if d.kind == "scratch"]
+    assert len(found) == 1 and len(scratches) == 1, report
+    assert _within(scratches[0].length_mm, truth.length_mm), (truth.length_mm, report)
+
+
+def test_two_scratches_in_line_across_a_long_gap_stay_two():
+    """The in-line join is for a gap short against both pieces: a 4 mm scratch with its
+    middle 1 mm missing (pieces of 2 and 1 mm) is two scratches."""
+    spec = DefectSpec("scratch", 640, 512, 400.0, 1.5, 44.0, 0.6, None, 5)
+    f = render_frame(FrameParams(), [], seed=77, defects=[spec])
+    clean = render_frame(FrameParams(), [], seed=77).image
+    yy, xx = np.mgrid[0:f.image.shape[0], 0:f.image.shape[1]]
+    along = (xx - 640) * np.cos(np.radians(44.0)) + (yy - 512) * np.sin(np.radians(44.0))
+    image = np.where((along >= 0.0) & (along < 100.0), clean, f.image)
+    found = detect_defects(image, MM_PER_PX)
+    lengths = sorted(round(d.length_mm, 2) for d in found if d.kind == "scratch")
+    assert len(found) == 2 and len(lengths) == 2, lengths
+    assert abs(lengths[0] - 1.0) <= 0.1 and lengths[1] < 3.0, lengths
+
 def test_a_pore_or_one_bent_scratch_is_one_mark_and_an_x_is_two_furrows():
     """``split_furrows`` splits only what crossing furrows leave: a disc of any size (a band
     through a blob always holds pixels; the first version split 0.4-0.47 mm pores in two,

@@ -533,6 +533,11 @@ class DefectConfig:
     scratch_join_gap_px: float = 200.0
     scratch_join_turn_deg: float = 20.0
     scratch_join_dark_share: float = 0.5
+    #: ... or, whatever the gap's darkness, when the gap is at most this share of each
+    #: piece's length and the pieces are in line within this turn (deg) and their core
+    #: (``_in_line``)
+    scratch_join_line_gap_share: float = 0.2
+    scratch_join_line_turn_deg: float = 5.0
     #: a scratch's furrow followed past its measured end (``_track_on``): at most so far
     #: (px), turning at most so much across per 2 px step (px), taken when its first
     #: ``track_min_px`` keep ``track_run_share`` of the scratch's own raw contrast
