@@ -1047,9 +1047,14 @@ class _SurfaceScan:
         if per_frame == 1 and best.r_px <= cfg.recentre_reach_px and not getattr(best.defect, "partial", False):
             # a coverage frame saw it centred; its size from every frame that saw it whole
             return [self.pooled(self.defect(best.defect, want, best.r_px, frames), whole)]
-        if self.lens is not None:
+        if self.lens is not None and not (per_frame == 1 and len(whole) >= 2 and not self.agree(whole)):
             # calibrated: the coverage frame that saw most of the group whole, nearest its
-            # centre; every whole defect of the group in it (a pair too close to merge apart)
+            # centre; every whole defect of the group in it (a pair too close to merge apart).
+            # Not when the frames that saw one defect whole, off their centres, read sizes
+            # that disagree (``agree``): one frame lost an end or took a groove's stretch in,
+            # and a frame centred on it reads it where the wall is best lit and the lens
+            # least distorting (seed 88001: a 0.95 mm scratch read 0.80 and 0.93 mm in two
+            # frames' corners; the more significant was the shorter)
             if whole:
                 by_frame: dict[int, list[_Sighting]] = {}
                 for sg in whole:
@@ -1113,6 +1118,12 @@ class _SurfaceScan:
             length, width, size_u, width_u = length * k_len, width * k_wid, size_u * k_len, width_u * k_wid
         return length, width, size_u, width_u
 
+    def agree(self, sightings: list[_Sighting]) -> bool:
+        """Whether readings of one defect's length from several frames agree: their Birge
+        ratio (:meth:`pooled`) within ``cfg.pool_birge_max``."""
+        rows = np.array([self.sizes(sg.defect) for sg in sightings], float)
+        return _birge(rows[:, 0], rows[:, 2])[2] <= self.cfg.pool_birge_max
+
     def pooled(self, out: SurfaceDefect, sightings: list[_Sighting]) -> SurfaceDefect:
         """One defect seen whole in several frames (``sightings``, one each), sized from
         all of them. Each frame reads it with its own noise and, off its centre, its own
@@ -1134,20 +1145,12 @@ class _SurfaceScan:
         if len(sightings) < 2:
             return out
         rows = np.array([self.sizes(sg.defect) for sg in sightings], float)
-        floor = 1e-4  # mm: a reading's uncertainty is never taken as nothing
-
-        def mean(values: np.ndarray, us: np.ndarray) -> tuple[float, float, float]:
-            w = 1.0 / np.maximum(us, floor) ** 2
-            m = float(np.sum(w * values) / np.sum(w))
-            birge = math.sqrt(float(np.sum(w * (values - m) ** 2)) / (values.size - 1))
-            return m, max(birge, 1.0) / math.sqrt(float(np.sum(w))), birge
-
-        length, u_len, birge = mean(rows[:, 0], rows[:, 2])
+        length, u_len, birge = _birge(rows[:, 0], rows[:, 2])
         if birge > self.cfg.pool_birge_max:
             k = max(range(len(sightings)), key=lambda i: float(getattr(sightings[i].defect, "significance", 0.0)))
             return replace(out, length_mm=float(rows[k, 0]), width_mm=float(rows[k, 1]),
                            size_u_mm=2.0 * float(rows[k, 2]))
-        width, _, _ = mean(rows[:, 1], rows[:, 3])
+        width, _, _ = _birge(rows[:, 1], rows[:, 3])
         return replace(out, length_mm=length, width_mm=width, size_u_mm=2.0 * u_len)
 
     def defect(self, d, place: tuple[float, float], r_px: float, frames: int) -> SurfaceDefect:
@@ -1167,6 +1170,17 @@ class _SurfaceScan:
         zone = self.part.surface_zone(axial)
         return SurfaceDefect("", d.kind, axial, place[1] % 360.0, length, width, 2.0 * size_u, u_pos,
                              float(d.confidence), hole=hole, zone=None if zone is None else zone.id, frames=frames)
+
+
+def _birge(values: np.ndarray, us: np.ndarray) -> tuple[float, float, float]:
+    """Readings ``values`` of one quantity with their standard uncertainties ``us``:
+    the mean weighted by their inverse variances, its uncertainty (widened by the Birge
+    ratio where that is over 1), and the Birge ratio (their scatter over what their own
+    uncertainties allow; a reading's uncertainty is never taken below 0.1 um)."""
+    w = 1.0 / np.maximum(us, 1e-4) ** 2
+    m = float(np.sum(w * values) / np.sum(w))
+    birge = math.sqrt(float(np.sum(w * (values - m) ** 2)) / (values.size - 1))
+    return m, max(birge, 1.0) / math.sqrt(float(np.sum(w))), birge
 
 
 def _measuring_on_the_way(move, pending, done: list, blur_px: float | None = None):
