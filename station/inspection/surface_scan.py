@@ -19,8 +19,9 @@ The plan (after the holes, so burrs and chips are put at the holes the scan foun
    is taken out, and the defect's sizes are corrected by the lens's local scale.
 3. **One measurement per defect.** Sightings of one defect (from overlapping frames) are
    merged. With the calibration, the defect is measured in the coverage frame that saw it
-   whole nearest its centre; a defect no frame saw whole (cut by every frame's edge) and,
-   without a calibration, every defect, is measured again in a frame centred on it
+   whole nearest its centre; a defect no frame saw whole (cut by every frame's edge), one
+   whose frames, all off their centres, read sizes that disagree, and, without a
+   calibration, every defect, is measured again in a frame centred on it
    (compensated as any move), where the distortion is below a few um
    (``recentre_reach_px``); one seen only cut by frames' borders that the frame centred
    on it does not show is the borders' mark and is not reported. Defects near each
