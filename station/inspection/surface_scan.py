@@ -1085,16 +1085,35 @@ class _SurfaceScan:
                 out.append(self.defect(d, p, r_px, frames))
         if not out:
             d = best.defect
-            shown = any(self.family(e.kind) == fam and near_group(self.place((look.axial_mm, look.angle_deg), e.x_px,
-                                                                             e.y_px))
-                        for e in look.defects)
-            if not shown and all(getattr(sg.defect, "partial", False) for sg in group):
+            centre = (look.axial_mm, look.angle_deg)
+
+            def shows(e) -> bool:
+                # at the group's place: its point, or a scratch's chord passing there
+                if near_group(self.place(centre, e.x_px, e.y_px)):
+                    return True
+                if e.kind != "scratch" or not e.length_px:
+                    return False
+                ends = self.piece(_Sighting(e, *self.place(centre, e.x_px, e.y_px), 0.0, -1, centre)).ends
+                return any(self.on_chord(ends, sg) for sg in group)
+
+            shown = {e.kind for e in look.defects if self.family(e.kind) == fam and shows(e)}
+            only_cut = all(getattr(sg.defect, "partial", False) for sg in group)
+            if only_cut and not shown:
                 # seen only where frames' borders cut it, and a frame centred on it shows nothing
                 # there: the border's cut, not a defect (a crossing of deep grooves cut by a
                 # frame's top edge at its corner read as a 0.33 mm pore: whole-surface part 24703)
                 self.notes.append(f"a {d.kind} at {want[0]:.3f} mm, {want[1]:.2f} deg, seen only cut by frames' "
                                   f"borders ({best.r_px:.0f} px off a frame's centre), was not seen in a frame "
                                   f"centred on it: not reported")
+                return []
+            if only_cut and d.kind != "scratch" and shown == {"scratch"}:
+                # ... or shows only a scratch passing there, longer than the frame: the mark
+                # was that scratch's end cut by a border (whole-surface part 90103: a 0.15 mm
+                # "pore" at a frame's left border on a 22.7 mm scratch's line, which its
+                # chain measured)
+                self.notes.append(f"a {d.kind} at {want[0]:.3f} mm, {want[1]:.2f} deg, seen only cut by frames' "
+                                  f"borders ({best.r_px:.0f} px off a frame's centre), is a scratch's stretch in a "
+                                  f"frame centred on it: not reported apart")
                 return []
             self.notes.append(f"a {d.kind} at {want[0]:.3f} mm, {want[1]:.2f} deg was not seen again re-centred: "
                               f"measured {best.r_px:.0f} px off a frame's centre (the lens's distortion not corrected)")

@@ -750,3 +750,61 @@ def test_a_scratch_longer_than_several_frames_crosses_them_at_one_image_place_an
     scattered = [_sighting(k, "scratch", 640.0, 512.0, 1024.0, 90.0, place=(5.0 + 9.2 * k, 47.0 + 30.0 * k))
                  for k in range(4)]
     assert [len(g) for g in camera_marks(scattered, cfg, 11.1)[0]] == [4]
+
+
+def test_a_mark_cut_by_frames_borders_that_a_centred_frame_shows_as_a_scratch_passing_is_not_reported_apart():
+    """A scratch longer than a frame, its end cut by a frame's left border, read there as a
+    0.15 mm "pore" (whole-surface part 90103, on a 22.7 mm scratch's line; the scratch was
+    measured by its chain). A frame centred on the mark shows only the scratch passing,
+    cut by that frame's borders too: the mark was the scratch's, and is not reported apart
+    (a note says so). A scratch's own piece seen so is still reported, and a mark that the
+    centred frame shows as a pore is that pore."""
+    from station.inspection.surface_scan import _Sighting
+    from station.vision.defects import Defect
+
+    cx, cy = GEO.centre_px
+    place = (28.26, 326.42)
+
+    def mark(kind, x, y, length_px, partial, angle=27.0):
+        mm = length_px * 0.01
+        return Defect(kind, x, y, length_px, 5.0, 0.9, angle, 2.0, 1.0, 12.0, partial, None, mm, 0.05, mm, 0.02, 0.01)
+
+    def measured(group_kind, look_defects):
+        scan = _scan(calibrated=True)
+        looks = []
+
+        def move(axial, angle, forward=False):
+            looks.append((axial, angle % 360.0))
+            return looks[-1]
+            yield  # a generator, as the station's move is
+
+        def frame():
+            return None, look_defects
+            yield
+
+        scan.move, scan.frame = move, frame
+        sg = _Sighting(mark(group_kind, 4.0, 931.0, 15.0 if group_kind == "pore" else 90.0, True), place[0],
+                       place[1], 761.0, 18, (32.56, 0.0))
+        gen = scan.measure([sg])
+        try:
+            while True:
+                msg = next(gen)
+                assert type(msg).__name__ == "Checkpoint", msg
+        except StopIteration as stop:
+            out = stop.value
+        assert len(looks) == 1
+        return out, scan.notes
+
+    passing = [mark("scratch", cx + 300.0, cy + 150.0, 1250.0, True)]  # its line through the centre
+    out, notes = measured("pore", passing)
+    assert out == [] and any("scratch's stretch" in n for n in notes), notes
+    # the piece's middle by chance at the mark (the bench's part): the old rule took that
+    # for the mark shown, and reported the "pore" as read off centre
+    out, notes = measured("pore", [mark("scratch", cx + 5.0, cy + 3.0, 1250.0, True)])
+    assert out == [] and any("scratch's stretch" in n for n in notes), notes
+    out, notes = measured("scratch", passing)  # a scratch's piece: as read, off centre
+    assert [d.kind for d in out] == ["scratch"] and any("not seen again re-centred" in n for n in notes), notes
+    out, _notes = measured("pore", passing + [mark("pore", cx + 1.0, cy - 2.0, 15.0, False)])
+    assert [d.kind for d in out] == ["pore"]
+    out, notes = measured("pore", [])  # nothing there: the borders' cut
+    assert out == [] and any("was not seen in a frame centred on it" in n for n in notes), notes
