@@ -808,3 +808,28 @@ def test_a_mark_cut_by_frames_borders_that_a_centred_frame_shows_as_a_scratch_pa
     assert [d.kind for d in out] == ["pore"]
     out, notes = measured("pore", [])  # nothing there: the borders' cut
     assert out == [] and any("was not seen in a frame centred on it" in n for n in notes), notes
+
+
+def test_the_rim_defects_of_a_pore_read_as_a_hole_are_not_reported():
+    """A 0.49 mm pore read as a hole in one frame gave a "burr" and a "chip" on its outline
+    (whole-surface part 91102), at none of the part's holes, while the pore itself was
+    reported: the rim defects go, with a note. A rim defect at a hole, or at none of the
+    part's holes and on no pore's outline (a hole drilled where the drawing has none),
+    stays; so does one beyond the pore's outline."""
+    from station.inspection.surface import SurfaceDefect
+
+    scan = _scan(calibrated=True)
+    r = GEO.bore_radius_mm
+
+    def at(kind, axial, angle, length=0.15, hole=None):
+        return SurfaceDefect("", kind, axial, angle, length, 0.03, 0.02, 0.02, 0.9, hole=hole)
+
+    pore = at("pore", 77.333, 87.372, 0.488)
+    burr = at("burr", 77.065, 87.93)
+    chip = at("chip", 77.265, 88.60, 0.26)
+    beyond = at("chip", 77.333, 87.372 + math.degrees(0.40 / r))  # 0.40 mm from its middle
+    at_hole = at("burr", 71.38, 0.2, hole="hole_1")
+    stray = at("burr", 30.0, 200.0)
+    kept = scan.without_pores_rims([pore, burr, chip, beyond, at_hole, stray])
+    assert kept == [pore, beyond, at_hole, stray]
+    assert sum("outline of the 0.49 mm pore" in n for n in scan.notes) == 2, scan.notes
