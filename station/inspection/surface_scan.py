@@ -606,6 +606,19 @@ class _SurfaceScan:
         """From place ``a`` to place ``b`` on the unrolled wall (mm: arc, axial)."""
         return np.array([math.radians(wrap_deg(b[1] - a[1])) * self.radius, b[0] - a[0]])
 
+    def wall_path(self, origin: tuple[float, float], pts) -> np.ndarray:
+        """Places along a piece (``pts``, in order) from ``origin`` on the unrolled wall
+        (mm: arc, axial), unrolled along the piece: its first place the short way round
+        from ``origin``, each next one from the one before. A piece near the far side of
+        the bore from ``origin`` is not split by the seam there (its ends read 34 mm either
+        side of it, and a piece half the bore away overlapped every other: whole-surface
+        part 91101, a 23.6 mm scratch joined with a 1.5 mm one across the bore)."""
+        pts = list(pts)
+        out = [self.wall_vec(origin, pts[0])]
+        for a, b in zip(pts[:-1], pts[1:]):
+            out.append(out[-1] + self.wall_vec(a, b))
+        return np.array(out)
+
     def off_wall(self, origin: tuple[float, float], v: np.ndarray) -> tuple[float, float]:
         """The place ``v`` (mm: arc, axial) from ``origin`` on the unrolled wall."""
         return origin[0] + float(v[1]), (origin[1] + math.degrees(float(v[0]) / self.radius)) % 360.0
@@ -663,8 +676,8 @@ class _SurfaceScan:
         u = up + (uq if cos_turn >= 0.0 else -uq)
         u /= np.hypot(*u)
         n = np.array([-u[1], u[0]])
-        tp = sorted(float(self.wall_vec(o, e) @ u) for e in p.ends)
-        tq = sorted(float(self.wall_vec(o, e) @ u) for e in q.ends)
+        tp = sorted(float(v @ u) for v in self.wall_path(o, p.ends))
+        tq = sorted(float(v @ u) for v in self.wall_path(o, q.ends))
         if max(tq[0] - tp[1], tp[0] - tq[1]) > cfg.join_gap_mm + lens:
             return None
         mq = self.wall_vec(o, (q.sighting.axial_mm, q.sighting.angle_deg))
@@ -693,7 +706,7 @@ class _SurfaceScan:
         line does not run along ``u``."""
         lines = []
         for pc in (p, q):
-            v = np.array([self.wall_vec(o, pt) for pt in pc.line])
+            v = self.wall_path(o, pc.line)
             t, off = v @ u, v @ n
             if t[-1] < t[0]:
                 t, off = t[::-1], off[::-1]

@@ -833,3 +833,38 @@ def test_the_rim_defects_of_a_pore_read_as_a_hole_are_not_reported():
     kept = scan.without_pores_rims([pore, burr, chip, beyond, at_hole, stray])
     assert kept == [pore, beyond, at_hole, stray]
     assert sum("outline of the 0.49 mm pore" in n for n in scan.notes) == 2, scan.notes
+
+
+@pytest.mark.parametrize("with_line", [False, True], ids=["chords", "centre lines"])
+def test_pieces_on_far_sides_of_the_bore_are_not_one_scratch(with_line):
+    """Whole-surface part 91101: a piece of a 23.6 mm scratch (its middle at 131.7 deg)
+    and a 0.9 mm piece of another scratch half the bore away (309-313.5 deg, 3 mm further
+    along the bore). Placed from the first's middle the short way round, the second's
+    ends fell 34 mm either side of it, the two "overlapped" seven times the shorter's
+    length, and the long scratch was reported 32.8 mm long. Each piece is now unrolled
+    along itself (``wall_path``): the pieces are 31 mm apart and stay apart; pieces of
+    one scratch across the 0/360 deg seam still join."""
+    from station.inspection.scan import wrap_deg
+    from station.inspection.surface_scan import _Piece, _Sighting
+
+    scan = _scan(calibrated=True)
+
+    def piece(frame, a, b, partial):
+        d = SimpleNamespace(kind="scratch", partial=partial, width_mm=0.03, width_px=3.0, length_px=100.0)
+        mid = ((a[0] + b[0]) / 2.0, (a[1] + (wrap_deg(b[1] - a[1]) / 2.0)) % 360.0)
+        line = None
+        if with_line:
+            t = np.linspace(0.0, 1.0, 21)
+            line = tuple((a[0] + s * (b[0] - a[0]), (a[1] + s * wrap_deg(b[1] - a[1])) % 360.0) for s in t)
+        return _Piece(_Sighting(d, mid[0], mid[1], 300.0, frame, mid), (a, b), ((0, 0), (0, 0)), (partial, False),
+                      line)
+
+    long_piece = piece(-1, (34.7836, 148.4962), (34.4083, 114.9813), True)
+    short = piece(23, (37.6194, 313.5437), (37.4651, 309.0083), False)
+    r = scan.misfit(long_piece, short)
+    assert r is None or abs(r[0]) > r[1], r
+    # one scratch across the seam: pieces of two frames, 0.2 mm apart along it
+    a = piece(1, (50.0, 355.0), (50.2, 359.9), True)
+    b = piece(2, (50.2, 0.9), (50.4, 6.0), True)
+    r = scan.misfit(a, b)
+    assert r is not None and abs(r[0]) <= r[1], r
