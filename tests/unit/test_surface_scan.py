@@ -383,6 +383,35 @@ def _run(gen):
         return stop.value
 
 
+def _looking(scan, seen) -> list[tuple[float, float]]:
+    """The scan's moves and frames stubbed: each look's centre recorded (returned, filled
+    as the scan looks), its frame showing ``seen(centre)``."""
+    looks: list[tuple[float, float]] = []
+
+    def move(axial, angle, forward=False):
+        looks.append((axial, angle % 360.0))
+        return looks[-1]
+        yield  # a generator, as the station's move is
+
+    def frame():
+        return None, seen(looks[-1])
+        yield
+
+    scan.move, scan.frame = move, frame
+    return looks
+
+
+def _run_looks(gen):
+    """A plan that may take frames of its own: it asks the station only to checkpoint
+    (the stubbed moves and frames of :func:`_looking` do the rest); its value."""
+    try:
+        while True:
+            msg = next(gen)
+            assert type(msg).__name__ == "Checkpoint", msg
+    except StopIteration as stop:
+        return stop.value
+
+
 def _truth(line: np.ndarray, r: float) -> tuple[float, float, float]:
     """The line's arc length (mm) and middle (axial mm, angle deg): where the station
     places a scratch."""
@@ -577,29 +606,12 @@ def test_a_defect_seen_whole_in_several_frames_takes_its_size_from_every_reading
     assert (out.length_mm, out.width_mm, out.size_u_mm) == pytest.approx((0.093, 0.06, 0.022))
     # ... off every frame's centre: looked at again, centred, and that reading reported
     scan = _scan(calibrated=True)
-    looks = []
-
-    def move(axial, angle, forward=False):
-        looks.append((axial, angle % 360.0))
-        return looks[-1]
-        yield  # a generator, as the station's move is
-
-    def frame():
-        return None, [pore(cx + 2.0, cy - 1.0, 0.086, 0.008, 0.055, significance=20.0)]
-        yield
-
-    scan.move, scan.frame = move, frame
+    looks = _looking(scan, lambda _centre: [pore(cx + 2.0, cy - 1.0, 0.086, 0.008, 0.055, significance=20.0)])
     a = _Sighting(pore(cx - 547.0, cy, 0.060, 0.010, significance=8.8), place[0], place[1], 547.0, 6,
                   (place[0], place[1] + 3.0))
     b = _Sighting(pore(cx + 597.0, cy, 0.093, 0.011, 0.06, significance=23.5), place[0] + 0.003, place[1], 597.0,
                   11, (place[0], place[1] - 3.0))
-    gen = scan.measure([a, b])
-    try:
-        while True:
-            msg = next(gen)
-            assert type(msg).__name__ == "Checkpoint", msg
-    except StopIteration as stop:
-        (out,) = stop.value
+    (out,) = _run_looks(scan.measure([a, b]))
     assert len(looks) == 1 and scan.wall_mm(looks[0], place) < 0.01
     assert (out.length_mm, out.width_mm, out.size_u_mm) == pytest.approx((0.086, 0.055, 0.016))
     assert scan.wall_mm((out.axial_mm, out.angle_deg), place) < 0.05
@@ -677,25 +689,8 @@ def test_a_scratch_a_frame_lost_is_followed_from_its_cut_ends_and_joined_whole()
     chains, rest = scan.join_scratches(lost)
     assert len(chains) + len([sg for sg in rest if sg.defect.kind == "scratch"]) >= 2  # broken where it was lost
 
-    looks = []
-
-    def move(axial, angle, forward=False):
-        looks.append((axial, angle % 360.0))
-        return looks[-1]
-        yield  # a generator, as the station's move is
-
-    def frame():
-        return None, _seen(line, looks[-1], with_line=True)
-        yield
-
-    scan.move, scan.frame = move, frame
-    gen = scan.follow_scratches(lost)
-    try:
-        while True:
-            msg = next(gen)
-            assert type(msg).__name__ == "Checkpoint", msg
-    except StopIteration as stop:
-        extra = stop.value
+    looks = _looking(scan, lambda centre: _seen(line, centre, with_line=True))
+    extra = _run_looks(scan.follow_scratches(lost))
     assert extra and all(isinstance(sg, _Sighting) and sg.frame < 0 for sg in extra)
     assert 1 <= len(looks) <= scan.cfg.follow_max_looks
     assert any("follow" in n for n in scan.notes)
@@ -771,27 +766,10 @@ def test_a_mark_cut_by_frames_borders_that_a_centred_frame_shows_as_a_scratch_pa
 
     def measured(group_kind, look_defects):
         scan = _scan(calibrated=True)
-        looks = []
-
-        def move(axial, angle, forward=False):
-            looks.append((axial, angle % 360.0))
-            return looks[-1]
-            yield  # a generator, as the station's move is
-
-        def frame():
-            return None, look_defects
-            yield
-
-        scan.move, scan.frame = move, frame
+        looks = _looking(scan, lambda _centre: look_defects)
         sg = _Sighting(mark(group_kind, 4.0, 931.0, 15.0 if group_kind == "pore" else 90.0, True), place[0],
                        place[1], 761.0, 18, (32.56, 0.0))
-        gen = scan.measure([sg])
-        try:
-            while True:
-                msg = next(gen)
-                assert type(msg).__name__ == "Checkpoint", msg
-        except StopIteration as stop:
-            out = stop.value
+        out = _run_looks(scan.measure([sg]))
         assert len(looks) == 1
         return out, scan.notes
 
