@@ -135,21 +135,40 @@ def defects_cmd(
     gamma: float = typer.Option(1.0, "--gamma", help="the camera's response gamma (pixel = full x light^gamma: "
                                 "sRGB-like cameras 0.45, 1 linear); frames are made linear first"),
     pixel_map: Optional[Path] = typer.Option(None, "--pixel-map", help=PIXEL_MAP_HELP),
+    hole_at: Optional[list[str]] = typer.Option(None, "--hole-at", help="X,Y: a hole of the part shows here (image "
+                                                "px; repeat for each). Given, a dark disc of a hole's size centred "
+                                                "at none of them is a mark of the wall (a large pore), not a hole"),
+    no_holes: bool = typer.Option(False, "--no-holes", help="the frame shows none of the part's holes: every dark "
+                                  "disc is a mark of the wall (a large pore), not a hole"),
     as_json: bool = typer.Option(False, "--json", help="one JSON object on stdout"),
 ) -> None:
     """Find and measure surface defects in IMAGE: pores, scratches, and burrs and chips at
-    the holes' edges (docs/surface.md)."""
+    the holes' edges (docs/surface.md). Without --hole-at or --no-holes every dark disc
+    of a hole's size (0.55 mm and more) is taken for a hole."""
     from station.vision.defects import detect_defects
+    from station.vision.detect import MAX_HOLE_MM
 
     if not mm_per_px > 0:
         fail(f"{image}: --mm-per-px must be positive, not {mm_per_px}")
     if blur_px is not None and not blur_px > 0:
         fail(f"{image}: --blur-px must be positive, not {blur_px}")
+    if hole_at and no_holes:
+        fail(f"{image}: --hole-at and --no-holes contradict each other")
+    hole_places = () if no_holes else None
+    if hole_at:
+        reach_px = MAX_HOLE_MM / 2.0 / mm_per_px  # from the centre given: the largest hole's radius
+        hole_places = []
+        for text in hole_at:
+            try:
+                x, y = (float(v) for v in text.split(","))
+            except ValueError:
+                fail(f"{image}: --hole-at {text!r}: expected X,Y in image px (two numbers)")
+            hole_places.append((x, y, reach_px))
     pmap = _pixel_map(pixel_map)
     frame = _mended(_read_linear(image, gamma), pmap, image)
     if min(frame.shape) < 64:
         fail(f"{image}: {frame.shape[1]} x {frame.shape[0]} px is too small to model the wall (at least 64 x 64)")
-    found = detect_defects(frame, mm_per_px, blur_px=blur_px)
+    found = detect_defects(frame, mm_per_px, blur_px=blur_px, hole_places=hole_places)
     if as_json:
         print_json({"image": str(image), "mm_per_px": mm_per_px, "defects": [d.to_dict() for d in found]})
         return

@@ -57,11 +57,13 @@ def vision_defects(mm_per_px: float, pixel_map=None):
     (``station.vision.defects.detect_defects``: pores, scratches, and burrs and chips at
     the frame's holes, which it measures itself). ``blur_px``: the camera's blur as the
     bore scan read it at the holes' edges (``MeasureSurface.blur_px``); None: read in
-    the frame itself. ``pixel_map``: as ``vision_measure``'s."""
+    the frame itself. ``hole_places``: where the part's holes may show in the frame
+    (``MeasureSurface.hole_places``); None: every dark disc of a hole's size is a hole.
+    ``pixel_map``: as ``vision_measure``'s."""
     from station.vision.defects import detect_defects
 
-    def surface(image, blur_px: float | None = None):
-        return detect_defects(_mended(image, pixel_map), mm_per_px, blur_px=blur_px)
+    def surface(image, blur_px: float | None = None, hole_places=None):
+        return detect_defects(_mended(image, pixel_map), mm_per_px, blur_px=blur_px, hole_places=hole_places)
 
     return surface
 

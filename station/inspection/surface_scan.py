@@ -13,7 +13,11 @@ The plan (after the holes, so burrs and chips are put at the holes the scan foun
    while the axes move to the next frame with the camera's blur the bore scan read at
    the holes' edges (:func:`camera_blur`), are placed on the part as the holes are
    (``scan.py``): where compensation put the detection point, moved by what the grating
-   saw that the model did not, plus the defect's offset from the frame's centre. Off
+   saw that the model did not, plus the defect's offset from the frame's centre. Each
+   frame is told where the part's holes show in it (:meth:`_SurfaceScan.hole_places`,
+   from the bore scan): a dark disc at none of them is a mark of the wall (a pore
+   larger than the least hole, or a drilling the drawing does not have), measured and
+   reported as a pore with a note, not taken for a hole. Off
    the centre that offset carries the lens's distortion (the endoscope's: up to 2.7 % at
    a corner, 0.2 mm): with the camera's calibration (``CameraGeometry.calibration``) it
    is taken out, and the defect's sizes are corrected by the lens's local scale.
@@ -54,7 +58,7 @@ from station.kinematics.model import StationModel
 from station.motion import AxisLimits
 from station.parts.spec import PartSpec, SURFACE_RIM_KINDS
 from station.sequencer import messages as m
-from station.vision.defects import DefectConfig, camera_blur_from_edge
+from station.vision.defects import DefectConfig, MIN_HOLE_DIAMETER_MM, camera_blur_from_edge
 
 
 @dataclass(frozen=True)
@@ -83,6 +87,12 @@ class SurfaceSettings:
     #: a burr or chip at none of the part's holes this far (mm) beyond a pore's half length
     #: from its middle is the pore's edge read as a hole's rim (``without_pores_rims``)
     pore_rim_reach_mm: float = 0.1
+    #: a frame's dark disc within this (mm) beyond a hole's radius of where the bore scan
+    #: found it is that hole; one at none of the part's holes is a mark of the wall (a
+    #: pore larger than a hole, or a stray drilling) and is measured and reported as a pore
+    #: (``hole_places``). The scan's places are good to ~0.02 mm; the lens's distortion,
+    #: where no calibration takes it out, moves a frame's corner ~0.2 mm
+    hole_place_reach_mm: float = 0.3
     #: a mark seen at one place of the *image* in this many coverage frames, each at
     #: another place of the part, moves with the camera, not the part: a flaw of its
     #: sensor or a speck on its window (``camera_marks``). Two frames never look at one
@@ -390,6 +400,10 @@ class _SurfaceScan:
         self.c_now = 0.0
         self.radius = geo.bore_radius_mm
         self.holes = [h for h in holes if h.found]
+        #: the drawing's holes the bore scan did not find: where it searched, a dark disc is
+        #: still taken for the hole (its verdict is the bore scan's, not the surface's)
+        found_names = {h.name for h in self.holes}
+        self.unfound = [h for h in part.holes if h.id not in found_names]
         self.plan = coverage_plan(part.surface_band_mm(), geo, cfg.overlap_mm)
         self.looks: list[_Look] = []
         self.notes: list[str] = []
@@ -451,10 +465,43 @@ class _SurfaceScan:
             drift = float(reading.position_mm) - carriage
         return axial + drift, angle % 360.0
 
-    def frame(self):
+    def hole_places(self, centre: tuple[float, float]) -> tuple[tuple[float, float, float], ...]:
+        """Where the part's holes show in a frame centred at ``centre`` (axial mm, angle
+        deg), as (x_px, y_px, reach_px) in its image (the lens's distortion put in when the
+        calibration is known): each found hole where the bore scan measured it, its radius
+        plus ``hole_place_reach_mm`` round it; each hole it did not find over the band it
+        was searched in (its position's tolerance, its angle's search band, its largest
+        radius and the same margin). Holes out of the frame by more than their reach are
+        left out."""
+        cx, cy = self.geo.centre_px
+        s = self.geo.mm_per_px
+        reach_mm = self.cfg.hole_place_reach_mm
+        spots = [(h.position_mm, h.angle_deg, h.diameter_mm / 2.0 + reach_mm) for h in self.holes]
+        for h in self.unfound:
+            half = max(h.position.upper_limit - h.position.nominal, h.position.nominal - h.position.lower_limit)
+            arc = math.radians(h.angle_search_deg) * self.radius
+            spots.append((h.position.nominal, h.angle_deg, h.diameter.upper_limit / 2.0 + math.hypot(half, arc)
+                          + reach_mm))
+        out = []
+        for axial, angle, reach in spots:
+            x = cx + math.radians(wrap_deg(angle - centre[1])) * self.radius / s
+            y = cy - (axial - centre[0]) / s
+            r = reach / s
+            if -r <= x <= self.geo.width_px - 1 + r and -r <= y <= self.geo.height_px - 1 + r:
+                if self.lens is not None:
+                    x, y = (float(v) for v in self.lens.distort_px(np.array([[x, y]], np.float64))[0])
+                out.append((float(x), float(y), float(r)))
+        return tuple(out)
+
+    def analyse(self, image, centre: tuple[float, float]):
+        """A frame's defects (``MeasureSurface``): the camera's blur from the bore scan's
+        holes, and where the part's holes show in it (``hole_places``)."""
+        defects = yield m.MeasureSurface(image, blur_px=self.blur_px, hole_places=self.hole_places(centre))
+        return list(defects or [])
+
+    def frame(self, centre: tuple[float, float]):
         frame = yield m.Capture()
-        defects = yield m.MeasureSurface(frame.image, blur_px=self.blur_px)
-        return frame.image, list(defects or [])
+        return frame.image, (yield from self.analyse(frame.image, centre))
 
     def run(self):
         plan = self.plan
@@ -484,7 +531,7 @@ class _SurfaceScan:
             for angle in plan.angles_deg:
                 done: list = []
                 centre = yield from _measuring_on_the_way(self.move(axial, angle, forward=True), pending, done,
-                                                          self.blur_px)
+                                                          self.analyse)
                 if done:
                     analysed(*done[0])
                 frame = yield m.Capture()
@@ -493,8 +540,7 @@ class _SurfaceScan:
                 k += 1
                 yield m.Progress(k, total, f"surface frame {k} of {total}")
         if pending is not None:
-            defects = yield m.MeasureSurface(pending[2], blur_px=self.blur_px)
-            analysed(pending[0], pending[1], list(defects or []))
+            analysed(pending[0], pending[1], (yield from self.analyse(pending[2], pending[1])))
         marks, sightings = camera_marks(sightings, self.cfg, self.radius)
         for mark in marks:
             kind = mark[0].defect.kind
@@ -521,6 +567,13 @@ class _SurfaceScan:
                            for o in defects):
                     defects.append(d)
         defects = self.without_pores_rims(defects)
+        for d in defects:
+            if d.kind == "pore" and d.length_mm >= MIN_HOLE_DIAMETER_MM:
+                note = (f"surface: a dark disc {d.length_mm:.2f} x {d.width_mm:.2f} mm at {d.axial_mm:.3f} mm, "
+                        f"{d.angle_deg:.2f} deg, the size of a hole, lies at none of the part's holes: reported as a "
+                        f"pore (a pore larger than the least hole, or a drilling where the drawing has none)")
+                self.notes.append(note)
+                yield m.Note(note)
         for i, d in enumerate(sorted(defects, key=lambda d: (d.axial_mm, d.angle_deg))):
             d.id = f"d{i + 1}"
         lo, hi = plan.band_mm
@@ -894,7 +947,7 @@ class _SurfaceScan:
         if look is None:
             yield m.Checkpoint(why)
             centre = yield from self.move(*place)
-            _image, found = yield from self.frame()
+            _image, found = yield from self.frame(centre)
             look = _Look(centre[0], centre[1], found)
             self.looks.append(look)
         return look
@@ -1243,24 +1296,23 @@ def _birge(values: np.ndarray, us: np.ndarray) -> tuple[float, float, float]:
     return m, max(birge, 1.0) / math.sqrt(float(np.sum(w))), birge
 
 
-def _measuring_on_the_way(move, pending, done: list, blur_px: float | None = None):
+def _measuring_on_the_way(move, pending, done: list, analyse):
     """Run the ``move`` plan, and while its axes travel (after its moves are sent, before
-    its first wait) analyse the ``pending`` frame (k, centre, image) with the camera's
-    blur ``blur_px``; its defects go to ``done`` as (k, centre, defects). The vision stage
-    then costs no machine time of its own while there is a move to hide it in."""
+    its first wait) analyse the ``pending`` frame (k, centre, image) with ``analyse``
+    (image, centre: a plan whose value is its defects); they go to ``done`` as (k,
+    centre, defects). The vision stage then costs no machine time of its own while there
+    is a move to hide it in."""
     try:
         msg = next(move)
         while True:
             if pending is not None and isinstance(msg, m.Wait):
-                defects = yield m.MeasureSurface(pending[2], blur_px=blur_px)
-                done.append((pending[0], pending[1], list(defects or [])))
+                done.append((pending[0], pending[1], (yield from analyse(pending[2], pending[1]))))
                 pending = None
             reply = yield msg
             msg = move.send(reply)
     except StopIteration as stop:
         if pending is not None:  # nothing moved: analyse it now
-            defects = yield m.MeasureSurface(pending[2], blur_px=blur_px)
-            done.append((pending[0], pending[1], list(defects or [])))
+            done.append((pending[0], pending[1], (yield from analyse(pending[2], pending[1]))))
         return stop.value
 
 

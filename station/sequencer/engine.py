@@ -131,7 +131,8 @@ class Devices:
     camera: Camera | None = None
     #: image -> list of hole measurements (the vision stage), run off the event loop
     measure: Callable[[Any], Any] | None = None
-    #: (image, blur_px=camera blur px or None) -> list of surface defects (the vision
+    #: (image, blur_px=camera blur px or None[, hole_places=the part's holes in the frame,
+    #: (x, y, reach) px each]) -> list of surface defects (the vision
     #: stage's defect detection), off the loop
     surface: Callable[..., Any] | None = None
 
@@ -504,7 +505,11 @@ class Engine:
         if self.devices.surface is None:
             raise EngineStateError("the plan inspects the surface, but the station has no defect detection")
         t0 = time.perf_counter()
-        out = await asyncio.to_thread(self.devices.surface, msg.image, blur_px=msg.blur_px)
+        if msg.hole_places is None:
+            out = await asyncio.to_thread(self.devices.surface, msg.image, blur_px=msg.blur_px)
+        else:
+            out = await asyncio.to_thread(self.devices.surface, msg.image, blur_px=msg.blur_px,
+                                          hole_places=msg.hole_places)
         self.ledger.add(Step("vision", time.perf_counter() - t0))
         return out
 

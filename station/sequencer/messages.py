@@ -79,10 +79,14 @@ class MeasureSurface(Msg):
     """Run the surface inspection on a frame's image; returns its defects
     (``station.vision.defects.Defect``, image px and mm). ``blur_px``: the camera's blur
     (Gaussian sigma, px) as the bore scan read it at the holes' edges; None: the frame's
-    defect detection reads it itself (from a hole in the frame, else each mark's own)."""
+    defect detection reads it itself (from a hole in the frame, else each mark's own).
+    ``hole_places``: where the part's holes may show in the frame, as (x_px, y_px,
+    reach_px) each (the bore scan found them); a dark disc at none of them is a mark of
+    the wall (a large pore), not a hole. None: every dark disc of a hole's size is a hole."""
 
     image: Any
     blur_px: float | None = None
+    hole_places: tuple[tuple[float, float, float], ...] | None = None
 
 
 @dataclass(frozen=True)

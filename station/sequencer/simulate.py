@@ -134,9 +134,9 @@ class SimWorld:
             raise ValueError("Measure of an image this world did not capture")
         return [] if self._measure is None else self._measure(dict(known[1]))
 
-    def measure_surface(self, image: Any, blur_px: float | None = None) -> Any:
+    def measure_surface(self, image: Any, blur_px: float | None = None, hole_places=None) -> Any:
         """The defects of a captured frame: none (a plan's world has a clean wall).
-        ``blur_px``: the camera's blur the plan gives the detection (not used here)."""
+        ``blur_px``, ``hole_places``: what the plan gives the detection (not used here)."""
         if self._pose_of_image.get(id(image)) is None:
             raise ValueError("MeasureSurface of an image this world did not capture")
         return []
@@ -196,7 +196,7 @@ def summarize_plan(plan: Generator[m.Msg, Any, Any], world: SimWorld | None = No
         elif isinstance(msg, m.Measure):
             answer = world.measure(msg.image)
         elif isinstance(msg, m.MeasureSurface):
-            answer = world.measure_surface(msg.image, blur_px=msg.blur_px)
+            answer = world.measure_surface(msg.image, blur_px=msg.blur_px, hole_places=msg.hole_places)
         elif isinstance(msg, m.Checkpoint):
             label = msg.label
             out.checkpoints.append(msg.label)

@@ -66,6 +66,16 @@ class CameraCalibration:
         )
         return out.reshape(-1, 2)
 
+    def distort_px(self, pts_px: np.ndarray) -> np.ndarray:
+        """Ideal pixel coordinates (N, 2) of the camera matrix -> where the lens puts them
+        in the image (``undistort_px``'s inverse)."""
+        p = np.asarray(pts_px, dtype=np.float64).reshape(-1, 2)
+        k = np.asarray(self.camera_matrix, np.float64)
+        rays = np.column_stack([(p[:, 0] - k[0, 2]) / k[0, 0], (p[:, 1] - k[1, 2]) / k[1, 1], np.ones(len(p))])
+        out, _ = cv2.projectPoints(rays.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), k,
+                                   np.asarray(self.dist_coeffs, np.float64))
+        return out.reshape(-1, 2)
+
     def undistort_u_px(self, pts_px: np.ndarray) -> np.ndarray | None:
         """Standard uncertainty (N, 2) of ``undistort_px`` at image points: how far the
         calibration's own map may be off there (bilinear in the stored grid), or None

@@ -237,8 +237,9 @@ def test_every_frame_s_defects_get_the_camera_blur_the_bore_scan_read_at_the_hol
 
 
 def test_the_station_s_defect_detection_is_given_the_camera_blur(monkeypatch):
-    """``vision_defects`` (the engine's ``surface`` device) hands ``blur_px`` on to
-    ``detect_defects``; without it, None (the frame reads the blur itself)."""
+    """``vision_defects`` (the engine's ``surface`` device) hands ``blur_px`` and the
+    part's holes' places on to ``detect_defects``; without them, None (the frame reads
+    the blur itself, and takes every dark disc of a hole's size for a hole)."""
     import station.vision.defects as defects
     from station.inspection.session import vision_defects
 
@@ -252,7 +253,10 @@ def test_the_station_s_defect_detection_is_given_the_camera_blur(monkeypatch):
     surface = vision_defects(0.01)
     assert surface("frame", blur_px=1.17) == ["found"]
     assert surface("frame 2") == ["found"]
-    assert calls == [("frame", 0.01, {"blur_px": 1.17}), ("frame 2", 0.01, {"blur_px": None})]
+    assert surface("frame 3", hole_places=((10.0, 20.0, 45.0),)) == ["found"]
+    assert calls == [("frame", 0.01, {"blur_px": 1.17, "hole_places": None}),
+                     ("frame 2", 0.01, {"blur_px": None, "hole_places": None}),
+                     ("frame 3", 0.01, {"blur_px": None, "hole_places": ((10.0, 20.0, 45.0),)})]
 
 
 def test_the_picture_puts_a_mark_of_a_frame_at_its_place_on_the_part():
@@ -393,8 +397,8 @@ def _looking(scan, seen) -> list[tuple[float, float]]:
         return looks[-1]
         yield  # a generator, as the station's move is
 
-    def frame():
-        return None, seen(looks[-1])
+    def frame(centre):
+        return None, seen(centre)
         yield
 
     scan.move, scan.frame = move, frame

@@ -47,6 +47,18 @@ GROUP_DOMINANT_SHARE = 2.0
 class DefectConfig:
     #: a dark disc at least this large is a hole, not a pore (:data:`MIN_HOLE_DIAMETER_MM`)
     min_hole_diameter_mm: float = MIN_HOLE_DIAMETER_MM
+    #: a dark disc of a hole's size at none of the part's holes (``detect_defects``'s
+    #: ``hole_places``) is a dark mark: the wall's level and its grooves' means are modelled
+    #: past this many times its diameter, as past the largest pore. At 1.2x (the grooves'
+    #: means then 1.8x) the means along the lines through a 1.3 mm pore took most of its
+    #: middle's darkness, the level followed it there, its floor read from -0.08 to 0.55,
+    #: and 0.65-1.3 mm pores were lost 9 times in 24 (synthetic frames, session 91); at
+    #: 2x none of 24 at 1.0-1.3 mm, sizes within 2 %
+    stray_disc_reach: float = 2.0
+    #: ... a disc the holes' coarse stage finds counts from this share of the least
+    #: hole's diameter (it reads a disc 0.85-0.93 of its size): the wall's model of frames
+    #: whose marks are all of a pore's size stays as it is
+    stray_disc_min_share: float = 0.85
     #: the share of a hole's rays that must agree on its circle when the rim analysis
     #: measures it by its rays alone (``_measure_holes_for_rims``; ``MeasureConfig.
     #: min_inlier_fraction`` is 0.5). Its rim defects are the rays' outliers: a dim hole

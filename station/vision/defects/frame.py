@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from dataclasses import asdict, replace
 from typing import NamedTuple
+import math
 import warnings
 
 import cv2
@@ -57,6 +58,23 @@ def _measure_holes_for_rims(img: np.ndarray, mm_per_px: float, cfg: DefectConfig
     return holes
 
 
+def _dark_discs(img: np.ndarray, mm_per_px: float, cfg: DefectConfig) -> list[tuple[float, float, float]]:
+    """The frame's dark discs of a hole's size or more, as the holes' coarse stage finds
+    them (``detect_candidates`` over the holes' range at this scale, and the
+    ``oversized_discs`` beyond it; from ``cfg.stray_disc_min_share`` of the least hole's
+    diameter): (x_px, y_px, diameter_px) each. Unmeasured: what a
+    dark mark at none of the part's holes needs is its size, for the wall's level to
+    reach past it (``detect_defects``)."""
+    from station.vision.detect import detect_candidates, for_scale, oversized_discs
+    from station.vision.measure import MeasureConfig
+
+    detect = for_scale(MeasureConfig().detect, mm_per_px)
+    smallest = cfg.stray_disc_min_share * cfg.min_hole_diameter_mm / mm_per_px
+    return [(c.x_px, c.y_px, 2.0 * c.radius_px)
+            for c in list(detect_candidates(img, detect)) + list(oversized_discs(img, detect))
+            if 2.0 * c.radius_px >= smallest]
+
+
 def _dark_disc_share(img: np.ndarray, hole) -> float:
     """The share of ``hole``'s disc inside its rim's blur (radius R - 2 blur - 1 px) that
     is darker than midway between the ring beyond its rim (3 blur + 1 px to 3 blur + 9
@@ -82,7 +100,7 @@ def _dark_disc_share(img: np.ndarray, hole) -> float:
 
 
 def detect_defects(image: np.ndarray, mm_per_px: float, *, holes=None, blur_px: float | None = None,
-                   cfg: DefectConfig = DefectConfig()) -> list[Defect]:
+                   hole_places=None, cfg: DefectConfig = DefectConfig()) -> list[Defect]:
     """Pores, scratches, burrs and chips of one grey (or BGR) frame of 8 or 16 bits.
 
     ``mm_per_px``: the scale at the wall (sizes in mm, and which dark discs are holes).
@@ -103,6 +121,12 @@ def detect_defects(image: np.ndarray, mm_per_px: float, *, holes=None, blur_px: 
     source and dropped: its ragged outline reads as extra blur, up to 3 px on dev frames.)
     Given, it stands for the blur everywhere but at the rims, which each read their own
     hole's (``rim_defects``).
+    ``hole_places``: where the part's holes may show in this frame, as (x_px, y_px,
+    reach_px) (the whole-surface scan knows them from the bore scan); a dark disc the size
+    of a hole whose centre is within reach of none is no hole of the part but a dark mark
+    (a pore over the holes' smallest size, or a stray drilling), and is examined as one;
+    its rim is not judged for burrs and chips. None: every dark disc of a hole's size is a
+    hole (a frame alone does not say which are the part's).
     Sorted by y then x.
     """
     if not (mm_per_px and mm_per_px > 0):
@@ -111,9 +135,23 @@ def detect_defects(image: np.ndarray, mm_per_px: float, *, holes=None, blur_px: 
     if holes is None:
         holes = _measure_holes_for_rims(img, mm_per_px, cfg)
     holes = [h for h in holes if h.diameter_px * mm_per_px >= cfg.min_hole_diameter_mm]
+    largest_mark_px = cfg.min_hole_diameter_mm / mm_per_px
+    if hole_places is not None:
+        places = [(float(x), float(y), float(r)) for x, y, r in hole_places]
+
+        def at_a_hole(x: float, y: float) -> bool:
+            return any(math.hypot(x - px, y - py) <= r for px, py, r in places)
+
+        # a dark disc at none of the part's holes is a mark: the wall's level must reach
+        # past the largest of them, as past a pore (a 1.15 mm one, under a level that
+        # followed it, read a floor from -0.08 to 0.55 of the wall's darkness and was lost)
+        stray = [h.diameter_px for h in holes if not at_a_hole(h.x_px, h.y_px)]
+        stray += [d for x, y, d in _dark_discs(img, mm_per_px, cfg) if not at_a_hole(x, y)]
+        holes = [h for h in holes if at_a_hole(h.x_px, h.y_px)]
+        largest_mark_px = max([largest_mark_px] + [cfg.stray_disc_reach * d for d in stray])
     # the wall model leaves out each hole and the band its rim defects may occupy
     reach_px = cfg.rim_reach_mm / mm_per_px + 6.0
-    wall = model_wall(img, holes, reach_px, cfg, largest_mark_px=cfg.min_hole_diameter_mm / mm_per_px)
+    wall = model_wall(img, holes, reach_px, cfg, largest_mark_px=largest_mark_px)
     zone = hole_zone(img.shape, holes, reach_px)
     hh, ww = img.shape
     level_full = cv2.resize(wall.level, (ww // 2 * 2, hh // 2 * 2), interpolation=cv2.INTER_LINEAR)
