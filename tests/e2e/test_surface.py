@@ -12,7 +12,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from sim.world import STANDARD_SAMPLE, PartTruth, SurfaceDefect, defect_truth_place
+from sim.world import STANDARD_SAMPLE, HoleTruth, PartTruth, SurfaceDefect, defect_truth_place
 from station.parts.loader import parse_part
 from station.runtime import open_session
 from station.store import Store
@@ -108,11 +108,42 @@ def test_a_part_with_seeded_defects_is_scanned_whole_and_every_defect_is_at_its_
         store.close()
 
 
-def _inspect(tmp_path, calibrated: bool, defects):
-    """The standard sample with ``defects`` in the twin's world, inspected whole with its
-    surface on the simulated station, with the lens's calibration or without one."""
+#: two dark discs of a hole's size at none of the part's holes: a 1.1 mm pore and a
+#: 0.7 mm drilling the drawing does not have (half the bore away from the holes)
+STRAY_PORE = SurfaceDefect("large_pore", "pore", 1.1, 0.9, axial_mm=75.0, angle_deg=100.0, orientation_deg=30.0,
+                           seed=31)
+STRAY_HOLE = HoleTruth("stray", 82.0, 200.0, 0.7)
+
+
+def test_a_dark_disc_at_none_of_the_part_s_holes_is_reported_as_a_pore(tmp_path):
+    """The coverage frames are told where the part's holes are (the bore scan found
+    them): a 1.1 mm pore, over the least hole's size, and a 0.7 mm drilling where the
+    drawing has none are each reported as a pore of their size at their place, with a
+    note, and fail the pore criterion; the part's own holes are no pores, and the pore's
+    outline gives no burr or chip."""
+    truth, out = _inspect(tmp_path, True, (STRAY_PORE,), extra_holes=(STRAY_HOLE,))
+    sf = out.surface
+    pores = {d.truth["name"] if d.truth else "drilling": d for d in sf.defects if d.kind == "pore"}
+    assert sorted(pores) == ["drilling", "large_pore"] and len(sf.defects) == 2, [d.to_json(True) for d in sf.defects]
+    big = pores["large_pore"]
+    assert big.truth["place_error_mm"] <= 0.05 and abs(big.length_mm - big.truth["length_mm"]) <= 0.11, big.to_json(True)
+    hole = pores["drilling"]
+    assert abs(hole.axial_mm - 82.0) <= 0.05 and abs(math.radians(hole.angle_deg - 200.0) * 11.1) <= 0.05
+    assert abs(hole.length_mm - 0.7) <= 0.07 and abs(hole.width_mm - 0.7) <= 0.07, hole.to_json(True)
+    assert sum("the size of a hole, lies at none of the part's holes" in n for n in sf.notes) == 2, sf.notes
+    chars = {c.id: c for c in out.characteristics}
+    assert not chars["surface.pore"].passed and chars["surface.pore"].measured == big.length_mm
+    assert chars["hole_1.burr"].passed and chars["hole_2.chip"].passed
+    assert [h.name for h in out.holes if h.found] == ["hole_1", "hole_2"]
+
+
+def _inspect(tmp_path, calibrated: bool, defects, extra_holes=()):
+    """The standard sample with ``defects`` in the twin's world (and ``extra_holes``
+    drilled where the drawing has none), inspected whole with its surface on the
+    simulated station, with the lens's calibration or without one."""
     spec = parse_part(SPEC, "surface-test.toml")
-    truth = PartTruth(STANDARD_SAMPLE.part_number, STANDARD_SAMPLE.bore_diameter_mm, STANDARD_SAMPLE.holes, defects)
+    truth = PartTruth(STANDARD_SAMPLE.part_number, STANDARD_SAMPLE.bore_diameter_mm,
+                      STANDARD_SAMPLE.holes + tuple(extra_holes), defects)
     config = None
     if not calibrated:
         config = tmp_path / "station.toml"

@@ -50,11 +50,17 @@ def test_plan_runs_and_returns_its_value():
 
 def test_the_surface_device_is_given_the_camera_blur_the_plan_names():
     """``MeasureSurface.blur_px`` reaches the station's defect detection as its keyword
-    (the camera's blur from the bore scan's holes), None when the plan names none."""
+    (the camera's blur from the bore scan's holes), None when the plan names none; and
+    ``hole_places`` (where the part's holes show) when the plan gives them, else the
+    device is called as before (a detection that takes no places still serves)."""
     calls = []
 
     def surface(image, blur_px=None):
         calls.append((image, blur_px))
+        return [image]
+
+    def placed(image, blur_px=None, hole_places=None):
+        calls.append((image, blur_px, hole_places))
         return [image]
 
     def plan():
@@ -62,14 +68,22 @@ def test_the_surface_device_is_given_the_camera_blur_the_plan_names():
         b = yield m.MeasureSurface("frame b")
         return a + b
 
-    async def go():
-        z, c = InstantMockLinearAxis("Z"), InstantMockRotaryAxis("C")
-        eng = Engine(Devices(z, c, surface=surface), retry_backoff_s=0.0, sleep=lambda s: asyncio.sleep(0))
-        await eng.home()
-        return await eng.run(plan())
+    def plan_with_places():
+        a = yield m.MeasureSurface("frame c", blur_px=1.3, hole_places=((5.0, 6.0, 40.0),))
+        b = yield m.MeasureSurface("frame d", hole_places=())
+        return a + b
 
-    assert asyncio.run(go()) == ["frame a", "frame b"]
+    async def go(device, p):
+        z, c = InstantMockLinearAxis("Z"), InstantMockRotaryAxis("C")
+        eng = Engine(Devices(z, c, surface=device), retry_backoff_s=0.0, sleep=lambda s: asyncio.sleep(0))
+        await eng.home()
+        return await eng.run(p)
+
+    assert asyncio.run(go(surface, plan())) == ["frame a", "frame b"]
     assert calls == [("frame a", 1.21), ("frame b", None)]
+    calls.clear()
+    assert asyncio.run(go(placed, plan_with_places())) == ["frame c", "frame d"]
+    assert calls == [("frame c", 1.3, ((5.0, 6.0, 40.0),)), ("frame d", None, ())]
 
 
 def test_pause_takes_effect_at_a_checkpoint_and_resume_continues():

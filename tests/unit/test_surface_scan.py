@@ -9,7 +9,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from station.inspection.scan import CameraGeometry, FrameObservation, HoleResult, ScanSettings
+from station.inspection.scan import CameraGeometry, FrameObservation, HoleResult, ScanSettings, wrap_deg
 from station.inspection.service import judge_surface, wants_surface
 from station.inspection.surface import SurfaceDefect, SurfaceResult
 from station.inspection.surface_scan import (SurfaceSettings, _Picture, _Sighting, camera_marks, coverage_plan,
@@ -234,6 +234,50 @@ def test_every_frame_s_defects_get_the_camera_blur_the_bore_scan_read_at_the_hol
         asked = [x for x in log if isinstance(x, m.MeasureSurface)]
         assert asked and all(x.blur_px is None for x in asked)
         assert result.blur_px is None and result.to_json()["blur_px"] is None
+
+
+def test_each_frame_is_told_where_the_part_s_holes_show_in_it():
+    """``hole_places``: a found hole where the bore scan measured it (its radius plus
+    ``hole_place_reach_mm``), put through the lens's distortion, so that the scan's own
+    ``place`` takes it back to the hole; a hole the bore scan did not find over the band it
+    was searched in; a hole out of the frame by more than its reach, left out. Every
+    ``MeasureSurface`` of the scan carries them (the frames away from the holes: none)."""
+    from station.inspection.surface_scan import _SurfaceScan
+    from station.vision.calibration import CameraCalibration
+
+    text = SPEC.replace("[surface]", """[[holes]]
+id = "hole_2"
+angle_deg = 180.0
+diameter = { nominal = 0.7, tol = 0.125 }
+position = { nominal = 85.19, tol = 0.1 }
+[surface]""")
+    cx, cy = GEO.centre_px
+    lens = CameraCalibration(np.array([[1000.0, 0, cx], [0, 1000.0, cy], [0, 0, 1]]), np.array([-0.25, 0.08, 0.0, 0.0]),
+                             (GEO.width_px, GEO.height_px), 0.0, GEO.mm_per_px)
+    geo = CameraGeometry(GEO.mm_per_px, GEO.width_px, GEO.height_px, GEO.bore_radius_mm, calibration=lens)
+    holes = [HoleResult("hole_1", True, 71.06, 0.001, 0.72, 0.001, 2.0), HoleResult("hole_2", False)]
+    reach = SurfaceSettings().hole_place_reach_mm
+    scan = _SurfaceScan(load_ideal_model(), spec(text), geo, ScanSettings(), SurfaceSettings(), None, holes)
+    centre = (75.0, 358.0)  # hole_1 4 deg and 3.9 mm off the centre: in a corner, where the lens bends most
+    (place,) = scan.hole_places(centre)
+    ideal = (cx + math.radians(4.0) * GEO.bore_radius_mm / 0.01, cy + 3.94 / 0.01)
+    assert math.hypot(place[0] - ideal[0], place[1] - ideal[1]) > 10.0  # the distortion is in it
+    back = scan.place(centre, place[0], place[1])
+    assert back[0] == pytest.approx(71.06, abs=1e-6) and math.radians(wrap_deg(back[1] - 2.0)) * 11.1 < 1e-6
+    assert place[2] == pytest.approx((0.36 + reach) / 0.01)
+    # hole_2, not found: at its drawing's place, reaching over its search band (+/- 25 deg)
+    (place,) = scan.hole_places((85.0, 181.0))
+    assert place[0] == pytest.approx(cx - math.radians(1.0) * GEO.bore_radius_mm / 0.01, abs=0.5)
+    band = math.hypot(0.1, math.radians(25.0) * GEO.bore_radius_mm)
+    assert place[2] == pytest.approx((0.825 / 2 + band + reach) / 0.01)
+    assert scan.hole_places((20.0, 90.0)) == ()
+    # the whole scan: every frame's detection is told
+    p = spec()
+    log, _ = _drive(surface_scan(load_ideal_model(), p, GEO, ScanSettings(), holes[:1]))
+    asked = [x for x in log if isinstance(x, m.MeasureSurface)]
+    assert asked and all(x.hole_places is not None for x in asked)
+    shown = [x for x in asked if x.hole_places]
+    assert shown and all(len(x.hole_places) == 1 for x in shown) and len(shown) < len(asked)
 
 
 def test_the_station_s_defect_detection_is_given_the_camera_blur(monkeypatch):
