@@ -34,16 +34,20 @@ from station.bench.defects import LIMITS_MM, SIZE_TOL_MM, SIZE_TOL_REL, above_li
 PLACE_TOL_MM = 0.05
 #: ``--long-scratches``: their lengths (mm), mostly beyond a frame (10.24 x 12.8 mm)
 LONG_SCRATCH_MM = (3.0, 25.0)
+#: ``--large-pores``: their lengths (mm), from the least hole's size (a frame alone takes
+#: a dark disc this large for a hole) to three times the renderer's largest pore
+LARGE_PORE_MM = (0.55, 1.5)
 
 
 def random_defects(rng: np.random.Generator, part, band_mm: tuple[float, float], n_wall: int, n_rim: int,
-                   n_long: int = 0):
+                   n_long: int = 0, n_large: int = 0):
     """``n_wall`` pores and scratches anywhere in the band (at least 1.5 mm from any
     hole, 1 mm from each other and from the band's ends; scratches off the part's honing,
     ``PartTruth.hatch_deg``) and ``n_rim`` burrs and chips at the holes' rims (0.5 mm
     apart along a rim), as the world's ``SurfaceDefect``s; first, ``n_long`` scratches of
     ``LONG_SCRATCH_MM`` (``long_<i>``), wholly in the band, 1.5 mm clear of the holes'
-    rims and 1 mm of each other and of the other defects."""
+    rims and 1 mm of each other and of the other defects; last, ``n_large`` pores of
+    ``LARGE_PORE_MM`` (``large_pore_<i>``), placed as the wall's defects are."""
     from sim.camera.defects import RANDOM_SIZES_MM, SCRATCH_MIN_ELONGATION, random_scratch_angle
     from sim.world import SurfaceDefect
 
@@ -84,6 +88,16 @@ def random_defects(rng: np.random.Generator, part, band_mm: tuple[float, float],
         lines.append(pts)
         out.append(SurfaceDefect(f"long_{i}", "scratch", length, width, axial_mm=place[0], angle_deg=place[1],
                                  orientation_deg=orientation, seed=int(rng.integers(1 << 30))))
+    def free_place(length: float) -> tuple[float, float] | None:
+        for _ in range(200):
+            place = (float(rng.uniform(lo + 1.0 + length / 2, hi - 1.0 - length / 2)), float(rng.uniform(0.0, 360.0)))
+            if all(wall(place, (h.axial_mm, h.angle_deg)) > 1.5 + length / 2 for h in part.holes) \
+                    and all(wall(place, p) > 1.0 + length / 2 for p in places) \
+                    and clear_of_lines(place, 1.0 + length / 2):
+                places.append(place)
+                return place
+        return None
+
     for i in range(n_wall):
         kind = "pore" if rng.random() < 0.55 else "scratch"
         sz = RANDOM_SIZES_MM[kind]
@@ -92,14 +106,9 @@ def random_defects(rng: np.random.Generator, part, band_mm: tuple[float, float],
             width = length / float(rng.uniform(*sz["aspect"]))
         else:
             width = float(min(rng.uniform(*sz["width"]), length / SCRATCH_MIN_ELONGATION))
-        for _ in range(200):
-            place = (float(rng.uniform(lo + 1.0 + length / 2, hi - 1.0 - length / 2)), float(rng.uniform(0.0, 360.0)))
-            if all(wall(place, (h.axial_mm, h.angle_deg)) > 1.5 + length / 2 for h in part.holes) \
-                    and all(wall(place, p) > 1.0 + length / 2 for p in places) and clear_of_lines(place, 1.0 + length / 2):
-                break
-        else:
+        place = free_place(length)
+        if place is None:
             continue
-        places.append(place)
         # a scratch crosses the honing (the defect bench's rule: one along a groove is the
         # hatch's own line to any detector); the set of groove directions is symmetric, so
         # the image's sense and the wall's agree
@@ -119,6 +128,15 @@ def random_defects(rng: np.random.Generator, part, band_mm: tuple[float, float],
             continue
         out.append(SurfaceDefect(f"{kind}_{i}", kind, float(rng.uniform(*sz["length"])), float(rng.uniform(*sz["width"])),
                                  hole=hole.name, at_deg=at, seed=int(rng.integers(1 << 30))))
+    for i in range(n_large):
+        length = float(rng.uniform(*LARGE_PORE_MM))
+        place = free_place(length)
+        if place is None:
+            continue
+        width = length / float(rng.uniform(*RANDOM_SIZES_MM["pore"]["aspect"]))
+        out.append(SurfaceDefect(f"large_pore_{i}", "pore", length, width,
+                                 axial_mm=place[0], angle_deg=place[1], orientation_deg=float(rng.uniform(0.0, 180.0)),
+                                 seed=int(rng.integers(1 << 30))))
     return tuple(out)
 
 
@@ -127,7 +145,7 @@ def _within(err: float, truth: float) -> bool:
 
 
 def run(parts: int = 3, seed: int = 23000, n_wall: int = 8, n_rim: int = 2, time_scale: float = 20.0,
-        progress=None, hatch_deg: float | None = None, n_long: int = 0) -> dict:
+        progress=None, hatch_deg: float | None = None, n_long: int = 0, n_large: int = 0) -> dict:
     from sim.world import STANDARD_SAMPLE, PartTruth, defect_truth_place, rendered_size
     from station.parts import load_part
     from station.runtime import open_session
@@ -144,7 +162,7 @@ def run(parts: int = 3, seed: int = 23000, n_wall: int = 8, n_rim: int = 2, time
                           hatch_deg=hatch_deg)
         # each part its own casting: its own defects and its own honed wall
         truth = PartTruth(truth.part_number, truth.bore_diameter_mm, truth.holes,
-                          random_defects(rng, truth, band, n_wall, n_rim, n_long), texture_seed=seed + k + 1,
+                          random_defects(rng, truth, band, n_wall, n_rim, n_long, n_large), texture_seed=seed + k + 1,
                           hatch_deg=hatch_deg)
 
         async def one():
@@ -167,7 +185,7 @@ def run(parts: int = 3, seed: int = 23000, n_wall: int = 8, n_rim: int = 2, time
                          "above_limit": above_limit(t.kind, length, width), "found": d is not None,
                          "place_error_mm": None if d is None else d.truth["place_error_mm"],
                          "middle_error_mm": None if d is None else d.truth.get("middle_error_mm"),
-                         "long": t.name.startswith("long_"),
+                         "long": t.name.startswith("long_"), "large": t.name.startswith("large_pore_"),
                          "length_error_mm": None if d is None else d.length_mm - length,
                          "width_error_mm": None if d is None else d.width_mm - width,
                          "length_u_mm": None if d is None else d.size_u_mm,
@@ -217,6 +235,20 @@ def run(parts: int = 3, seed: int = 23000, n_wall: int = 8, n_rim: int = 2, time
             "place_within_U": (sum(r["place_error_mm"] <= r["position_u_mm"] for r in long_found)
                                / len(long_found)) if long_found else None,
         }
+    large = [r for r in rows if r["large"]]
+    large_found = [r for r in large if r["found"]]
+    large_summary = None
+    if large:
+        large_summary = {
+            "seeded": len(large), "found": len(large_found),
+            "lengths_mm": [round(min(r["length_mm"] for r in large), 3), round(max(r["length_mm"] for r in large), 3)],
+            "lengths_within_tol": (sum(_within(r["length_error_mm"], r["length_mm"]) for r in large_found)
+                                   / len(large_found)) if large_found else None,
+            "widths_within_tol": (sum(_within(r["width_error_mm"], r["width_mm"]) for r in large_found)
+                                  / len(large_found)) if large_found else None,
+            "length_error_rel": {"max": max(abs(r["length_error_mm"]) / r["length_mm"] for r in large_found)
+                                 if large_found else None},
+        }
     ratios = [p["ratio"] for p in per_part if p["ratio"] is not None]
     return {
         "parts": parts, "seed": seed, "hatch_deg": hatch_deg, "band_mm": list(band), "seeded": len(rows), "found": len(found),
@@ -229,6 +261,7 @@ def run(parts: int = 3, seed: int = 23000, n_wall: int = 8, n_rim: int = 2, time
         "widths_within_tol": (sum(_within(r["width_error_mm"], r["width_mm"]) for r in found) / len(found))
         if found else None,
         "long_scratches": long_summary,
+        "large_pores": large_summary,
         "false_defects": sum(len(p["false"]) for p in per_part),
         "false_per_part": sum(len(p["false"]) for p in per_part) / parts,
         "kinds": kinds,
@@ -257,6 +290,9 @@ def register(bench_app: typer.Typer) -> None:
         n_long: int = typer.Option(0, "--long-scratches", min=0,
                                    help="scratches of 3-25 mm per part besides the others: most no frame sees whole, "
                                         "joined from their pieces (their place: the middle of the centre line)"),
+        n_large: int = typer.Option(0, "--large-pores", min=0,
+                                    help="pores of 0.55-1.5 mm per part besides the others: over the least hole's "
+                                         "size, reported as pores because they lie at none of the part's holes"),
         as_json: bool = typer.Option(False, "--json", help="one JSON object on stdout"),
     ) -> None:
         """Whole-surface inspections: each seeded defect's place (<= 0.05 mm), recall, sizes, cycle vs physical limit."""
@@ -268,7 +304,8 @@ def register(bench_app: typer.Typer) -> None:
 
         with Progress(console=out_console, transient=True, disable=as_json) as bar:
             task = bar.add_task("inspecting simulated parts (coverage scan)", total=parts)
-            r = run(parts, seed, n_wall, n_rim, progress=lambda: bar.advance(task), hatch_deg=hatch_deg, n_long=n_long)
+            r = run(parts, seed, n_wall, n_rim, progress=lambda: bar.advance(task), hatch_deg=hatch_deg, n_long=n_long,
+                    n_large=n_large)
         if as_json:
             print_json(r)
             return
@@ -288,6 +325,12 @@ def register(bench_app: typer.Typer) -> None:
             f"{fmt_cell(r['lengths_within_tol'])}, widths {fmt_cell(r['widths_within_tol'])}; "
             f"false defects {r['false_defects']} ({r['false_per_part']:.2f} per part); coverage scan "
             f"{fmt_cell(r['cycle']['median_ratio'], 2)} x its physical limit (median)")
+        lp = r["large_pores"]
+        if lp:
+            out_console.print(
+                f"large pores ({lp['lengths_mm'][0]:g}-{lp['lengths_mm'][1]:g} mm): found {lp['found']} of "
+                f"{lp['seeded']}; lengths within 10 % or 0.02 mm {fmt_cell(lp['lengths_within_tol'])}, widths "
+                f"{fmt_cell(lp['widths_within_tol'])}")
         ls = r["long_scratches"]
         if ls:
             out_console.print(

@@ -126,7 +126,8 @@ def test_a_dark_disc_at_none_of_the_part_s_holes_is_reported_as_a_pore(tmp_path)
     pores = {d.truth["name"] if d.truth else "drilling": d for d in sf.defects if d.kind == "pore"}
     assert sorted(pores) == ["drilling", "large_pore"] and len(sf.defects) == 2, [d.to_json(True) for d in sf.defects]
     big = pores["large_pore"]
-    assert big.truth["place_error_mm"] <= 0.05 and abs(big.length_mm - big.truth["length_mm"]) <= 0.11, big.to_json(True)
+    assert big.truth["place_error_mm"] <= 0.05, big.to_json(True)
+    assert abs(big.length_mm - big.truth["length_mm"]) <= 0.1 * big.truth["length_mm"], big.to_json(True)
     hole = pores["drilling"]
     assert abs(hole.axial_mm - 82.0) <= 0.05 and abs(math.radians(hole.angle_deg - 200.0) * 11.1) <= 0.05
     assert abs(hole.length_mm - 0.7) <= 0.07 and abs(hole.width_mm - 0.7) <= 0.07, hole.to_json(True)

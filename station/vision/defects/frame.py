@@ -132,6 +132,8 @@ def detect_defects(image: np.ndarray, mm_per_px: float, *, holes=None, blur_px: 
     if not (mm_per_px and mm_per_px > 0):
         raise ValueError("mm_per_px must be positive")
     img = to_8bit(to_grey(image))
+    if cfg.floor_test_max_px is None:
+        cfg = replace(cfg, floor_test_max_px=cfg.min_hole_diameter_mm / mm_per_px)
     if holes is None:
         holes = _measure_holes_for_rims(img, mm_per_px, cfg)
     holes = [h for h in holes if h.diameter_px * mm_per_px >= cfg.min_hole_diameter_mm]
