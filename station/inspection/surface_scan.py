@@ -470,18 +470,15 @@ class _SurfaceScan:
         deg), as (x_px, y_px, reach_px) in its image (the lens's distortion put in when the
         calibration is known): each found hole where the bore scan measured it, its radius
         plus ``hole_place_reach_mm`` round it; each hole it did not find over the band it
-        was searched in (its position's tolerance, its angle's search band, its largest
-        radius and the same margin). Holes out of the frame by more than their reach are
-        left out."""
+        was searched in (:meth:`search_band`, and the same margin). Holes out of the frame
+        by more than their reach are left out."""
         cx, cy = self.geo.centre_px
         s = self.geo.mm_per_px
         reach_mm = self.cfg.hole_place_reach_mm
         spots = [(h.position_mm, h.angle_deg, h.diameter_mm / 2.0 + reach_mm) for h in self.holes]
         for h in self.unfound:
-            half = max(h.position.upper_limit - h.position.nominal, h.position.nominal - h.position.lower_limit)
-            arc = math.radians(h.angle_search_deg) * self.radius
-            spots.append((h.position.nominal, h.angle_deg, h.diameter.upper_limit / 2.0 + math.hypot(half, arc)
-                          + reach_mm))
+            axial, angle, reach = self.search_band(h)
+            spots.append((axial, angle, reach + reach_mm))
         out = []
         for axial, angle, reach in spots:
             x = cx + math.radians(wrap_deg(angle - centre[1])) * self.radius / s
@@ -492,6 +489,29 @@ class _SurfaceScan:
                     x, y = (float(v) for v in self.lens.distort_px(np.array([[x, y]], np.float64))[0])
                 out.append((float(x), float(y), float(r)))
         return tuple(out)
+
+    def search_band(self, hole) -> tuple[float, float, float]:
+        """Where the bore scan searched for a spec ``hole`` it did not find, as a circle on
+        the wall (axial mm, table angle deg, radius mm) round its zone (``hole_targets``'
+        rule: the position's limits widened by the part's axial placement, the drawing's
+        angular band plus the placement's when a fixture sets the part's angle), and its
+        largest radius. With an angular datum the part's angle is what the found holes
+        say (their angles less the drawing's, the median); none found: all round."""
+        pl = self.part.placement
+        lo = hole.position.lower_limit - pl.axial_mm
+        hi = hole.position.upper_limit + pl.axial_mm
+        half_deg = hole.angle_search_deg + (pl.angle_deg if pl.angular_datum is None else 0.0)
+        offset = 0.0
+        if pl.angular_datum is not None:
+            drawing = {h.id: h.angle_deg for h in self.part.holes}
+            turns = [wrap_deg(h.angle_deg - drawing[h.name]) for h in self.holes if h.name in drawing]
+            if turns:
+                offset = float(np.median(turns))
+            else:
+                half_deg = 180.0
+        arc = math.radians(min(half_deg, 180.0)) * self.radius
+        return (lo + hi) / 2.0, (hole.angle_deg + offset) % 360.0, \
+            hole.diameter.upper_limit / 2.0 + math.hypot((hi - lo) / 2.0, arc)
 
     def analyse(self, image, centre: tuple[float, float]):
         """A frame's defects (``MeasureSurface``): the camera's blur from the bore scan's

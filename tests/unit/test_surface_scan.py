@@ -265,12 +265,23 @@ position = { nominal = 85.19, tol = 0.1 }
     back = scan.place(centre, place[0], place[1])
     assert back[0] == pytest.approx(71.06, abs=1e-6) and math.radians(wrap_deg(back[1] - 2.0)) * 11.1 < 1e-6
     assert place[2] == pytest.approx((0.36 + reach) / 0.01)
-    # hole_2, not found: at its drawing's place, reaching over its search band (+/- 25 deg)
+    # hole_2, not found: at its drawing's place, reaching over its search band (the
+    # position's tolerance and the part's axial placement, 0.5 mm; the drawing's 25 deg
+    # and the fixture's 5)
     (place,) = scan.hole_places((85.0, 181.0))
     assert place[0] == pytest.approx(cx - math.radians(1.0) * GEO.bore_radius_mm / 0.01, abs=0.5)
-    band = math.hypot(0.1, math.radians(25.0) * GEO.bore_radius_mm)
+    band = math.hypot(0.1 + 0.5, math.radians(25.0 + 5.0) * GEO.bore_radius_mm)
     assert place[2] == pytest.approx((0.825 / 2 + band + reach) / 0.01)
     assert scan.hole_places((20.0, 90.0)) == ()
+    # the part's angle set by a datum hole: the found holes say it (hole_1 at 2 deg for
+    # its drawing's 0), and the band is the drawing's alone; none found: all round
+    datum = spec(text.replace("[surface]", '[placement]\nangular_datum = "hole_1"\n[surface]'))
+    scan = _SurfaceScan(load_ideal_model(), datum, geo, ScanSettings(), SurfaceSettings(), None, holes)
+    axial, angle, r = scan.search_band(datum.holes[1])
+    assert axial == pytest.approx(85.19) and angle == pytest.approx(182.0)
+    assert r == pytest.approx(0.825 / 2 + math.hypot(0.6, math.radians(25.0) * GEO.bore_radius_mm))
+    blind = _SurfaceScan(load_ideal_model(), datum, geo, ScanSettings(), SurfaceSettings(), None, [])
+    assert blind.search_band(datum.holes[1])[2] > math.pi * GEO.bore_radius_mm
     # the whole scan: every frame's detection is told
     p = spec()
     log, _ = _drive(surface_scan(load_ideal_model(), p, GEO, ScanSettings(), holes[:1]))
