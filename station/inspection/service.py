@@ -120,7 +120,8 @@ def scan_plan(model: StationModel, part: PartSpec, geometry: CameraGeometry, set
 
     def both():
         scan = yield from holes
-        scan.surface = yield from surface_scan(model, part, geometry, settings, scan.holes, motion=motion)
+        scan.surface = yield from surface_scan(model, part, geometry, settings, scan.holes, motion=motion,
+                                               findings=scan.findings)
         return scan
 
     return both()

@@ -400,6 +400,9 @@ class _SurfaceScan:
         self.c_now = 0.0
         self.radius = geo.bore_radius_mm
         self.holes = [h for h in holes if h.found]
+        #: the bore scan's unexpected holes (``ScanFinding``), named in the notes of the
+        #: pores reported where they are (``surface_scan``)
+        self.unexpected: list = []
         #: the drawing's holes the bore scan did not find: where it searched, a dark disc is
         #: still taken for the hole (its verdict is the bore scan's, not the surface's)
         found_names = {h.name for h in self.holes}
@@ -589,9 +592,14 @@ class _SurfaceScan:
         defects = self.without_pores_rims(defects)
         for d in defects:
             if d.kind == "pore" and d.length_mm >= MIN_HOLE_DIAMETER_MM:
+                seen = next((f for f in self.unexpected
+                             if self.wall_mm((f.axial_mm, f.angle_deg), (d.axial_mm, d.angle_deg))
+                             <= max(d.length_mm / 2.0, self.cfg.merge_mm)), None)
                 note = (f"surface: a dark disc {d.length_mm:.2f} x {d.width_mm:.2f} mm at {d.axial_mm:.3f} mm, "
                         f"{d.angle_deg:.2f} deg, the size of a hole, lies at none of the part's holes: reported as a "
-                        f"pore (a pore larger than the least hole, or a drilling where the drawing has none)")
+                        f"pore (a pore larger than the least hole, or a drilling where the drawing has none)"
+                        + ("" if seen is None else
+                           f"; the bore scan found it too, an unexpected hole of {seen.diameter_mm:.3f} mm"))
                 self.notes.append(note)
                 yield m.Note(note)
         for i, d in enumerate(sorted(defects, key=lambda d: (d.axial_mm, d.angle_deg))):
@@ -1371,12 +1379,17 @@ def physical_limit(band_mm: tuple[float, float], geo: CameraGeometry, overlap_mm
 
 def surface_scan(model: StationModel, part: PartSpec, geo: CameraGeometry, settings: ScanSettings,
                  holes: list[HoleResult], *, motion: Mapping[str, AxisLimits] | None = None,
-                 cfg: SurfaceSettings | None = None):
+                 cfg: SurfaceSettings | None = None, findings=()):
     """The coverage scan of ``part``'s surface band (a plan; returns a
     :class:`~station.inspection.surface.SurfaceResult`). ``holes``: the bore scan's
-    results, to put burrs and chips at their holes."""
+    results, to put burrs and chips at their holes; ``findings``: its findings
+    (``ScanFinding``), whose unexpected holes the notes name where a pore of a hole's
+    size is reported."""
     if part.surface is None:
         raise ValueError(f"{part.part_number} has no [surface] table: nothing to scan")
     if not settings.compensated:
         model = model.without_errors()
-    return (yield from _SurfaceScan(model, part, geo, settings, cfg or SurfaceSettings(), motion, holes).run())
+    scan = _SurfaceScan(model, part, geo, settings, cfg or SurfaceSettings(), motion, holes)
+    scan.unexpected = [f for f in findings if f.kind == "unexpected_hole" and f.axial_mm is not None
+                       and f.angle_deg is not None]
+    return (yield from scan.run())

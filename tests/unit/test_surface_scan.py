@@ -291,6 +291,36 @@ position = { nominal = 85.19, tol = 0.1 }
     assert shown and all(len(x.hole_places) == 1 for x in shown) and len(shown) < len(asked)
 
 
+def test_a_pore_of_a_hole_s_size_is_reported_with_a_note_naming_the_bore_scan_s_finding():
+    """A pore at least the least hole's size (a disc at none of the part's holes) is
+    reported as a pore with a note; where the bore scan found an unexpected hole at its
+    place, the note says so. A smaller pore gets no note."""
+    from station.inspection.scan import ScanFinding
+    from station.vision.calibration import CameraCalibration
+    from station.vision.defects import Defect
+
+    cx, cy = GEO.centre_px
+    lens = CameraCalibration(np.array([[1000.0, 0, cx], [0, 1000.0, cy], [0, 0, 1]]), np.zeros(4),
+                             (GEO.width_px, GEO.height_px), 0.0, GEO.mm_per_px)
+    geo = CameraGeometry(GEO.mm_per_px, GEO.width_px, GEO.height_px, GEO.bore_radius_mm, calibration=lens)
+    big = Defect("pore", cx + 20.0, cy, 80.0, 70.0, 1.0, 0.0, 1.0, 1.0, 300.0, False, None, 0.8, 0.7, 0.8,
+                 0.01, 0.01)
+    small = Defect("pore", cx - 300.0, cy + 100.0, 30.0, 25.0, 1.0, 0.0, 1.0, 1.0, 80.0, False, None, 0.3, 0.25, 0.3,
+                   0.01, 0.01)
+    p = spec()
+    plan = coverage_plan(p.surface_band_mm(), geo, SurfaceSettings().overlap_mm)
+    where = (plan.axials_mm[0], (plan.angles_deg[0] + math.degrees(0.2 / GEO.bore_radius_mm)) % 360.0)
+    finding = ScanFinding("unexpected_hole", "unexpected hole", None, where[0], where[1], 0.79, 0.01)
+    for findings, named in (((), False), ((finding,), True)):
+        _, result = _drive(surface_scan(load_ideal_model(), p, geo, ScanSettings(), [], findings=findings),
+                           defects=lambda n: [big, small] if n == 0 else [])
+        pores = sorted(result.defects, key=lambda d: d.length_mm)
+        assert [d.kind for d in pores] == ["pore", "pore"] and pores[1].length_mm == pytest.approx(0.8, abs=0.01)
+        notes = [n for n in result.notes if "the size of a hole" in n]
+        assert len(notes) == 1 and "0.80 x 0.70 mm" in notes[0], result.notes
+        assert ("the bore scan found it too, an unexpected hole of 0.790 mm" in notes[0]) == named
+
+
 def test_the_station_s_defect_detection_is_given_the_camera_blur(monkeypatch):
     """``vision_defects`` (the engine's ``surface`` device) hands ``blur_px`` and the
     part's holes' places on to ``detect_defects``; without them, None (the frame reads
