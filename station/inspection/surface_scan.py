@@ -393,7 +393,8 @@ class _Picture:
 
 class _SurfaceScan:
     def __init__(self, model: StationModel, part: PartSpec, geo: CameraGeometry, settings: ScanSettings,
-                 cfg: SurfaceSettings, motion: Mapping[str, AxisLimits] | None, holes: list[HoleResult]):
+                 cfg: SurfaceSettings, motion: Mapping[str, AxisLimits] | None, holes: list[HoleResult],
+                 findings=()):
         self.model, self.part, self.geo, self.settings, self.cfg = model, part, geo, settings, cfg
         self.motion = dict(motion or {})
         self.axes_at: dict[str, float] = {}
@@ -401,8 +402,9 @@ class _SurfaceScan:
         self.radius = geo.bore_radius_mm
         self.holes = [h for h in holes if h.found]
         #: the bore scan's unexpected holes (``ScanFinding``), named in the notes of the
-        #: pores reported where they are (``surface_scan``)
-        self.unexpected: list = []
+        #: pores of a hole's size reported where they are
+        self.unexpected = [f for f in findings if f.kind == "unexpected_hole" and f.axial_mm is not None
+                           and f.angle_deg is not None]
         #: the drawing's holes the bore scan did not find: where it searched, a dark disc is
         #: still taken for the hole (its verdict is the bore scan's, not the surface's)
         found_names = {h.name for h in self.holes}
@@ -1389,7 +1391,5 @@ def surface_scan(model: StationModel, part: PartSpec, geo: CameraGeometry, setti
         raise ValueError(f"{part.part_number} has no [surface] table: nothing to scan")
     if not settings.compensated:
         model = model.without_errors()
-    scan = _SurfaceScan(model, part, geo, settings, cfg or SurfaceSettings(), motion, holes)
-    scan.unexpected = [f for f in findings if f.kind == "unexpected_hole" and f.axial_mm is not None
-                       and f.angle_deg is not None]
-    return (yield from scan.run())
+    return (yield from _SurfaceScan(model, part, geo, settings, cfg or SurfaceSettings(), motion, holes,
+                                    findings).run())
