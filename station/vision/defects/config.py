@@ -183,13 +183,14 @@ class DefectConfig:
     #: defects 1.12-2.13, four false pores; 1,662 true pores of seventeen sets at most 0.93
     #: over a whole region, 0.99 over a core, ``_core_pore``, whose pixels are its darker half)
     max_pore_darkness_over_floor: float = 1.1
-    #: ... for marks shorter than this (px; ``detect_defects`` sets it to the least hole's
-    #: size at the frame's scale when None): the grooves' residue it is for is no larger
-    #: than the largest pore. A pore larger than a hole, at none of the part's holes
-    #: (``hole_places``), reads a floor under its mean darkness where its outline is no
+    #: ... but not for the dark discs of a hole's size at none of the part's holes (x_px,
+    #: y_px, diameter_px; ``detect_defects`` sets them from its ``hole_places``): a mark
+    #: centred in one and at least ``stray_disc_min_share`` of its diameter long is that
+    #: disc. Such a pore reads a floor under its mean darkness where its outline is no
     #: ellipse and the fit's blur runs to 3 px (a 1.43 mm pore at a frame's border: 0.40
-    #: against 0.49, lost; whole-surface bench seed 96000, ``--large-pores``)
-    floor_test_max_px: float | None = None
+    #: against 0.49, lost; whole-surface bench seed 96000, ``--large-pores``). Not by size
+    #: alone: the grooves' residue the test stops reaches 0.61 mm (wide frame 96090)
+    floor_test_exempt: tuple = ()
     #: a pore's rim is a sharp edge blurred by the camera alone: a fitted edge blur beyond
     #: this (px) is a soft shading of the wall, not a cavity (the renderer's and the
     #: endoscope's envelope is 0.8-2 px; dev frames' texture blobs fit 3-3.5 px)

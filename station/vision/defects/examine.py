@@ -614,7 +614,8 @@ def _accept(m: dict | None, kind: str, box, at_border: bool, angles_deg, cfg: De
     if kind == "pore" and m["length"] >= cfg.broad_pore_px and m["mean_darkness"] < cfg.min_broad_pore_darkness:
         return None  # broad and faint: the cross-hatch's residue, not a cavity
     if kind == "pore" and m["mean_darkness"] > cfg.max_pore_darkness_over_floor * m["contrast"] \
-            and (cfg.floor_test_max_px is None or m["length"] < cfg.floor_test_max_px):
+            and not any(np.hypot(m["x"] + box[0] - x, m["y"] + box[1] - y) <= d / 2.0
+                        and m["length"] >= cfg.stray_disc_min_share * d for x, y, d in cfg.floor_test_exempt):
         return None  # darker on the whole than its own fitted floor: no cavity's blurred step
     if kind == "scratch" and (m["contrast"] < cfg.min_scratch_contrast or m["blur"] > cfg.edge_blur_limit(blur_hint)
                               or m["width"] > max_width_px or m["length"] < cfg.scratch_elongation * m["width"]

@@ -132,8 +132,6 @@ def detect_defects(image: np.ndarray, mm_per_px: float, *, holes=None, blur_px: 
     if not (mm_per_px and mm_per_px > 0):
         raise ValueError("mm_per_px must be positive")
     img = to_8bit(to_grey(image))
-    if cfg.floor_test_max_px is None:
-        cfg = replace(cfg, floor_test_max_px=cfg.min_hole_diameter_mm / mm_per_px)
     if holes is None:
         holes = _measure_holes_for_rims(img, mm_per_px, cfg)
     holes = [h for h in holes if h.diameter_px * mm_per_px >= cfg.min_hole_diameter_mm]
@@ -147,10 +145,12 @@ def detect_defects(image: np.ndarray, mm_per_px: float, *, holes=None, blur_px: 
         # a dark disc at none of the part's holes is a mark: the wall's level must reach
         # past the largest of them, as past a pore (a 1.15 mm one, under a level that
         # followed it, read a floor from -0.08 to 0.55 of the wall's darkness and was lost)
-        stray = [h.diameter_px for h in holes if not at_a_hole(h.x_px, h.y_px)]
-        stray += [d for x, y, d in _dark_discs(img, mm_per_px, cfg) if not at_a_hole(x, y)]
+        stray = [(h.x_px, h.y_px, h.diameter_px) for h in holes if not at_a_hole(h.x_px, h.y_px)]
+        stray += [(x, y, d) for x, y, d in _dark_discs(img, mm_per_px, cfg) if not at_a_hole(x, y)]
         holes = [h for h in holes if at_a_hole(h.x_px, h.y_px)]
-        largest_mark_px = max([largest_mark_px] + [cfg.stray_disc_reach * d for d in stray])
+        largest_mark_px = max([largest_mark_px] + [cfg.stray_disc_reach * d for _, _, d in stray])
+        if stray:  # each is a cavity whatever its outline: not judged by the floor test
+            cfg = replace(cfg, floor_test_exempt=tuple(stray))
     # the wall model leaves out each hole and the band its rim defects may occupy
     reach_px = cfg.rim_reach_mm / mm_per_px + 6.0
     wall = model_wall(img, holes, reach_px, cfg, largest_mark_px=largest_mark_px)
