@@ -37,6 +37,7 @@ import numpy as np
 from station.kinematics.inverse import compensate
 from station.kinematics.model import StationModel
 from station.motion import AxisLimits, move_time_s
+from station.parts.spec import PartSpec
 from station.sequencer import messages as m
 from station.vision.defects import MIN_HOLE_DIAMETER_MM
 
@@ -70,6 +71,18 @@ class HoleTarget:
         lo = self.axial_mm - 0.5 if self.axial_lo_mm is None else self.axial_lo_mm
         hi = self.axial_mm + 0.5 if self.axial_hi_mm is None else self.axial_hi_mm
         return lo, hi
+
+
+def hole_targets(part: PartSpec) -> list[HoleTarget]:
+    """The spec's holes with their search zones: the position limits widened by the
+    part's axial placement uncertainty, the drawing's angular band (docs/part-specs.md)."""
+    pad_mm = part.placement.axial_mm
+    return [HoleTarget(h.id, h.position.nominal, h.angle_deg, h.diameter.nominal,
+                       axial_lo_mm=h.position.lower_limit - pad_mm, axial_hi_mm=h.position.upper_limit + pad_mm,
+                       angle_half_deg=h.angle_search_deg,
+                       diameter_lo_mm=h.diameter.lower_limit, diameter_hi_mm=h.diameter.upper_limit,
+                       axial_lo_tol_mm=h.position.lower_limit, axial_hi_tol_mm=h.position.upper_limit)
+            for h in part.holes]
 
 
 @dataclass(frozen=True)

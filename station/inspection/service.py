@@ -26,7 +26,7 @@ from station import __version__
 from station.inspection.documents import (CheckDocument, DocumentStream, FrameDocument, HoleDocument,
                                           InspectionStart, InspectionStop, SurfaceDocument)
 from station.inspection.scan import (CameraGeometry, HoleResult, HoleTarget, ScanFinding, ScanResult, ScanSettings,
-                                     bore_scan)
+                                     bore_scan, hole_targets)
 from station.inspection.surface import SurfaceResult
 from station.inspection.surface_scan import SurfaceSettings, physical_limit, surface_scan
 from station.inspection.writers import ResultNotStored
@@ -94,18 +94,6 @@ def model_fingerprint(model: StationModel) -> str:
     """16 hex digits that change with any number of the model (its version for a record)."""
     return hashlib.sha256(repr((model.endoscope_offset_mm, model.table_offset_mm, sorted(model.static_errors.items()),
                                 sorted(model.motions.items()))).encode()).hexdigest()[:16]
-
-
-def hole_targets(part: PartSpec) -> list[HoleTarget]:
-    """The spec's holes with their search zones: the position limits widened by the
-    part's axial placement uncertainty, the drawing's angular band (docs/part-specs.md)."""
-    pad_mm = part.placement.axial_mm
-    return [HoleTarget(h.id, h.position.nominal, h.angle_deg, h.diameter.nominal,
-                       axial_lo_mm=h.position.lower_limit - pad_mm, axial_hi_mm=h.position.upper_limit + pad_mm,
-                       angle_half_deg=h.angle_search_deg,
-                       diameter_lo_mm=h.diameter.lower_limit, diameter_hi_mm=h.diameter.upper_limit,
-                       axial_lo_tol_mm=h.position.lower_limit, axial_hi_tol_mm=h.position.upper_limit)
-            for h in part.holes]
 
 
 def scan_plan(model: StationModel, part: PartSpec, geometry: CameraGeometry, settings: ScanSettings,

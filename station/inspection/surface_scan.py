@@ -52,7 +52,7 @@ from typing import Mapping
 import cv2
 import numpy as np
 
-from station.inspection.scan import CameraGeometry, HoleResult, ScanSettings, goto, wrap_deg
+from station.inspection.scan import CameraGeometry, HoleResult, ScanSettings, goto, hole_targets, wrap_deg
 from station.inspection.surface import SurfaceDefect, SurfacePicture, SurfaceResult
 from station.kinematics.model import StationModel
 from station.motion import AxisLimits
@@ -408,7 +408,7 @@ class _SurfaceScan:
         #: the drawing's holes the bore scan did not find: where it searched, a dark disc is
         #: still taken for the hole (its verdict is the bore scan's, not the surface's)
         found_names = {h.name for h in self.holes}
-        self.unfound = [h for h in part.holes if h.id not in found_names]
+        self.unfound = [t for t in hole_targets(part) if t.name not in found_names]
         self.plan = coverage_plan(part.surface_band_mm(), geo, cfg.overlap_mm)
         self.looks: list[_Look] = []
         self.notes: list[str] = []
@@ -456,6 +456,18 @@ class _SurfaceScan:
         x_px, y_px = self.ideal(x_px, y_px)
         return centre[0] + (cy - y_px) * s, (centre[1] + math.degrees((x_px - cx) * s / self.radius)) % 360.0
 
+    def image_px(self, centre: tuple[float, float], axial_mm: float, angle_deg: float) -> tuple[float, float]:
+        """A place on the part in the image of a frame centred at ``centre``: :meth:`place`'s
+        inverse (the lens's distortion put in when the calibration is known)."""
+        cx, cy = self.geo.centre_px
+        s = self.geo.mm_per_px
+        x = cx + math.radians(wrap_deg(angle_deg - centre[1])) * self.radius / s
+        y = cy - (axial_mm - centre[0]) / s
+        if self.lens is None:
+            return x, y
+        p = self.lens.distort_px(np.array([[x, y]], np.float64))[0]
+        return float(p[0]), float(p[1])
+
     def move(self, axial: float, angle: float, forward: bool = False):
         """To (axial, angle) on the part; the table forward (never back) when asked, else
         the short way. Returns the frame's centre on the part with the grating's
@@ -477,35 +489,33 @@ class _SurfaceScan:
         plus ``hole_place_reach_mm`` round it; each hole it did not find over the band it
         was searched in (:meth:`search_band`, and the same margin). Holes out of the frame
         by more than their reach are left out."""
-        cx, cy = self.geo.centre_px
-        s = self.geo.mm_per_px
         reach_mm = self.cfg.hole_place_reach_mm
         spots = [(h.position_mm, h.angle_deg, h.diameter_mm / 2.0 + reach_mm) for h in self.holes]
-        for h in self.unfound:
-            axial, angle, reach = self.search_band(h)
+        for t in self.unfound:
+            axial, angle, reach = self.search_band(t)
             spots.append((axial, angle, reach + reach_mm))
         out = []
         for axial, angle, reach in spots:
-            x = cx + math.radians(wrap_deg(angle - centre[1])) * self.radius / s
-            y = cy - (axial - centre[0]) / s
-            r = reach / s
-            if -r <= x <= self.geo.width_px - 1 + r and -r <= y <= self.geo.height_px - 1 + r:
-                if self.lens is not None:
-                    x, y = (float(v) for v in self.lens.distort_px(np.array([[x, y]], np.float64))[0])
-                out.append((float(x), float(y), float(r)))
+            # whether it reaches into the frame, on the wall (mm from the centre)
+            du = math.radians(wrap_deg(angle - centre[1])) * self.radius
+            half_w = (self.geo.width_px - 1) / 2.0 * self.geo.mm_per_px
+            half_h = (self.geo.height_px - 1) / 2.0 * self.geo.mm_per_px
+            if abs(du) <= half_w + reach and abs(axial - centre[0]) <= half_h + reach:
+                x, y = self.image_px(centre, axial, angle)
+                out.append((x, y, reach / self.geo.mm_per_px))
         return tuple(out)
 
-    def search_band(self, hole) -> tuple[float, float, float]:
-        """Where the bore scan searched for a spec ``hole`` it did not find, as a circle on
-        the wall (axial mm, table angle deg, radius mm) round its zone (``hole_targets``'
-        rule: the position's limits widened by the part's axial placement, the drawing's
-        angular band plus the placement's when a fixture sets the part's angle), and its
-        largest radius. With an angular datum the part's angle is what the found holes
-        say (their angles less the drawing's, the median); none found: all round."""
+    def search_band(self, target) -> tuple[float, float, float]:
+        """Where the bore scan searched for a spec hole it did not find (its ``HoleTarget``,
+        ``hole_targets``: the position's limits widened by the part's axial placement, the
+        drawing's angular band, plus the placement's when a fixture sets the part's angle,
+        as ``BoreScan.zone`` has it), as a circle on the wall round that zone and its
+        largest radius: (axial mm, table angle deg, radius mm). With an angular datum the
+        part's angle is what the found holes say (their angles less the drawing's, the
+        median); none found: all round."""
         pl = self.part.placement
-        lo = hole.position.lower_limit - pl.axial_mm
-        hi = hole.position.upper_limit + pl.axial_mm
-        half_deg = hole.angle_search_deg + (pl.angle_deg if pl.angular_datum is None else 0.0)
+        lo, hi = target.zone_axial_mm
+        half_deg = target.angle_half_deg + (pl.angle_deg if pl.angular_datum is None else 0.0)
         offset = 0.0
         if pl.angular_datum is not None:
             drawing = {h.id: h.angle_deg for h in self.part.holes}
@@ -515,8 +525,8 @@ class _SurfaceScan:
             else:
                 half_deg = 180.0
         arc = math.radians(min(half_deg, 180.0)) * self.radius
-        return (lo + hi) / 2.0, (hole.angle_deg + offset) % 360.0, \
-            hole.diameter.upper_limit / 2.0 + math.hypot((hi - lo) / 2.0, arc)
+        return (lo + hi) / 2.0, (target.angle_deg + offset) % 360.0, \
+            target.diameter_hi_mm / 2.0 + math.hypot((hi - lo) / 2.0, arc)
 
     def analyse(self, image, centre: tuple[float, float]):
         """A frame's defects (``MeasureSurface``): the camera's blur from the bore scan's

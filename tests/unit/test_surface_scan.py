@@ -277,11 +277,13 @@ position = { nominal = 85.19, tol = 0.1 }
     # its drawing's 0), and the band is the drawing's alone; none found: all round
     datum = spec(text.replace("[surface]", '[placement]\nangular_datum = "hole_1"\n[surface]'))
     scan = _SurfaceScan(load_ideal_model(), datum, geo, ScanSettings(), SurfaceSettings(), None, holes)
-    axial, angle, r = scan.search_band(datum.holes[1])
+    (hole_2,) = scan.unfound
+    axial, angle, r = scan.search_band(hole_2)
     assert axial == pytest.approx(85.19) and angle == pytest.approx(182.0)
     assert r == pytest.approx(0.825 / 2 + math.hypot(0.6, math.radians(25.0) * GEO.bore_radius_mm))
     blind = _SurfaceScan(load_ideal_model(), datum, geo, ScanSettings(), SurfaceSettings(), None, [])
-    assert blind.search_band(datum.holes[1])[2] > math.pi * GEO.bore_radius_mm
+    assert [t.name for t in blind.unfound] == ["hole_1", "hole_2"]
+    assert blind.search_band(blind.unfound[1])[2] > math.pi * GEO.bore_radius_mm
     # the whole scan: every frame's detection is told
     p = spec()
     log, _ = _drive(surface_scan(load_ideal_model(), p, GEO, ScanSettings(), holes[:1]))

@@ -30,14 +30,25 @@ from station.vision.defects.tracking import (
 )
 
 
-def _measure_holes_for_rims(img: np.ndarray, mm_per_px: float, cfg: DefectConfig) -> list:
+def _coarse_discs(img: np.ndarray, mm_per_px: float) -> list:
+    """The holes' coarse stage at this scale (``detect_candidates``): the dark discs the
+    rims' holes (``_measure_holes_for_rims``) and the marks of a hole's size
+    (``_dark_discs``) are read from, found once for both."""
+    from station.vision.detect import detect_candidates, for_scale
+    from station.vision.measure import MeasureConfig
+
+    return list(detect_candidates(img, for_scale(MeasureConfig().detect, mm_per_px)))
+
+
+def _measure_holes_for_rims(img: np.ndarray, mm_per_px: float, cfg: DefectConfig, coarse=None) -> list:
     """The frame's holes, as ``measure_holes`` measures them, and those it drops because
     their rim is no clean disc: a large burr or chip makes the photometric fit run away
     (``MeasureConfig.reject_unfitted_whole``), and such a hole, unmeasured, would be taken
     for a 0.7 mm pore (dev frames: a hole with two burrs of 0.2-0.3 mm). Those are
     measured by their rays alone (robust circle, Tukey weights: the defects are its
-    outliers), which is all the rim analysis needs."""
-    from station.vision.detect import detect_candidates, for_scale
+    outliers), which is all the rim analysis needs. ``coarse``: the coarse stage's discs
+    (``_coarse_discs``) if already found."""
+    from station.vision.detect import for_scale
     from station.vision.measure import MeasureConfig, measure_candidate, measure_holes
 
     # the rims need no grain-aware step: the weighted fit places them well within a px
@@ -45,7 +56,7 @@ def _measure_holes_for_rims(img: np.ndarray, mm_per_px: float, cfg: DefectConfig
     rays_only = MeasureConfig(photometric=None, min_inlier_fraction=cfg.rim_hole_min_inlier_fraction,
                               min_confidence=cfg.rim_hole_min_confidence)
     rays_only = replace(rays_only, detect=for_scale(rays_only.detect, mm_per_px))
-    for cand in detect_candidates(img, rays_only.detect):
+    for cand in (_coarse_discs(img, mm_per_px) if coarse is None else coarse):
         if 2.0 * cand.radius_px * mm_per_px < cfg.rim_hole_coarse_share * cfg.min_hole_diameter_mm:
             continue  # too small to be a hole, even as a coarse blob that rim defects cut into
         if any(np.hypot(cand.x_px - h.x_px, cand.y_px - h.y_px) < h.diameter_px / 2 for h in holes):
@@ -58,21 +69,22 @@ def _measure_holes_for_rims(img: np.ndarray, mm_per_px: float, cfg: DefectConfig
     return holes
 
 
-def _dark_discs(img: np.ndarray, mm_per_px: float, cfg: DefectConfig) -> list[tuple[float, float, float]]:
+def _dark_discs(img: np.ndarray, mm_per_px: float, cfg: DefectConfig,
+                coarse=None) -> list[tuple[float, float, float]]:
     """The frame's dark discs of a hole's size or more, as the holes' coarse stage finds
     them (``detect_candidates`` over the holes' range at this scale, and the
     ``oversized_discs`` beyond it; from ``cfg.stray_disc_min_share`` of the least hole's
     diameter): (x_px, y_px, diameter_px) each. Unmeasured: what a
     dark mark at none of the part's holes needs is its size, for the wall's level to
-    reach past it (``detect_defects``)."""
-    from station.vision.detect import detect_candidates, for_scale, oversized_discs
+    reach past it (``detect_defects``). ``coarse``: as ``_measure_holes_for_rims``'."""
+    from station.vision.detect import for_scale, oversized_discs
     from station.vision.measure import MeasureConfig
 
-    detect = for_scale(MeasureConfig().detect, mm_per_px)
+    if coarse is None:
+        coarse = _coarse_discs(img, mm_per_px)
     smallest = cfg.stray_disc_min_share * cfg.min_hole_diameter_mm / mm_per_px
-    return [(c.x_px, c.y_px, 2.0 * c.radius_px)
-            for c in list(detect_candidates(img, detect)) + list(oversized_discs(img, detect))
-            if 2.0 * c.radius_px >= smallest]
+    wide = list(oversized_discs(img, for_scale(MeasureConfig().detect, mm_per_px)))
+    return [(c.x_px, c.y_px, 2.0 * c.radius_px) for c in list(coarse) + wide if 2.0 * c.radius_px >= smallest]
 
 
 def _dark_disc_share(img: np.ndarray, hole) -> float:
@@ -132,8 +144,10 @@ def detect_defects(image: np.ndarray, mm_per_px: float, *, holes=None, blur_px: 
     if not (mm_per_px and mm_per_px > 0):
         raise ValueError("mm_per_px must be positive")
     img = to_8bit(to_grey(image))
+    # the holes' coarse stage, once for the rims' holes and the marks of a hole's size
+    coarse = _coarse_discs(img, mm_per_px) if holes is None and hole_places is not None else None
     if holes is None:
-        holes = _measure_holes_for_rims(img, mm_per_px, cfg)
+        holes = _measure_holes_for_rims(img, mm_per_px, cfg, coarse)
     holes = [h for h in holes if h.diameter_px * mm_per_px >= cfg.min_hole_diameter_mm]
     largest_mark_px = cfg.min_hole_diameter_mm / mm_per_px
     if hole_places is not None:
@@ -146,7 +160,7 @@ def detect_defects(image: np.ndarray, mm_per_px: float, *, holes=None, blur_px: 
         # past the largest of them, as past a pore (a 1.15 mm one, under a level that
         # followed it, read a floor from -0.08 to 0.55 of the wall's darkness and was lost)
         stray = [(h.x_px, h.y_px, h.diameter_px) for h in holes if not at_a_hole(h.x_px, h.y_px)]
-        stray += [(x, y, d) for x, y, d in _dark_discs(img, mm_per_px, cfg) if not at_a_hole(x, y)]
+        stray += [(x, y, d) for x, y, d in _dark_discs(img, mm_per_px, cfg, coarse) if not at_a_hole(x, y)]
         holes = [h for h in holes if at_a_hole(h.x_px, h.y_px)]
         largest_mark_px = max([largest_mark_px] + [cfg.stray_disc_reach * d for _, _, d in stray])
         if stray:  # each is a cavity whatever its outline: not judged by the floor test
