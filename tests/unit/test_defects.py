@@ -801,6 +801,25 @@ def test_a_large_pale_pore_that_the_frames_level_followed_is_found():
     _the_large_pore_is_found_once_and_its_length_in_tolerance(4540016)
 
 
+@pytest.mark.parametrize("seed", [0, 5, 6])
+def test_a_large_pale_pore_that_the_frames_level_dipped_under_is_measured_whole(seed):
+    """A 0.5 mm pore at 0.6 of the wall's reflectance (the renderer's palest) on the twin's
+    wall (grooves 10 % deep): found, but its darkness shared with the grooves' coarse means
+    through it, so not clearly dark where the frame's level was taken; the level dipped by
+    up to 16 % under it, and it read 13-18 % short on these seeds. Measured again under the
+    level taken round it, it is within 5 % in length and width."""
+    spec = DefectSpec("pore", 640.3, 512.2, 50.0, 45.0, 30.0 + 20 * seed, reflectance=0.6, shape_seed=seed)
+    f = render_frame(FrameParams(groove_depth=0.1), [], seed=seed, defects=[spec])
+    (t,) = f.defects
+    found = detect_defects(f.image, MM_PER_PX)
+    pairs, false = match([t.with_scale(MM_PER_PX)], found, MM_PER_PX)
+    assert false == [], [(d.kind, d.x_px, d.y_px) for d in found]
+    d = pairs[0][1]
+    assert d is not None and d.kind == "pore"
+    assert abs(d.length_px / t.length_px - 1.0) <= 0.05, (d.length_px, t.length_px)
+    assert abs(d.width_px / t.width_px - 1.0) <= 0.05, (d.width_px, t.width_px)
+
+
 def _pores_across_the_border(seed: int, envelope: str = "station", **overrides):
     """A frame of ``random_params``' envelope with three random pores, each drawn with its
     centre within 0.3 of its length of one of the frame's borders (a side drawn at random)."""

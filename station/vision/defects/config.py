@@ -101,6 +101,10 @@ class DefectConfig:
     #: grooves) is surely no wall texture and is weighted out of the finer level: pores
     #: are 40-85 % dark, the blotches' residue under the coarse level a few per cent
     dark_floor: float = 0.15
+    #: a pore over which the frame's level lies this far (a share of it, on average)
+    #: under the level taken round it is measured again under the latter
+    #: (``examine._examine_once``, ``wall.level_dip``)
+    pore_relevel_dip: float = 0.03
     #: the finer level's Gaussian (half-resolution px): follows the blotches' ~64 px
     #: features (renderer: 64 px cells, cubic), wide against a scratch (<= 6 px)
     level_sigma_half_px: float = 8.0

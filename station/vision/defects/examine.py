@@ -18,7 +18,7 @@ from station.vision.defects.config import Defect, DefectConfig, NOISE_FLOOR
 from station.vision.defects.common import (
     is_along_hatch, circ_diff_deg, confidence_of, gauss_newton, mad_sigma, near_hatch, weighted_pca,
 )
-from station.vision.defects.wall import line_band, local_patch, Patch
+from station.vision.defects.wall import level_dip, line_band, local_patch, Patch
 from station.vision.defects.rims import darkness_reader, grow_by_skirt
 from station.vision.defects.scratches import BLUR_PRIOR_PX, measure_scratch
 from station.vision.defects.pores import measure_pore
@@ -294,6 +294,18 @@ def _examine_once(img: np.ndarray, box, seed: np.ndarray, excl: np.ndarray, zone
                 res_img = np.where(patch.zone, np.nan, 1.0 - patch.residual).astype(np.float32)
                 m["square_end"] = _square_end(res_img, np.ones_like(res_img), 0, 0, m, cfg, angles_deg)[0]
     defect = _accept(m, kind, box, at_border, angles_deg, cfg, max_width_px, blur_hint)
+    if defect is not None and defect.kind == "pore" and not relevel and hidden is None and \
+            level_dip(img, patch, region, 2.0 * cfg.level_sigma_half_px) > cfg.pore_relevel_dip:
+        # a pore the frame's level dipped under: found, but not clearly dark where the
+        # frame's level was taken (a large pale pore shares its darkness with the grooves'
+        # means through it), so the level followed it, and its edges read short (the
+        # twin's 0.5 mm pores at 0.6 of the wall's reflectance, over 10 % grooves: the
+        # level 16 % down in the middle, lengths 3-18 % short). Measured again with the
+        # level taken round it
+        again = _examine_once(img, box, seed, excl, zone, angles_deg, wall_level, cfg, blur_hint, max_width_px,
+                              confine, line_out, keep_out, hide, relevel=True)
+        if again[0].defect is not None and again[0].defect.kind == "pore":
+            return again
     if defect is None and kind == "pore" and m is not None and m.get("faint") and not relevel:
         # a pore's floor under the bar: the frame's level leaves out what it found clearly
         # dark, and a large pale pore it did not find so pulled it down under itself (a

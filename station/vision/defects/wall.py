@@ -756,6 +756,21 @@ class Patch:
     noise_box5: float  # robust std of the residual's 5x5 box mean (correlated noise)
 
 
+def level_dip(img: np.ndarray, patch: Patch, region: np.ndarray, level_sigma_px: float) -> float:
+    """How far the frame's level lies under a mark (``region``, bool over the patch) below
+    the level taken round it (a Gaussian of ``level_sigma_px``, full-res px, over the
+    patch, its candidate and the holes' zone left out, as ``local_patch`` takes it again):
+    the mean shortfall over the mark, as a share of the frame's level (0: none)."""
+    h, w = patch.level.shape
+    p = img[patch.y0:patch.y0 + h, patch.x0:patch.x0 + w].astype(np.float32)
+    mean, den = weighted_gaussian_mean(p, (~patch.excluded).astype(np.float32), level_sigma_px)
+    at = region & (den > 0.05)
+    if not at.any():
+        return 0.0
+    level = np.maximum(patch.level[at], 1.0)
+    return float(np.mean(np.maximum(mean[at] - level, 0.0) / level))
+
+
 def local_patch(img: np.ndarray, box: tuple[int, int, int, int], seed_mask: np.ndarray, zone: np.ndarray,
                 angles_deg, wall_level: np.ndarray, level_sigma_px: float | None = None) -> Patch | None:
     """The wall model of a patch at full resolution: the frame's level (``wall_level``,
